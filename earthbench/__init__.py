@@ -1,0 +1,40 @@
+"""earthbench: a benchmark suite for earthmoving planners.
+
+The data flows one way: suite → scenarios → planner → plan → referee → metrics → store →
+leaderboard. This package holds the core; planners, terrains and metrics are plugins.
+"""
+
+from .errors import (
+    EarthbenchError,
+    PlanFormatError,
+    PluginError,
+    ScenarioError,
+    StoreError,
+    SuiteError,
+    UnknownNameError,
+)
+from .plan import PLAN_SCHEMA, Dig, Dump, Move, Plan, Prediction
+from .planner import NoConfig, Planner
+from .referee import Verdict, Violation, judge
+from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
+from .world import (
+    Budget,
+    ExcavatorSpec,
+    Heightmap,
+    Machines,
+    Pose,
+    Scenario,
+    Site,
+    Task,
+    TruckSpec,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Budget", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "METRICS", "Machines",
+    "Move", "NoConfig", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
+    "Pose", "Prediction", "Scenario", "ScenarioError", "Site", "StoreError", "SuiteError", "TERRAINS",
+    "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
+    "register_planner",
+]

@@ -1,0 +1,49 @@
+"""The exceptions a user can cause.
+
+Every error that bad input can trigger derives from :class:`EarthbenchError`, so the CLI can
+print its message and exit non-zero instead of showing a traceback. Messages say what to do.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class EarthbenchError(Exception):
+    """Base class for errors caused by user input (names, files, plans, suites)."""
+
+
+class UnknownNameError(EarthbenchError, KeyError):
+    """A planner, terrain generator, metric or suite name that is not registered."""
+
+    def __init__(self, kind: str, name: str, known: Iterable[str]):
+        self.kind, self.name = kind, name
+        self.known = sorted(known)
+        close = difflib.get_close_matches(name, self.known, n=3, cutoff=0.5)
+        hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+        listing = ", ".join(self.known) if self.known else "(none registered)"
+        super().__init__(f"unknown {kind} {name!r}.{hint} Known {kind}s: {listing}.")
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return self.args[0]
+
+
+class PlanFormatError(EarthbenchError, ValueError):
+    """A plan document that cannot be read: unknown action, missing field, NaN, bad times."""
+
+
+class ScenarioError(EarthbenchError, ValueError):
+    """A scenario or terrain file that is malformed or inconsistent."""
+
+
+class SuiteError(EarthbenchError, ValueError):
+    """A suite file with a typo, an unknown key or an impossible value."""
+
+
+class StoreError(EarthbenchError):
+    """A results database that is not earthbench's, is newer than this version, or is locked."""
+
+
+class PluginError(EarthbenchError):
+    """A plugin that cannot be loaded, or a planner that breaks the planner contract."""

@@ -1,0 +1,156 @@
+"""Registries of planners, terrain generators and metrics.
+
+Built-ins and third-party packages register the same way, through entry-point groups
+(``earthbench.planners``, ``earthbench.terrains``, ``earthbench.metrics``); scripts and
+notebooks use :func:`register_planner`; a single plugin file is loaded with
+:func:`load_plugin_file`. Entry points are read lazily on first use. A plugin that fails to
+import is recorded in ``failures`` (and shown by ``earthbench list``) without hiding the rest.
+Unknown names raise :class:`UnknownNameError` with the known names and close matches.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import inspect
+import sys
+import traceback
+from collections.abc import Callable, Iterator
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+from .errors import PluginError, UnknownNameError
+from .planner import Planner
+
+T = TypeVar("T")
+
+
+class Registry(Generic[T]):
+    """Name → object, filled from an entry-point group and by explicit registration."""
+
+    def __init__(self, group: str, kind: str, check: Callable[[Any], str | None] | None = None):
+        self.group, self.kind = group, kind
+        self._check = check
+        self._items: dict[str, T] = {}
+        self._origin: dict[str, str] = {}
+        self.failures: dict[str, str] = {}
+        self._loaded = False
+
+    def _load_entry_points(self) -> None:
+        if self._loaded:
+            return
+        self._loaded = True
+        for ep in entry_points(group=self.group):
+            if ep.name in self._items:
+                continue
+            try:
+                obj = ep.load()
+            except Exception:  # noqa: BLE001 - one broken plugin must not hide the others
+                self.failures[ep.name] = f"{ep.value}: " + traceback.format_exc(limit=3).strip().splitlines()[-1]
+                continue
+            problem = self._check(obj) if self._check else None
+            if problem:
+                self.failures[ep.name] = f"{ep.value}: {problem}"
+                continue
+            self._items[ep.name] = obj
+            dist = getattr(ep, "dist", None)
+            self._origin[ep.name] = f"entry point {ep.value}" + (f" ({dist.name} {dist.version})" if dist else "")
+
+    def register(self, name: str, obj: T, *, origin: str = "", replace: bool = False) -> T:
+        self._load_entry_points()
+        problem = self._check(obj) if self._check else None
+        if problem:
+            raise PluginError(f"cannot register {self.kind} {name!r}: {problem}")
+        if name in self._items and self._items[name] is not obj and not replace:
+            raise PluginError(f"a {self.kind} named {name!r} is already registered ({self._origin.get(name, '?')})")
+        self._items[name] = obj
+        self._origin[name] = origin or f"{getattr(obj, '__module__', '?')}.{getattr(obj, '__qualname__', name)}"
+        self.failures.pop(name, None)
+        return obj
+
+    def get(self, name: str) -> T:
+        self._load_entry_points()
+        try:
+            return self._items[name]
+        except KeyError:
+            if name in self.failures:
+                raise PluginError(f"{self.kind} {name!r} failed to load: {self.failures[name]}") from None
+            raise UnknownNameError(self.kind, name, self._items) from None
+
+    def origin(self, name: str) -> str:
+        self.get(name)
+        return self._origin.get(name, "")
+
+    def names(self) -> list[str]:
+        self._load_entry_points()
+        return sorted(self._items)
+
+    def items(self) -> Iterator[tuple[str, T]]:
+        for n in self.names():
+            yield n, self._items[n]
+
+    def __contains__(self, name: object) -> bool:
+        self._load_entry_points()
+        return name in self._items
+
+
+def _check_planner(obj: Any) -> str | None:
+    if not (inspect.isclass(obj) and issubclass(obj, Planner)):
+        return f"{obj!r} is not a subclass of earthbench.Planner"
+    if inspect.isabstract(obj):
+        return f"{obj.__name__} does not implement plan()"
+    return None
+
+
+def _check_callable(obj: Any) -> str | None:
+    return None if callable(obj) else f"{obj!r} is not callable"
+
+
+PLANNERS: Registry[type[Planner]] = Registry("earthbench.planners", "planner", _check_planner)
+TERRAINS: Registry[Callable[..., Any]] = Registry("earthbench.terrains", "terrain generator", _check_callable)
+METRICS: Registry[Callable[..., Any]] = Registry("earthbench.metrics", "metric", _check_callable)
+
+
+def register_planner(cls: type[Planner] | None = None, *, name: str | None = None, replace: bool = True) -> Any:
+    """Class decorator: ``@register_planner`` or ``@register_planner(name="mine")``."""
+
+    def deco(c: type[Planner]) -> type[Planner]:
+        n = name or c.name
+        if not n:
+            raise PluginError(f"planner class {c.__name__} needs a 'name' class attribute or register_planner(name=...)")
+        if not c.name:
+            c.name = n
+        return PLANNERS.register(n, c, replace=replace)
+
+    return deco(cls) if cls is not None else deco
+
+
+def load_plugin_file(path: str | Path) -> list[str]:
+    """Import one Python file and register every named Planner subclass defined in it.
+
+    Returns the names of the planners it provides (registered by decorator or found).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise PluginError(f"plugin file {str(p)!r} not found")
+    mod_name = f"earthbench_plugin_{p.stem}_{abs(hash(str(p.resolve()))) % 10**8}"
+    spec = importlib.util.spec_from_file_location(mod_name, p)
+    if spec is None or spec.loader is None:
+        raise PluginError(f"{p} is not an importable Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = module
+    before = set(PLANNERS.names())
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # noqa: BLE001
+        del sys.modules[mod_name]
+        raise PluginError(f"plugin file {p} failed to import: {type(exc).__name__}: {exc}") from exc
+    found = set(PLANNERS.names()) - before
+    for obj in vars(module).values():
+        if inspect.isclass(obj) and obj.__module__ == mod_name and issubclass(obj, Planner) and obj.name:
+            if _check_planner(obj) is None and obj.name not in PLANNERS:
+                PLANNERS.register(obj.name, obj, origin=str(p))
+            found.add(obj.name)
+    if not found:
+        raise PluginError(f"plugin file {p} defines no Planner subclass with a 'name'")
+    return sorted(found)

@@ -1,0 +1,372 @@
+"""The world model: terrain, site, machines, task, budget and the immutable Scenario.
+
+Conventions (DESIGN §2): SI units; x east, y north, z up; yaw counter-clockwise from +x;
+time in seconds from 0; volumes are bank volumes in m³.
+
+The heightmap is cell-centred: cell ``z[j, i]`` covers ``[x0 + i·r, x0 + (i+1)·r) ×
+[y0 + j·r, y0 + (j+1)·r)`` and its height is the height of the whole cell, so a volume is a
+sum of heights times ``r²``. This grid is the only terrain truth a planner receives.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from .errors import ScenarioError
+
+SCENARIO_SCHEMA = "earthbench.scenario/1"
+TRACKS = ("backhoe", "wheel_loader")
+Track = Literal["backhoe", "wheel_loader"]
+Point = tuple[float, float]
+Polygon = tuple[Point, ...]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A planar pose: position in metres, yaw in radians counter-clockwise from +x."""
+
+    x: float
+    y: float
+    yaw: float = 0.0
+
+    @property
+    def xy(self) -> np.ndarray:
+        return np.array([self.x, self.y])
+
+
+@dataclass(frozen=True, eq=False)
+class Heightmap:
+    """A regular grid of cell heights ``z[ny, nx]`` with its lower-left corner at ``origin``."""
+
+    origin: Point
+    resolution: float
+    z: np.ndarray
+
+    def __post_init__(self) -> None:
+        z = np.array(self.z, dtype=np.float64)  # a private, read-only copy keeps Scenario immutable
+        if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2:
+            raise ScenarioError(f"heightmap z must be a 2-D grid of at least 2×2 cells, got shape {z.shape}")
+        if not np.all(np.isfinite(z)):
+            raise ScenarioError("heightmap z contains NaN or infinite values; fill or crop them first")
+        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+            raise ScenarioError(f"heightmap resolution must be a positive number of metres, got {self.resolution}")
+        z.setflags(write=False)
+        object.__setattr__(self, "z", z)
+        object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
+        object.__setattr__(self, "resolution", float(self.resolution))
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, Heightmap)
+            and self.origin == other.origin
+            and self.resolution == other.resolution
+            and np.array_equal(self.z, other.z)
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.origin, self.resolution, self.z.shape, self.z.tobytes()))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.z.shape  # type: ignore[return-value]
+
+    @property
+    def cell_area(self) -> float:
+        return self.resolution**2
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) of the grid's outer cell edges."""
+        ny, nx = self.shape
+        x0, y0 = self.origin
+        return (x0, x0 + nx * self.resolution, y0, y0 + ny * self.resolution)
+
+    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """1-D arrays of the x and y coordinates of the cell centres."""
+        ny, nx = self.shape
+        x0, y0 = self.origin
+        r = self.resolution
+        return x0 + (np.arange(nx) + 0.5) * r, y0 + (np.arange(ny) + 0.5) * r
+
+    def height_at(self, x: float, y: float, z: np.ndarray | None = None) -> float:
+        """Bilinear height between cell centres (clamped at the border) of ``z`` or the map."""
+        zz = self.z if z is None else z
+        ny, nx = zz.shape
+        fx = (x - self.origin[0]) / self.resolution - 0.5
+        fy = (y - self.origin[1]) / self.resolution - 0.5
+        fx = min(max(fx, 0.0), nx - 1.0)
+        fy = min(max(fy, 0.0), ny - 1.0)
+        i0 = min(int(fx), nx - 2)
+        j0 = min(int(fy), ny - 2)
+        tx, ty = fx - i0, fy - j0
+        top = zz[j0, i0] * (1 - tx) + zz[j0, i0 + 1] * tx
+        bot = zz[j0 + 1, i0] * (1 - tx) + zz[j0 + 1, i0 + 1] * tx
+        return float(top * (1 - ty) + bot * ty)
+
+    def contains(self, x: float, y: float) -> bool:
+        xmin, xmax, ymin, ymax = self.extent
+        return xmin <= x <= xmax and ymin <= y <= ymax
+
+    def volume_above(self, level: float | np.ndarray, mask: np.ndarray | None = None) -> float:
+        """Bank volume (m³) of the cells above ``level``, optionally only where ``mask``."""
+        excess = np.clip(self.z - level, 0.0, None)
+        if mask is not None:
+            excess = excess[mask]
+        return float(excess.sum() * self.cell_area)
+
+    def with_z(self, z: np.ndarray) -> Heightmap:
+        return Heightmap(self.origin, self.resolution, z)
+
+
+def _polygon(points: Any, what: str) -> Polygon:
+    try:
+        poly = tuple((float(p[0]), float(p[1])) for p in points)
+    except (TypeError, ValueError, IndexError) as exc:
+        raise ScenarioError(f"{what} must be a list of [x, y] vertices: {exc}") from None
+    if len(poly) < 3 or not all(math.isfinite(c) for p in poly for c in p):
+        raise ScenarioError(f"{what} needs at least 3 finite [x, y] vertices, got {len(poly)}")
+    return poly
+
+
+@dataclass(frozen=True)
+class Site:
+    """Where digging is allowed: the dig area, the design grade and the keep-out zones."""
+
+    dig_area: Polygon
+    floor: float | None = None
+    keep_outs: tuple[Polygon, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dig_area", _polygon(self.dig_area, "site.dig_area"))
+        object.__setattr__(
+            self,
+            "keep_outs",
+            tuple(_polygon(k, f"site.keep_outs[{n}]") for n, k in enumerate(self.keep_outs)),
+        )
+        if self.floor is not None:
+            object.__setattr__(self, "floor", float(self.floor))
+
+
+@dataclass(frozen=True)
+class ExcavatorSpec:
+    """A backhoe excavator. Defaults: the STL-TAMP paper's 7-tonne machine (section V).
+
+    ``reach_min``/``reach_max`` bound the horizontal distance from the base centre to any point
+    of a dig stroke (boom + arm = 6.2 m at full stretch; 6.1 m keeps the bucket controllable).
+    A dig lasts at least the swing to its bearing plus ``min_stroke_time``; a dump at least the
+    swing to the truck plus ``min_dump_time``. ``clearance`` is the least centre distance to the
+    truck. ``chord_tolerance`` is the lateral slack (m) allowed between a unicycle arc and the
+    straight chord between two path samples.
+    """
+
+    boom_length: float = 3.6
+    arm_length: float = 2.6
+    reach_min: float = 2.0
+    reach_max: float = 6.1
+    bucket_width: float = 0.7
+    bucket_capacity: float = 0.28
+    max_drag_length: float = 1.0
+    max_cut_depth: float = 0.4
+    travel_speed: float = 0.86
+    yaw_rate: float = 0.11
+    swing_rate: float = 1.1
+    joint_rate: float = 1.1
+    min_stroke_time: float = 3.0
+    min_dump_time: float = 2.0
+    clearance: float = 3.5
+    chord_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class TruckSpec:
+    """A dump truck: the same travel limits as the excavator, a loading radius and a capacity."""
+
+    travel_speed: float = 0.86
+    yaw_rate: float = 0.11
+    loading_radius: float = 1.0
+    capacity: float = 10.0
+    chord_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class Machines:
+    """The machines on site with their initial poses. Machine ids in plans: see ``ids``."""
+
+    truck: TruckSpec = field(default_factory=TruckSpec)
+    truck_pose: Pose = Pose(2.0, 13.0, 0.0)
+    excavator: ExcavatorSpec | None = field(default_factory=ExcavatorSpec)
+    excavator_pose: Pose | None = Pose(13.0, 7.2, math.pi)
+
+    def __post_init__(self) -> None:
+        for name in ("excavator",):
+            if (getattr(self, name) is None) != (getattr(self, f"{name}_pose") is None):
+                raise ScenarioError(f"machines.{name} and machines.{name}_pose must be given together")
+
+    @property
+    def ids(self) -> tuple[str, ...]:
+        out = ["truck"]
+        if self.excavator is not None:
+            out.insert(0, "excavator")
+        return tuple(out)
+
+    def pose(self, machine: str) -> Pose:
+        if machine not in self.ids:
+            raise ScenarioError(f"no machine {machine!r} on this site; machines: {', '.join(self.ids)}")
+        return getattr(self, f"{machine}_pose")
+
+
+@dataclass(frozen=True)
+class Task:
+    """What must be achieved: remove ``target_volume`` m³ from the dig area into the truck."""
+
+    target_volume: float
+
+    def __post_init__(self) -> None:
+        if not (self.target_volume > 0 and math.isfinite(self.target_volume)):
+            raise ScenarioError(f"task.target_volume must be a positive number of m³, got {self.target_volume}")
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Resources a planner gets for one scenario; the harness enforces them."""
+
+    wall_s: float = 300.0
+    cores: int = 2
+    memory_mb: int = 4096
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One benchmark problem. Immutable; ``digest`` identifies its content on every machine.
+
+    ``id`` and ``meta`` (generator, parameters, seed) are labels: they are carried in the JSON
+    but left out of the digest, so the same problem reached through two suites is one problem.
+    """
+
+    id: str
+    terrain: Heightmap
+    site: Site
+    machines: Machines
+    task: Task
+    track: Track = "backhoe"
+    budget: Budget = Budget()
+    meta: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        if self.track not in TRACKS:
+            raise ScenarioError(f"track must be one of {TRACKS}, got {self.track!r}")
+        needed = {"backhoe": "excavator", "wheel_loader": "loader"}[self.track]
+        if getattr(self.machines, needed, None) is None:
+            raise ScenarioError(f"a {self.track} scenario needs machines.{needed}")
+
+    # -- identity ---------------------------------------------------------------------------
+    def _content(self) -> dict[str, Any]:
+        d = _to_plain(self)
+        d.pop("id"), d.pop("meta")
+        d["terrain"].pop("z")
+        return d
+
+    @property
+    def digest(self) -> str:
+        """sha256 over canonical JSON of the content and the heightmap's little-endian bytes."""
+        h = hashlib.sha256(_canonical(self._content()).encode())
+        h.update(np.ascontiguousarray(self.terrain.z, dtype="<f8").tobytes())
+        return h.hexdigest()
+
+    def replace(self, **changes: Any) -> Scenario:
+        return dataclasses.replace(self, **changes)
+
+    # -- JSON ---------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        d = _to_plain(self)
+        z = np.ascontiguousarray(self.terrain.z, dtype="<f8")
+        d["terrain"]["z"] = {"shape": list(z.shape), "f8_base64": base64.b64encode(z.tobytes()).decode()}
+        return {"schema": SCENARIO_SCHEMA, **d}
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        text = json.dumps(self.to_dict(), indent=1, sort_keys=True)
+        if path is not None:
+            Path(path).write_text(text)
+        return text
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Scenario:
+        if not isinstance(d, dict):
+            raise ScenarioError("a scenario document must be a JSON object")
+        if d.get("schema", SCENARIO_SCHEMA) != SCENARIO_SCHEMA:
+            raise ScenarioError(f"unsupported scenario schema {d.get('schema')!r}; expected {SCENARIO_SCHEMA!r}")
+        try:
+            t = d["terrain"]
+            z = t["z"]
+            if isinstance(z, dict):
+                z = np.frombuffer(base64.b64decode(z["f8_base64"]), dtype="<f8").reshape(z["shape"])
+            terrain = Heightmap(tuple(t["origin"]), t["resolution"], np.asarray(z, dtype=float))
+            s = d["site"]
+            site = Site(tuple(s["dig_area"]), s.get("floor"), tuple(s.get("keep_outs", ())))
+            m = d["machines"]
+            machines = Machines(
+                truck=TruckSpec(**m["truck"]),
+                truck_pose=Pose(**m["truck_pose"]),
+                excavator=ExcavatorSpec(**m["excavator"]) if m.get("excavator") else None,
+                excavator_pose=Pose(**m["excavator_pose"]) if m.get("excavator_pose") else None,
+            )
+            return cls(
+                id=str(d["id"]),
+                terrain=terrain,
+                site=site,
+                machines=machines,
+                task=Task(**d["task"]),
+                track=d.get("track", "backhoe"),
+                budget=Budget(**d.get("budget", {})),
+                meta=dict(d.get("meta", {})),
+            )
+        except ScenarioError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ScenarioError(f"malformed scenario document: {type(exc).__name__}: {exc}") from None
+
+    @classmethod
+    def from_json(cls, text_or_path: str | Path) -> Scenario:
+        text = str(text_or_path)
+        if not text.lstrip().startswith("{"):
+            path = Path(text_or_path)
+            if not path.is_file():
+                raise ScenarioError(f"scenario file {str(path)!r} not found")
+            text = path.read_text()
+        try:
+            return cls.from_dict(json.loads(text))
+        except json.JSONDecodeError as exc:
+            raise ScenarioError(f"scenario is not valid JSON: {exc}") from None
+
+
+def _to_plain(obj: Any) -> Any:
+    """Dataclasses → dicts, tuples → lists, numpy → Python; the JSON form of the world model."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, dict):
+        return {str(k): _to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_to_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def canonical_json(obj: Any) -> str:
+    """Canonical JSON (sorted keys, no spaces) of any world-model object; used for digests."""
+    return _canonical(_to_plain(obj))

@@ -1,0 +1,77 @@
+"""The metrics of one run (DESIGN §4).
+
+``time_per_m3_lower_bound`` — why it holds: every m³ loaded into the truck was dug and dumped.
+A bucket carries at most ``C`` m³, so loading ``V`` takes at least ``V / C`` digs and as many
+dumps by the one excavator; its actions never overlap, each dig lasts at least the minimum
+stroke time ``t_s`` and each dump at least the minimum dump time ``t_d``. Hence
+``makespan ≥ (V / C)(t_s + t_d)`` and ``makespan / V ≥ (t_s + t_d) / C``. The bound ignores
+swinging and driving, so it is loose but never wrong.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from earthbench.plan import Plan
+from earthbench.referee import Verdict
+from earthbench.world import Scenario
+
+DEFAULT_SUCCESS_THRESHOLD = 0.9
+
+
+def lower_bound_time_per_m3(scenario: Scenario) -> float:
+    """The least time per m³ any valid plan can reach on this scenario (s/m³)."""
+    exc = scenario.machines.excavator
+    if exc is None:
+        raise ValueError(f"no lower bound is defined for track {scenario.track!r} without an excavator")
+    return (exc.min_stroke_time + exc.min_dump_time) / exc.bucket_capacity
+
+
+def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, Any]:
+    """Volume ratio, time per m³ (and its ratio to the bound), digs, fill, travel, claims' error."""
+    target = scenario.task.target_volume
+    loaded = verdict.loaded_volume
+    makespan = verdict.makespan
+    tpm = makespan / loaded if loaded > 0 else math.inf
+    bound = lower_bound_time_per_m3(scenario)
+    fills = [d.fill for d in verdict.digs]
+    pred = plan.predicted
+    return {
+        "valid": verdict.valid,
+        "violations": len(verdict.violations),
+        "loaded_volume": loaded,
+        "target_volume": target,
+        "volume_ratio": loaded / target,
+        "makespan_s": makespan,
+        "time_per_m3": tpm,
+        "time_per_m3_lower_bound": bound,
+        "time_per_m3_ratio": tpm / bound,
+        "digs": len(verdict.digs),
+        "dumps": verdict.dumps,
+        "mean_bucket_fill": sum(fills) / len(fills) if fills else 0.0,
+        "travel_m": sum(verdict.travel.values()),
+        "volume_prediction_error": None if pred.volume is None else pred.volume - loaded,
+        "makespan_prediction_error": None if pred.makespan is None else pred.makespan - makespan,
+    }
+
+
+def evaluate(
+    scenario: Scenario,
+    plan: Plan,
+    verdict: Verdict,
+    threshold: float = DEFAULT_SUCCESS_THRESHOLD,
+) -> dict[str, Any]:
+    """All registered metrics of one run, plus ``success`` (valid and volume ratio ≥ threshold).
+
+    ``solve_time_s`` and ``solve_cpu_s`` are left as None: only the harness can measure them.
+    """
+    from earthbench.registry import METRICS
+
+    out: dict[str, Any] = {"solve_time_s": None, "solve_cpu_s": None}
+    out.update(core_metrics(scenario, plan, verdict))
+    for name, fn in METRICS.items():
+        if fn is not core_metrics:
+            out.update(fn(scenario, plan, verdict))
+    out["success"] = bool(verdict.valid and out["volume_ratio"] >= threshold)
+    return out

@@ -1,0 +1,1 @@
+"""Built-in planner plugins. Each registers through the ``earthbench.planners`` entry points."""
