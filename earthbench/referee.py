@@ -21,6 +21,7 @@ import shapely
 from shapely.geometry import LineString, Point, Polygon
 
 from .errors import PlanFormatError
+from .motion import wrap
 from .plan import Dig, Dump, Move, Plan
 from .world import ExcavatorSpec, Heightmap, Pose, Scenario
 
@@ -93,11 +94,6 @@ class Verdict:
             return "valid"
         rules = sorted({v.rule for v in self.violations})
         return f"invalid ({len(self.violations)} violations: {', '.join(rules)})"
-
-
-def wrap(angle: float) -> float:
-    """Angle wrapped to [-π, π)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 # -- the cut model, shared with planners that want an exact forward model -----------------------

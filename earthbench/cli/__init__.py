@@ -1,0 +1,50 @@
+"""The ``earthbench`` command line.
+
+Each sub-command lives in its own module of this package with two functions:
+``add_parser(subparsers)`` (declares its arguments and help) and ``run(args) -> int`` (the exit
+status). Add a command by writing such a module and naming it in ``COMMANDS``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ..errors import EarthbenchError
+
+#: Sub-command modules, in the order ``earthbench --help`` lists them.
+COMMANDS = ["list_", "plan", "validate", "show"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="earthbench",
+        description="Benchmark earthmoving planners on shared terrain suites, judged by an independent referee.",
+    )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"earthbench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        module = importlib.import_module(f"{__name__}.{name}")
+        p = module.add_parser(sub)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except EarthbenchError as exc:
+        print(f"earthbench: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("earthbench: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
