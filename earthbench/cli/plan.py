@@ -1,0 +1,41 @@
+"""``earthbench plan PLANNER``: run one planner on one scenario and write its plan."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from ..registry import PLANNERS
+from ._common import add_plugin_arg, add_scenario_args, load_plugins, load_scenario
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "plan",
+        help="run a planner on one scenario and write the plan JSON",
+        description="Run PLANNER on a scenario (a file, or a generator, seed and target) and write its plan. "
+        "This runs in-process, without the runner's budget; use `earthbench run` for benchmarking.",
+    )
+    p.add_argument("planner", help="planner name (see `earthbench list planners`)")
+    add_scenario_args(p)
+    add_plugin_arg(p)
+    p.add_argument("-o", "--out", metavar="PLAN.json", help="where to write the plan (default: standard output)")
+    p.add_argument("--save-scenario", metavar="FILE", help="also write the scenario JSON (to validate the plan later)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    load_plugins(args)
+    cls = PLANNERS.get(args.planner)
+    scenario = load_scenario(args)
+    if args.save_scenario:
+        scenario.to_json(args.save_scenario)
+    t0 = time.perf_counter()
+    plan = cls().plan(scenario)
+    dt = time.perf_counter() - t0
+    text = plan.to_json(args.out)
+    if not args.out:
+        print(text)
+    print(f"{args.planner}: {len(plan.actions)} actions in {dt:.2f} s for scenario {scenario.id}", file=sys.stderr)
+    return 0

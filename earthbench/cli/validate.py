@@ -1,0 +1,51 @@
+"""``earthbench validate PLAN.json --scenario S.json``: the referee's verdict and the metrics."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from ..errors import PlanFormatError
+from ..plan import Plan
+from ..referee import judge
+from ..world import Scenario
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "validate",
+        help="judge a plan with the referee and print the verdict, violations and metrics",
+        description="Replay PLAN on the scenario with the referee. Exit status 0 for a valid plan, 1 for an invalid one.",
+    )
+    p.add_argument("plan", metavar="PLAN.json")
+    p.add_argument("--scenario", required=True, metavar="SCENARIO.json")
+    p.add_argument("--threshold", type=float, default=0.9, help="volume ratio needed for success (default: 0.9)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from metrics import evaluate  # the built-in metrics package; extra metrics come from plugins
+
+    scenario = Scenario.from_json(args.scenario)
+    path = Path(args.plan)
+    if not path.is_file():
+        raise PlanFormatError(f"plan file {args.plan!r} not found")
+    text = path.read_text()
+    verdict = judge(scenario, text)  # a malformed document is an invalid verdict, not a crash
+    plan = None if any(v.rule == "malformed" for v in verdict.violations) else Plan.from_json(text)
+    metrics = evaluate(scenario, plan, verdict, args.threshold) if plan is not None else {}
+    if args.json:
+        print(json.dumps({"valid": verdict.valid, "violations": [v.to_dict() for v in verdict.violations], "metrics": metrics}, indent=1, default=str))
+    else:
+        print(f"verdict: {verdict.summary()}")
+        for v in verdict.violations:
+            where = "plan" if v.action is None else f"action {v.action}"
+            print(f"  {where}: {v.rule} (magnitude {v.magnitude:.4g}) {v.message}")
+        for k, val in metrics.items():
+            if isinstance(val, float) and math.isfinite(val):
+                val = f"{val:.4g}"
+            print(f"  {k:<26} {val}")
+    return 0 if verdict.valid else 1
