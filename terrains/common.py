@@ -1,0 +1,87 @@
+"""Helpers every terrain generator shares: dig-area masks, volumes and the scenario checks.
+
+A generator calls :func:`check_scenario` on what it built, so a target the site cannot hold
+or machine poses the referee would reject fail at generation time with a
+:class:`~earthbench.errors.ScenarioError`, not later inside a planner run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from earthbench.errors import ScenarioError
+from earthbench.world import Heightmap, Scenario
+
+#: A site must hold at least this multiple of its target above the floor (issue 4), so a
+#: planner has to choose where to dig rather than scrape up everything there is.
+MIN_VOLUME_FACTOR = 2.0
+
+
+def round_heights(z: np.ndarray) -> np.ndarray:
+    """Heights rounded to 0.1 mm: float noise below that never changes a digest across machines."""
+    return np.round(np.asarray(z, dtype=np.float64), 4) + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def polygon_mask(terrain: Heightmap, polygon) -> np.ndarray:
+    """Boolean ``[ny, nx]`` mask of the cells whose centre lies inside (or on) ``polygon``."""
+    xs, ys = terrain.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    poly = Polygon(polygon)
+    return shapely.contains_xy(poly, X, Y) | shapely.intersects_xy(poly.boundary, X, Y)
+
+
+def dig_area_volume(scenario: Scenario) -> float:
+    """Bank volume (m³) above the floor inside the dig area; 0 m when the site has no floor."""
+    mask = polygon_mask(scenario.terrain, scenario.site.dig_area)
+    floor = scenario.site.floor if scenario.site.floor is not None else 0.0
+    return scenario.terrain.volume_above(floor, mask)
+
+
+def reachable_volume(scenario: Scenario) -> float:
+    """Volume above the floor in the dig area whose cells lie in the excavator's reach annulus
+    from its initial pose: what a planner can dig without moving the base."""
+    sc = scenario
+    exc, pose = sc.machines.excavator, sc.machines.excavator_pose
+    if exc is None or pose is None:
+        return 0.0
+    xs, ys = sc.terrain.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    d = np.hypot(X - pose.x, Y - pose.y)
+    mask = polygon_mask(sc.terrain, sc.site.dig_area) & (d >= exc.reach_min) & (d <= exc.reach_max)
+    floor = sc.site.floor if sc.site.floor is not None else 0.0
+    return sc.terrain.volume_above(floor, mask)
+
+
+def check_scenario(scenario: Scenario, factor: float = MIN_VOLUME_FACTOR) -> Scenario:
+    """Raise ScenarioError unless the site holds ``factor`` × target above the floor, the truck
+    can carry the target, and the initial poses keep the excavator–truck clearance.
+
+    Returns the scenario unchanged so generators can ``return check_scenario(Scenario(...))``.
+    """
+    sc = scenario
+    target = sc.task.target_volume
+    held = dig_area_volume(sc)
+    if held < factor * target - 1e-9:
+        raise ScenarioError(
+            f"scenario {sc.id!r}: the dig area holds {held:.3f} m³ above the floor, less than "
+            f"{factor:g} × the target {target:g} m³; choose a target of at most {held / factor:.3f} m³"
+        )
+    if sc.machines.truck.capacity < target:
+        raise ScenarioError(
+            f"scenario {sc.id!r}: the truck carries {sc.machines.truck.capacity:g} m³, less than the "
+            f"target {target:g} m³; raise the generator's truck_capacity"
+        )
+    exc, pose = sc.machines.excavator, sc.machines.excavator_pose
+    if exc is not None and pose is not None:
+        t = sc.machines.truck_pose
+        d = math.hypot(t.x - pose.x, t.y - pose.y)
+        if d < exc.clearance:
+            raise ScenarioError(
+                f"scenario {sc.id!r}: excavator and truck start {d:.3f} m apart, closer than the "
+                f"clearance {exc.clearance:g} m; move one of them"
+            )
+    return sc
