@@ -1,0 +1,311 @@
+"""Suites: named sets of scenarios, written as data (TOML) and identified by a digest.
+
+A suite file names its track, budget, success threshold and scenario families; each family
+calls one terrain generator from the ``earthbench.terrains`` registry as
+``gen(seed, target_volume, **params)`` for every (target, seed). The loader then stamps each
+scenario with the suite's id scheme ``SUITE/FAMILY/sSEED/vTARGET`` and the suite's budget, so
+the same generator call in two suites gives two labels but, with equal budgets, one digest.
+
+Where suites come from (:func:`known_suites`): the ``earthbench.suites`` entry-point group.
+Each entry point names a *package*; every ``*.toml`` file directly in it is a suite named by
+the file's stem. The built-in suites register this way (``terrains.suites``), exactly as a
+third-party package would, so the core never imports ``terrains`` by name. A user may also
+pass the path of any suite file.
+
+Format (every key is checked; a typo is a :class:`SuiteError` that suggests the close names)::
+
+    name = "smoke"
+    description = "A few small cases for CI."
+    track = "backhoe"
+    success_threshold = 0.9          # optional
+    planners = ["greedy"]            # optional; default: every planner supporting the track
+    [budget]                         # earthbench.world.Budget
+    wall_s = 60
+    cores = 2
+    memory_mb = 4096
+    [[family]]
+    name = "rbf14"
+    generator = "rbf"
+    targets = [0.56, 1.12]           # m³
+    seeds = [0, 1]                   # or "0-9"
+    [family.params]
+    n_bases = 14
+    [config.NAME]                    # optional Planner(**overrides) per planner name
+    steepness = 20.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import inspect
+import math
+import tomllib
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from functools import cached_property
+from importlib import resources
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+from .errors import EarthbenchError, SuiteError, UnknownNameError
+from .world import TRACKS, Budget, Scenario
+
+SUITE_GROUP = "earthbench.suites"
+DEFAULT_THRESHOLD = 0.9
+
+_TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config")
+_FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")
+_BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
+
+
+@dataclass(frozen=True)
+class Family:
+    """One generator with fixed parameters, swept over targets × seeds."""
+
+    name: str
+    generator: str
+    targets: tuple[float, ...]
+    seeds: tuple[int, ...]
+    params: dict[str, Any] = field(default_factory=dict, hash=False)
+
+
+@dataclass(frozen=True, eq=False)
+class Suite:
+    """A loaded suite file. ``scenarios`` are generated once, on first use."""
+
+    name: str
+    track: str
+    budget: Budget
+    families: tuple[Family, ...]
+    description: str = ""
+    success_threshold: float = DEFAULT_THRESHOLD
+    planners: tuple[str, ...] | None = None
+    config: dict[str, dict[str, Any]] = field(default_factory=dict)
+    path: str = ""
+
+    @cached_property
+    def scenarios(self) -> tuple[Scenario, ...]:
+        """Every scenario of the suite, in file order (family, then target, then seed)."""
+        from .registry import TERRAINS
+
+        out: list[Scenario] = []
+        seen: set[str] = set()
+        for fam in self.families:
+            gen = TERRAINS.get(fam.generator)
+            for target in fam.targets:
+                for seed in fam.seeds:
+                    sid = f"{self.name}/{fam.name}/s{seed}/v{target:g}"
+                    if sid in seen:
+                        raise SuiteError(f"{self._where}: scenario id {sid!r} occurs twice; give the families distinct names")
+                    seen.add(sid)
+                    try:
+                        sc = gen(seed, target, **fam.params)
+                    except EarthbenchError as exc:
+                        raise SuiteError(f"{self._where}: family {fam.name!r}, seed {seed}, target {target:g}: {exc}") from exc
+                    if not isinstance(sc, Scenario):
+                        raise SuiteError(f"{self._where}: generator {fam.generator!r} returned {type(sc).__name__}, not a Scenario")
+                    if sc.track != self.track:
+                        raise SuiteError(f"{self._where}: family {fam.name!r} makes {sc.track!r} scenarios but the suite's track is {self.track!r}")
+                    meta = {**sc.meta, "suite": self.name, "family": fam.name, "seed": seed, "target": target}
+                    out.append(sc.replace(id=sid, budget=self.budget, meta=meta))
+        return tuple(out)
+
+    @cached_property
+    def digest(self) -> str:
+        """sha256 over the sorted (id, scenario digest) pairs and the success threshold."""
+        h = hashlib.sha256()
+        for sid, d in sorted((s.id, s.digest) for s in self.scenarios):
+            h.update(f"{sid}\t{d}\n".encode())
+        h.update(f"threshold\t{self.success_threshold!r}\n".encode())
+        return h.hexdigest()
+
+    def select(self, seeds: Iterable[int] | None = None) -> tuple[Scenario, ...]:
+        """The scenarios whose seed is in ``seeds`` (all when None)."""
+        if seeds is None:
+            return self.scenarios
+        keep = set(seeds)
+        return tuple(s for s in self.scenarios if s.meta.get("seed") in keep)
+
+    @property
+    def _where(self) -> str:
+        return f"suite {self.name!r}" + (f" ({self.path})" if self.path else "")
+
+
+# -- finding suites -------------------------------------------------------------------------------
+
+
+def known_suites() -> dict[str, Path]:
+    """Suite name → file, from every package in the ``earthbench.suites`` entry-point group.
+
+    A package that fails to import is skipped (as a broken planner plugin is); the first
+    package to define a name wins.
+    """
+    found: dict[str, Path] = {}
+    for ep in sorted(entry_points(group=SUITE_GROUP), key=lambda e: e.name):
+        try:
+            pkg = ep.load()
+            root = resources.files(pkg)
+        except Exception:  # noqa: BLE001 - one broken plugin must not hide the others
+            continue
+        for item in sorted(root.iterdir(), key=lambda p: p.name):
+            if item.name.endswith(".toml") and item.is_file():
+                found.setdefault(item.name[: -len(".toml")], Path(str(item)))
+    return found
+
+
+def load_suite(name_or_path: str | Path) -> Suite:
+    """Load a suite by registered name or by the path of a TOML file."""
+    text = str(name_or_path)
+    p = Path(text)
+    if text.endswith(".toml") or p.is_file() or "/" in text:
+        if not p.is_file():
+            raise SuiteError(f"suite file {text!r} not found")
+        return parse_suite(p.read_text(), path=str(p), default_name=p.stem)
+    suites = known_suites()
+    if text not in suites:
+        raise UnknownNameError("suite", text, suites)
+    f = suites[text]
+    return parse_suite(f.read_text(), path=str(f), default_name=text)
+
+
+# -- parsing ---------------------------------------------------------------------------------------
+
+
+def _unknown(keys: Iterable[str], allowed: Iterable[str], where: str) -> None:
+    allowed = list(allowed)
+    for k in keys:
+        if k not in allowed:
+            close = difflib.get_close_matches(k, allowed, n=3, cutoff=0.5)
+            hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+            raise SuiteError(f"{where}: unknown key {k!r}.{hint} Allowed keys: {', '.join(allowed)}.")
+
+
+def _seeds(value: Any, where: str) -> tuple[int, ...]:
+    if isinstance(value, str):
+        try:
+            a, b = (int(x) for x in value.split("-"))
+        except ValueError:
+            raise SuiteError(f"{where}: seeds {value!r} must be a list of integers or a range 'A-B' such as '0-9'") from None
+        if b < a:
+            raise SuiteError(f"{where}: seed range {value!r} is empty (end before start)")
+        return tuple(range(a, b + 1))
+    if isinstance(value, list) and value and all(isinstance(s, int) and not isinstance(s, bool) for s in value):
+        if len(set(value)) != len(value):
+            raise SuiteError(f"{where}: seeds {value} repeat a seed")
+        return tuple(value)
+    raise SuiteError(f"{where}: seeds must be a non-empty list of integers or a range 'A-B', got {value!r}")
+
+
+def parse_seed_range(text: str) -> tuple[int, ...]:
+    """``"3"`` or ``"0-9"`` → the seeds; used by ``earthbench run --seeds``."""
+    text = text.strip()
+    if text.isdigit():
+        return (int(text),)
+    return _seeds(text, "--seeds")
+
+
+def _targets(value: Any, where: str) -> tuple[float, ...]:
+    if not isinstance(value, list) or not value:
+        raise SuiteError(f"{where}: targets must be a non-empty list of volumes in m³, got {value!r}")
+    out = []
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 and math.isfinite(v)):
+            raise SuiteError(f"{where}: target {v!r} must be a positive number of m³")
+        out.append(float(v))
+    return tuple(out)
+
+
+def _check_params(gen: Any, params: dict[str, Any], where: str) -> None:
+    try:
+        sig = inspect.signature(gen)
+    except (TypeError, ValueError):
+        return
+    ps = list(sig.parameters.values())
+    if any(p.kind is p.VAR_KEYWORD for p in ps):
+        return
+    names = [p.name for p in ps[2:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    _unknown(params, names, f"{where} params")
+
+
+def parse_suite(text: str, *, path: str = "", default_name: str = "") -> Suite:
+    """Check and build a suite from TOML text; every error names the file and the key."""
+    from .registry import TERRAINS
+
+    where = path or "suite"
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SuiteError(f"{where} is not valid TOML: {exc}") from None
+    _unknown(doc, _TOP_KEYS, where)
+    name = doc.get("name", default_name)
+    if not isinstance(name, str) or not name or "/" in name:
+        raise SuiteError(f"{where}: 'name' must be a non-empty string without '/', got {name!r}")
+    track = doc.get("track", "backhoe")
+    if track not in TRACKS:
+        close = difflib.get_close_matches(str(track), TRACKS, n=1)
+        raise SuiteError(f"{where}: track {track!r} is not one of {', '.join(TRACKS)}" + (f"; did you mean {close[0]!r}?" if close else ""))
+    threshold = doc.get("success_threshold", DEFAULT_THRESHOLD)
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold <= 1:
+        raise SuiteError(f"{where}: success_threshold must be a number in (0, 1], got {threshold!r}")
+    budget_doc = doc.get("budget", {})
+    if not isinstance(budget_doc, dict):
+        raise SuiteError(f"{where}: [budget] must be a table with {', '.join(_BUDGET_KEYS)}")
+    _unknown(budget_doc, _BUDGET_KEYS, f"{where} [budget]")
+    for k, v in budget_doc.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise SuiteError(f"{where} [budget]: {k} must be a positive number, got {v!r}")
+    if "cores" in budget_doc and not isinstance(budget_doc["cores"], int):
+        raise SuiteError(f"{where} [budget]: cores must be an integer, got {budget_doc['cores']!r}")
+    if "memory_mb" in budget_doc and not isinstance(budget_doc["memory_mb"], int):
+        raise SuiteError(f"{where} [budget]: memory_mb must be an integer, got {budget_doc['memory_mb']!r}")
+    if "wall_s" in budget_doc:  # 60 and 60.0 must give the same scenario digest
+        budget_doc = {**budget_doc, "wall_s": float(budget_doc["wall_s"])}
+    budget = Budget(**budget_doc)
+    planners = doc.get("planners")
+    if planners is not None and (not isinstance(planners, list) or not all(isinstance(p, str) for p in planners)):
+        raise SuiteError(f"{where}: planners must be a list of planner names, got {planners!r}")
+    config = doc.get("config", {})
+    if not isinstance(config, dict) or not all(isinstance(v, dict) for v in config.values()):
+        raise SuiteError(f"{where}: [config.PLANNER] sections must be tables of settings")
+    fams_doc = doc.get("family")
+    if not isinstance(fams_doc, list) or not fams_doc:
+        raise SuiteError(f"{where}: a suite needs at least one [[family]] table")
+    families = []
+    for n, fd in enumerate(fams_doc):
+        fwhere = f"{where} [[family]] #{n + 1}"
+        _unknown(fd, _FAMILY_KEYS, fwhere)
+        for req in ("name", "generator", "targets", "seeds"):
+            if req not in fd:
+                raise SuiteError(f"{fwhere}: missing key {req!r}")
+        fname = fd["name"]
+        if not isinstance(fname, str) or not fname or "/" in fname:
+            raise SuiteError(f"{fwhere}: name must be a non-empty string without '/', got {fname!r}")
+        fwhere = f"{where} family {fname!r}"
+        try:
+            gen = TERRAINS.get(fd["generator"])
+        except EarthbenchError as exc:
+            raise SuiteError(f"{fwhere}: {exc}") from None
+        params = fd.get("params", {})
+        if not isinstance(params, dict):
+            raise SuiteError(f"{fwhere}: params must be a table")
+        _check_params(gen, params, fwhere)
+        families.append(Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), dict(params)))
+    if len({f.name for f in families}) != len(families):
+        raise SuiteError(f"{where}: two families share a name; scenario ids would clash")
+    desc = doc.get("description", "")
+    if not isinstance(desc, str):
+        raise SuiteError(f"{where}: description must be a string")
+    return Suite(
+        name=name,
+        track=track,
+        budget=budget,
+        families=tuple(families),
+        description=desc,
+        success_threshold=float(threshold),
+        planners=tuple(planners) if planners is not None else None,
+        config={k: dict(v) for k, v in config.items()},
+        path=path,
+    )
