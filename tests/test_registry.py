@@ -1,0 +1,88 @@
+"""Registries: entry points, the decorator, plugin files, helpful errors for unknown names."""
+
+from __future__ import annotations
+
+from importlib.metadata import EntryPoint
+
+import pytest
+
+import earthbench.registry as registry
+from earthbench import PLANNERS, TERRAINS, Plan, Planner, PluginError, UnknownNameError, load_plugin_file, register_planner
+
+
+def test_builtins_register_through_entry_points():
+    assert "greedy" in PLANNERS.names()
+    assert "rbf" in TERRAINS.names()
+    assert "entry point" in PLANNERS.origin("greedy")
+
+
+def test_unknown_names_list_the_known_ones_and_close_matches():
+    with pytest.raises(UnknownNameError) as err:
+        PLANNERS.get("gredy")
+    msg = str(err.value)
+    assert "Did you mean 'greedy'" in msg and "Known planners:" in msg
+    with pytest.raises(UnknownNameError, match="unknown terrain generator 'rbv'.*'rbf'"):
+        TERRAINS.get("rbv")
+
+
+def test_a_broken_plugin_is_reported_and_does_not_hide_the_others(monkeypatch):
+    eps = [
+        EntryPoint("broken", "earthbench_no_such_module:Planner", "earthbench.planners"),
+        EntryPoint("notaplanner", "math:pi", "earthbench.planners"),
+        EntryPoint("greedy", "planners.greedy:GreedyPlanner", "earthbench.planners"),
+    ]
+    monkeypatch.setattr(registry, "entry_points", lambda group: eps)
+    reg = registry.Registry("earthbench.planners", "planner", registry._check_planner)
+    assert reg.names() == ["greedy"]
+    assert "ModuleNotFoundError" in reg.failures["broken"]
+    assert "not a subclass" in reg.failures["notaplanner"]
+    with pytest.raises(PluginError, match="failed to load"):
+        reg.get("broken")
+
+
+def test_register_planner_decorator():
+    @register_planner
+    class Idle(Planner):
+        """Does nothing."""
+
+        name = "test-idle"
+
+        def plan(self, scenario):
+            return Plan()
+
+    assert PLANNERS.get("test-idle") is Idle
+    with pytest.raises(PluginError, match="not a subclass"):
+        registry.PLANNERS.register("x", object)
+
+
+PLUGIN = '''
+from earthbench import Planner, Plan
+
+class FilePlanner(Planner):
+    """A planner that lives in one file."""
+    name = "test-file-planner"
+    version = "0.1"
+
+    def plan(self, scenario):
+        return Plan()
+'''
+
+
+def test_load_one_plugin_file(tmp_path):
+    path = tmp_path / "myplanner.py"
+    path.write_text(PLUGIN)
+    assert load_plugin_file(path) == ["test-file-planner"]
+    assert PLANNERS.get("test-file-planner").version == "0.1"
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [("def broken(:\n", "failed to import"), ("x = 1\n", "defines no Planner")],
+)
+def test_bad_plugin_files_get_clear_errors(tmp_path, text, words):
+    path = tmp_path / "bad.py"
+    path.write_text(text)
+    with pytest.raises(PluginError, match=words):
+        load_plugin_file(path)
+    with pytest.raises(PluginError, match="not found"):
+        load_plugin_file(tmp_path / "missing.py")
