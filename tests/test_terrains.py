@@ -119,3 +119,134 @@ def test_bench_rejects_a_target_the_site_cannot_hold():
 def test_generators_are_registered():
     for name in ("rbf", "bench"):
         assert name in TERRAINS.names()
+
+
+# -- dem -----------------------------------------------------------------------------------------
+def test_dem_is_deterministic_scaled_and_holds_the_suite_target():
+    from terrains.dem import dem
+
+    a, b = dem(2, 7.0), dem(2, 7.0)
+    assert a.digest == b.digest and dem(3, 7.0).digest != a.digest
+    z = a.terrain.z
+    assert z.shape == (120, 240)
+    assert z.min() == 0.0 and z.max() == pytest.approx(1.5, abs=1e-4)
+    assert a.meta["ground_relief_m"] >= 60.0
+    assert dig_area_volume(a) >= 2 * 7.0
+    assert (a.machines.excavator_pose.x, a.machines.excavator_pose.y) == (13.0, 7.2)
+
+
+def test_dem_crops_differ_from_every_rbf_map():
+    """Real data, not a generator: no dem crop correlates closely with any rbf map."""
+    from terrains.dem import dem
+    from terrains.rbf import rbf_surface
+
+    dems = [dem(s, 4.0).terrain.z for s in range(10)]
+    rbfs = [rbf_surface(s, n_bases=n).z for n in (14, 30) for s in range(10)]
+    for d in dems:
+        for r in rbfs:
+            assert not np.array_equal(d, r)
+            assert abs(np.corrcoef(d.ravel(), r.ravel())[0, 1]) < 0.9
+
+
+def test_dem_refuses_a_crop_larger_than_the_sample():
+    from terrains.dem import dem
+
+    with pytest.raises(ScenarioError, match="ground_scale"):
+        dem(0, 4.0, ground_scale=5000.0)
+
+
+# -- heightmap files ------------------------------------------------------------------------------
+def _grid() -> np.ndarray:
+    y, x = np.mgrid[0:40, 0:60] * 0.1
+    return 0.5 + 0.4 * np.sin(x) * np.cos(y)
+
+
+@pytest.mark.parametrize("fmt", ["npy", "npz", "csv"])
+def test_heightmap_files_round_trip(tmp_path, fmt):
+    from terrains.files import heightmap_file, load_heightmap
+
+    z = np.round(_grid(), 4)
+    p = tmp_path / f"site.{fmt}"
+    if fmt == "npy":
+        np.save(p, z)
+    elif fmt == "npz":
+        np.savez(p, z=z, resolution=0.1, origin=[5.0, -2.0])
+    else:
+        np.savetxt(p, z, delimiter=",", fmt="%.4f")
+    kw = {} if fmt == "npz" else {"resolution": 0.1, "origin": (5.0, -2.0)}
+    hm = load_heightmap(p, **kw)
+    assert hm.origin == (5.0, -2.0) and hm.resolution == 0.1
+    np.testing.assert_array_equal(hm.z, z)  # first file row = southern row
+    sc = heightmap_file(0, 1.0, path=str(p), **kw)
+    assert sc.site.floor == pytest.approx(z.min())
+    assert sc.terrain.extent == pytest.approx((5.0, 11.0, -2.0, 2.0))
+    assert sc.machines.excavator_pose.x == pytest.approx(12.0)
+    assert "file" in TERRAINS.names()
+
+
+def test_heightmap_file_errors(tmp_path):
+    from terrains.files import load_heightmap
+
+    with pytest.raises(ScenarioError, match="not found"):
+        load_heightmap(tmp_path / "missing.npy", resolution=0.1)
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    with pytest.raises(ScenarioError, match="empty"):
+        load_heightmap(empty, resolution=0.1)
+    comments = tmp_path / "comments.csv"
+    comments.write_text("# nothing but a comment\n\n")
+    with pytest.raises(ScenarioError, match="no rows"):
+        load_heightmap(comments, resolution=0.1)
+    nan = tmp_path / "nan.npy"
+    np.save(nan, np.full((5, 5), np.nan))
+    with pytest.raises(ScenarioError, match="only NaN"):
+        load_heightmap(nan, resolution=0.1)
+    some_nan = tmp_path / "gaps.csv"
+    some_nan.write_text("1,2,3\n4,,6\n7,8,9\n")
+    with pytest.raises(ScenarioError, match="1 NaN or infinite cells of 9"):
+        load_heightmap(some_nan, resolution=0.1)
+    ragged = tmp_path / "ragged.csv"
+    ragged.write_text("1,2,3\n4,5\n")
+    with pytest.raises(ScenarioError, match="not a rectangular grid"):
+        load_heightmap(ragged, resolution=0.1)
+    header = tmp_path / "header.csv"
+    header.write_text("x,y,z\n1,2,3\n")
+    with pytest.raises(ScenarioError, match="grid of numbers"):
+        load_heightmap(header, resolution=0.1)
+    flat = tmp_path / "line.npy"
+    np.save(flat, np.zeros(10))
+    with pytest.raises(ScenarioError, match=r"shape \(10,\)"):
+        load_heightmap(flat, resolution=0.1)
+    cube = tmp_path / "cube.npy"
+    np.save(cube, np.zeros((3, 3, 3)))
+    with pytest.raises(ScenarioError, match="2-D grid"):
+        load_heightmap(cube, resolution=0.1)
+    zero = tmp_path / "zero.npy"
+    np.save(zero, np.zeros((0, 4)))
+    with pytest.raises(ScenarioError, match="empty array"):
+        load_heightmap(zero, resolution=0.1)
+    ok = tmp_path / "ok.npy"
+    np.save(ok, np.zeros((4, 4)))
+    with pytest.raises(ScenarioError, match="cell size"):
+        load_heightmap(ok)
+    other = tmp_path / "site.tif"
+    other.write_bytes(b"II*\x00")
+    with pytest.raises(ScenarioError, match="unsupported format"):
+        load_heightmap(other, resolution=0.1)
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip archive")
+    with pytest.raises(ScenarioError, match="cannot be read"):
+        load_heightmap(junk, resolution=0.1)
+    named = tmp_path / "named.npz"
+    np.savez(named, a=np.zeros((3, 3)), b=np.ones((3, 3)))
+    with pytest.raises(ScenarioError, match="name the heights 'z'"):
+        load_heightmap(named, resolution=0.1)
+
+
+def test_heightmap_file_checks_the_target(tmp_path):
+    from terrains.files import heightmap_file
+
+    p = tmp_path / "site.npy"
+    np.save(p, _grid())
+    with pytest.raises(ScenarioError, match="holds"):
+        heightmap_file(0, 100.0, path=str(p), resolution=0.1, truck_capacity=200.0)

@@ -1,0 +1,163 @@
+"""``file``: a user's own heightmap (``.npy``, ``.npz`` or CSV grid) as a scenario.
+
+Row convention, the same for every format: ``z[j, i]`` is the cell at column ``i`` (east) and
+row ``j`` (north), so the *first* row of the file is the *southern* edge at ``origin[1]``,
+exactly as ``numpy.save(z)`` / ``numpy.savetxt(z, delimiter=",")`` write an earthbench
+heightmap. Heights are metres. The cell size and origin are not in ``.npy`` and CSV files,
+so they are parameters; a ``.npz`` may carry them as arrays ``resolution`` and ``origin``
+(parameters given explicitly win). The height array of a ``.npz`` is ``z`` (or, failing that,
+``elevation`` or ``heights``, or its only array).
+
+Registered as the terrain generator ``file``, so a suite family or the CLI can use it:
+``earthbench plan --terrain file --param path='"site.csv"' --param resolution=0.1``. The seed is
+ignored (a file is one terrain); the target is checked against the volume above the floor.
+GeoTIFF is not read here: convert it with GDAL/rasterio to ``.npy`` plus its cell size, which
+keeps a heavy native dependency out of the benchmark.
+"""
+
+from __future__ import annotations
+
+import math
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from earthbench.errors import ScenarioError
+from earthbench.world import Budget, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+
+from .common import check_scenario, round_heights
+
+FORMATS = (".npy", ".npz", ".csv")
+_NPZ_KEYS = ("z", "elevation", "heights")
+
+
+def _read_npz(p: Path) -> tuple[np.ndarray, dict[str, Any]]:
+    with np.load(p, allow_pickle=False) as d:
+        files = list(d.files)
+        if not files:
+            raise ScenarioError(f"heightmap file {str(p)!r} is an empty .npz archive; save the heights as array 'z'")
+        key = next((k for k in _NPZ_KEYS if k in files), files[0] if len(files) == 1 else None)
+        if key is None:
+            raise ScenarioError(f"heightmap file {str(p)!r} has arrays {files} but none named {', '.join(_NPZ_KEYS)}; name the heights 'z'")
+        extra: dict[str, Any] = {}
+        if "resolution" in files:
+            extra["resolution"] = float(np.asarray(d["resolution"]).reshape(-1)[0])
+        if "origin" in files:
+            o = np.asarray(d["origin"], dtype=float).reshape(-1)
+            if o.size != 2:
+                raise ScenarioError(f"heightmap file {str(p)!r}: 'origin' must hold 2 numbers (x, y), got {o.size}")
+            extra["origin"] = (float(o[0]), float(o[1]))
+        return np.asarray(d[key]), extra
+
+
+def _read_csv(p: Path) -> np.ndarray:
+    text = p.read_text()
+    rows = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not rows:
+        raise ScenarioError(f"heightmap file {str(p)!r} holds no rows of numbers")
+    delim = "," if "," in rows[0] else None
+    out: list[list[float]] = []
+    for n, ln in enumerate(rows):
+        cells = ln.split(delim)
+        try:
+            out.append([float(c) if c.strip() else math.nan for c in cells])
+        except ValueError as exc:
+            raise ScenarioError(f"heightmap file {str(p)!r}, data row {n + 1}: {exc}; the CSV must be a grid of numbers without a header") from None
+        if len(out[-1]) != len(out[0]):
+            raise ScenarioError(
+                f"heightmap file {str(p)!r} is not a rectangular grid: data row {n + 1} has {len(out[-1])} values, row 1 has {len(out[0])}"
+            )
+    return np.array(out, dtype=np.float64)
+
+
+def load_heightmap(
+    path: str | Path,
+    *,
+    resolution: float | None = None,
+    origin: tuple[float, float] | None = None,
+) -> Heightmap:
+    """Read a heightmap file; every way it can be unusable is a ScenarioError saying what to do."""
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"heightmap file {str(p)!r} not found")
+    suffix = p.suffix.lower()
+    if suffix not in FORMATS:
+        raise ScenarioError(f"heightmap file {str(p)!r}: unsupported format {suffix or '(none)'!r}; use one of {', '.join(FORMATS)}")
+    if p.stat().st_size == 0:
+        raise ScenarioError(f"heightmap file {str(p)!r} is empty")
+    extra: dict[str, Any] = {}
+    try:
+        if suffix == ".npy":
+            z = np.load(p, allow_pickle=False)
+        elif suffix == ".npz":
+            z, extra = _read_npz(p)
+        else:
+            z = _read_csv(p)
+    except ScenarioError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ScenarioError(f"heightmap file {str(p)!r} cannot be read as {suffix}: {exc}") from None
+    z = np.asarray(z)
+    if z.dtype.kind not in "biuf":
+        raise ScenarioError(f"heightmap file {str(p)!r} holds {z.dtype} data; heights must be numbers")
+    if z.size == 0:
+        raise ScenarioError(f"heightmap file {str(p)!r} holds an empty array (shape {z.shape})")
+    if z.ndim != 2 or min(z.shape) < 2:
+        raise ScenarioError(f"heightmap file {str(p)!r} holds an array of shape {z.shape}; a heightmap is a 2-D grid of at least 2 × 2 cells")
+    z = z.astype(np.float64)
+    bad = int(np.count_nonzero(~np.isfinite(z)))
+    if bad:
+        what = "only NaN or infinite values" if bad == z.size else f"{bad} NaN or infinite cells of {z.size}"
+        raise ScenarioError(f"heightmap file {str(p)!r} holds {what}; fill the gaps (e.g. interpolate) or crop them away")
+    res = resolution if resolution is not None else extra.get("resolution")
+    if res is None:
+        raise ScenarioError(f"heightmap file {str(p)!r}: give the cell size in metres (resolution=...); {suffix} files do not store it")
+    org = origin if origin is not None else extra.get("origin", (0.0, 0.0))
+    return Heightmap((float(org[0]), float(org[1])), float(res), z)
+
+
+def heightmap_file(
+    seed: int,
+    target_volume: float,
+    *,
+    path: str,
+    resolution: float | None = None,
+    origin: tuple[float, float] | None = None,
+    floor: float | None = None,
+    dig_area: list[tuple[float, float]] | None = None,
+    excavator: tuple[float, float, float] | None = None,
+    truck: tuple[float, float, float] | None = None,
+    truck_capacity: float = 10.0,
+    budget: Budget | None = None,
+    scenario_id: str | None = None,
+) -> Scenario:
+    """A scenario on the heightmap in ``path``. Parameters:
+
+    - ``path``: the ``.npy``/``.npz``/``.csv`` file; ``resolution`` (m) and ``origin`` (x, y of
+      the lower-left cell corner, default (0, 0)) as described in the module doc.
+    - ``floor``: design grade in m; default the lowest cell of the map.
+    - ``dig_area``: polygon [[x, y], ...]; default the whole map.
+    - ``excavator``, ``truck``: initial poses (x, y, yaw); default the STL-TAMP paper's offsets
+      from the map's corners (east of the map, and north-west of it), as for ``rbf``.
+    - ``truck_capacity``: m³. ``seed`` is ignored.
+    """
+    terrain = load_heightmap(path, resolution=resolution, origin=origin)
+    terrain = terrain.with_z(round_heights(terrain.z))
+    xmin, xmax, ymin, ymax = terrain.extent
+    area = tuple(dig_area) if dig_area is not None else ((xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax))
+    sc = Scenario(
+        id=scenario_id or f"file-{Path(path).stem}-v{target_volume:g}",
+        terrain=terrain,
+        site=Site(dig_area=area, floor=float(terrain.z.min()) if floor is None else floor),
+        machines=Machines(
+            truck=TruckSpec(capacity=truck_capacity),
+            excavator_pose=Pose(*(excavator or (xmax + 1.0, ymax + 1.2, math.pi))),
+            truck_pose=Pose(*(truck or (xmin + 2.0, ymax + 7.0, 0.0))),
+        ),
+        task=Task(target_volume),
+        budget=budget or Budget(),
+        meta={"generator": "file", "path": str(path)},
+    )
+    return check_scenario(sc)
