@@ -13,7 +13,7 @@ from .errors import (
     SuiteError,
     UnknownNameError,
 )
-from .plan import PLAN_SCHEMA, Dig, Dump, Move, Plan, Prediction
+from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
 from .planner import NoConfig, Planner
 from .referee import Verdict, Violation, judge
 from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
@@ -21,6 +21,7 @@ from .world import (
     Budget,
     ExcavatorSpec,
     Heightmap,
+    LoaderSpec,
     Machines,
     Pose,
     Scenario,
@@ -32,7 +33,7 @@ from .world import (
 __version__ = "0.1.0"
 
 __all__ = [
-    "Budget", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "METRICS", "Machines",
+    "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",
     "Move", "NoConfig", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
     "Pose", "Prediction", "Scenario", "ScenarioError", "Site", "StoreError", "SuiteError", "TERRAINS",
     "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",

@@ -64,8 +64,29 @@ class Dump:
     kind: ClassVar[str] = "dump"
 
 
-Action = Union[Move, Dig, Dump]
-ACTION_TYPES: dict[str, type] = {c.kind: c for c in (Move, Dig, Dump)}
+@dataclass(frozen=True)
+class Charge:
+    """A wheel-loader charge: from ``entry`` = ``(x, y, yaw)`` (the loader's pose when it starts),
+    drive ``penetration`` metres along ``yaw`` into the pile with the bucket flat on the floor.
+
+    The loader ends the charge at ``entry + penetration · (cos yaw, sin yaw)``, same yaw.
+    """
+
+    machine: str
+    t_start: float
+    t_end: float
+    entry: tuple[float, float, float]
+    penetration: float
+    kind: ClassVar[str] = "charge"
+
+    @property
+    def end(self) -> tuple[float, float, float]:
+        x, y, yaw = self.entry
+        return (x + self.penetration * math.cos(yaw), y + self.penetration * math.sin(yaw), yaw)
+
+
+Action = Union[Move, Dig, Dump, Charge]
+ACTION_TYPES: dict[str, type] = {c.kind: c for c in (Move, Dig, Dump, Charge)}
 
 
 @dataclass(frozen=True)
@@ -102,6 +123,8 @@ class Plan:
                 d["t_start"], d["t_end"] = a.t_start, a.t_end
                 if isinstance(a, Dig):
                     d.update(contact=list(a.contact), heading=a.heading, depth=a.depth, drag_length=a.drag_length)
+                elif isinstance(a, Charge):
+                    d.update(entry=list(a.entry), penetration=a.penetration)
             acts.append(d)
         pred = {k: v for k, v in (("volume", self.predicted.volume), ("makespan", self.predicted.makespan)) if v is not None}
         return {"schema": PLAN_SCHEMA, "actions": acts, "predicted": pred, "info": self.info}
@@ -229,5 +252,13 @@ def _parse_action(n: int, d: Any) -> Action:
             _number(d, "heading", where),
             _number(d, "depth", where, positive=True),
             _number(d, "drag_length", where, positive=True),
+        )
+    if kind == "charge":
+        return Charge(
+            machine,
+            t0,
+            t1,
+            _vector(d, "entry", where, 3),  # type: ignore[arg-type]
+            _number(d, "penetration", where, positive=True),
         )
     return Dump(machine, t0, t1)

@@ -198,6 +198,39 @@ class TruckSpec:
 
 
 @dataclass(frozen=True)
+class LoaderSpec:
+    """A small wheel loader (about 5–6 t, 0.8 m³ bucket) for the ``wheel_loader`` track.
+
+    The loader's pose is the centre of its front axle; the bucket's cutting edge, ``bucket_width``
+    wide, lies ``bucket_offset`` ahead of it along the heading. The loader is car-like: it
+    drives forward or in reverse along its heading on arcs of radius ≥ ``min_turning_radius``
+    (it cannot turn in place) at ≤ ``travel_speed`` and ≤ ``yaw_rate``.
+
+    A charge drives ≤ ``penetration_speed`` into the pile and lasts at least
+    ``min_charge_time`` (crowding and racking the bucket back); a dump lasts at least
+    ``min_dump_time``, needs the cutting edge within ``dump_reach`` of the truck's loading
+    circle and the truck in front (within 45° of the heading). ``clearance`` is the least
+    distance between the loader's pose and the truck's centre. The pose may never cross a cell
+    more than ``max_step`` above the base level (the floor; see the referee).
+    ``chord_tolerance`` is the lateral slack (m) between an arc and the chord of two samples.
+    """
+
+    bucket_width: float = 1.8
+    bucket_capacity: float = 0.8
+    bucket_offset: float = 1.2
+    min_turning_radius: float = 3.5
+    travel_speed: float = 2.0
+    penetration_speed: float = 0.5
+    yaw_rate: float = 0.6
+    min_charge_time: float = 2.0
+    min_dump_time: float = 3.0
+    dump_reach: float = 1.0
+    clearance: float = 2.5
+    max_step: float = 0.15
+    chord_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
 class Machines:
     """The machines on site with their initial poses. Machine ids in plans: see ``ids``."""
 
@@ -205,15 +238,19 @@ class Machines:
     truck_pose: Pose = Pose(2.0, 13.0, 0.0)
     excavator: ExcavatorSpec | None = field(default_factory=ExcavatorSpec)
     excavator_pose: Pose | None = Pose(13.0, 7.2, math.pi)
+    loader: LoaderSpec | None = None
+    loader_pose: Pose | None = None
 
     def __post_init__(self) -> None:
-        for name in ("excavator",):
+        for name in ("excavator", "loader"):
             if (getattr(self, name) is None) != (getattr(self, f"{name}_pose") is None):
                 raise ScenarioError(f"machines.{name} and machines.{name}_pose must be given together")
 
     @property
     def ids(self) -> tuple[str, ...]:
         out = ["truck"]
+        if self.loader is not None:
+            out.insert(0, "loader")
         if self.excavator is not None:
             out.insert(0, "excavator")
         return tuple(out)
@@ -270,7 +307,7 @@ class Scenario:
 
     # -- identity ---------------------------------------------------------------------------
     def _content(self) -> dict[str, Any]:
-        d = _to_plain(self)
+        d = _drop_absent_loader(_to_plain(self))
         d.pop("id"), d.pop("meta")
         d["terrain"].pop("z")
         return d
@@ -287,7 +324,7 @@ class Scenario:
 
     # -- JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        d = _to_plain(self)
+        d = _drop_absent_loader(_to_plain(self))
         z = np.ascontiguousarray(self.terrain.z, dtype="<f8")
         d["terrain"]["z"] = {"shape": list(z.shape), "f8_base64": base64.b64encode(z.tobytes()).decode()}
         return {"schema": SCENARIO_SCHEMA, **d}
@@ -318,6 +355,8 @@ class Scenario:
                 truck_pose=Pose(**m["truck_pose"]),
                 excavator=ExcavatorSpec(**m["excavator"]) if m.get("excavator") else None,
                 excavator_pose=Pose(**m["excavator_pose"]) if m.get("excavator_pose") else None,
+                loader=LoaderSpec(**m["loader"]) if m.get("loader") else None,
+                loader_pose=Pose(**m["loader_pose"]) if m.get("loader_pose") else None,
             )
             return cls(
                 id=str(d["id"]),
@@ -361,6 +400,15 @@ def _to_plain(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def _drop_absent_loader(d: dict[str, Any]) -> dict[str, Any]:
+    """Leave out ``machines.loader``/``loader_pose`` when there is no loader, so scenarios
+    without one keep the JSON form and digest they had before the loader existed."""
+    m = d.get("machines", {})
+    if m.get("loader") is None and m.get("loader_pose") is None:
+        m.pop("loader", None), m.pop("loader_pose", None)
+    return d
 
 
 def _canonical(obj: Any) -> str:
