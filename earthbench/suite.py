@@ -32,6 +32,13 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     n_bases = 14
     [config.NAME]                    # optional Planner(**overrides) per planner name
     steepness = 20.0
+
+A suite may also take the families of other suites: ``include = ["paper-extensive", "bench"]``
+(registered names, or paths relative to the including file). Each included family keeps its
+generator, parameters, targets and seeds and is renamed ``SUITE.FAMILY``, so its ids read
+``standard/paper-extensive.rbf30/s0/v4``; the including suite's own track (which every included
+suite must share), budget, threshold and planner config apply. With equal budgets the
+scenarios keep their digests, so runs stored for the included suite count for the union.
 """
 
 from __future__ import annotations
@@ -56,7 +63,7 @@ from .world import TRACKS, Budget, Scenario
 SUITE_GROUP = "earthbench.suites"
 DEFAULT_THRESHOLD = 0.9
 
-_TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config")
+_TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include")
 _FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
 
@@ -230,7 +237,32 @@ def _check_params(gen: Any, params: dict[str, Any], where: str) -> None:
     _unknown(params, names, f"{where} params")
 
 
-def parse_suite(text: str, *, path: str = "", default_name: str = "") -> Suite:
+def _included_families(names: Any, where: str, path: str, track: str, stack: tuple[str, ...]) -> list[Family]:
+    """The families of the suites named in ``include``, renamed ``SUITE.FAMILY``."""
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise SuiteError(f"{where}: include must be a list of suite names or paths, got {names!r}")
+    out: list[Family] = []
+    for name in names:
+        if name in stack:
+            raise SuiteError(f"{where}: include {name!r} forms a cycle ({' -> '.join(stack + (name,))})")
+        suites = known_suites()
+        rel = Path(path).parent / name if path else Path(name)
+        if name in suites:
+            file = suites[name]
+        elif rel.is_file():
+            file = rel
+        else:
+            close = difflib.get_close_matches(name, list(suites), n=3, cutoff=0.5)
+            hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+            raise SuiteError(f"{where}: include {name!r} is neither a known suite nor a file.{hint} Known suites: {', '.join(sorted(suites))}.")
+        sub = parse_suite(Path(file).read_text(), path=str(file), default_name=Path(file).stem, _stack=stack + (name,))
+        if sub.track != track:
+            raise SuiteError(f"{where}: included suite {sub.name!r} is a {sub.track!r} suite; this suite's track is {track!r}")
+        out.extend(dataclasses.replace(f, name=f"{sub.name}.{f.name}") for f in sub.families)
+    return out
+
+
+def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tuple[str, ...] = ()) -> Suite:
     """Check and build a suite from TOML text; every error names the file and the key."""
     from .registry import TERRAINS
 
@@ -270,9 +302,9 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "") -> Suite:
     config = doc.get("config", {})
     if not isinstance(config, dict) or not all(isinstance(v, dict) for v in config.values()):
         raise SuiteError(f"{where}: [config.PLANNER] sections must be tables of settings")
-    fams_doc = doc.get("family")
-    if not isinstance(fams_doc, list) or not fams_doc:
-        raise SuiteError(f"{where}: a suite needs at least one [[family]] table")
+    fams_doc = doc.get("family", [] if "include" in doc else None)
+    if not isinstance(fams_doc, list) or not (fams_doc or "include" in doc):
+        raise SuiteError(f"{where}: a suite needs at least one [[family]] table or an include list")
     families = []
     for n, fd in enumerate(fams_doc):
         fwhere = f"{where} [[family]] #{n + 1}"
@@ -293,6 +325,8 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "") -> Suite:
             raise SuiteError(f"{fwhere}: params must be a table")
         _check_params(gen, params, fwhere)
         families.append(Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), dict(params)))
+    if "include" in doc:
+        families.extend(_included_families(doc["include"], where, path, track, _stack + (name,)))
     if len({f.name for f in families}) != len(families):
         raise SuiteError(f"{where}: two families share a name; scenario ids would clash")
     desc = doc.get("description", "")

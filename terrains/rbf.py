@@ -47,9 +47,10 @@ def rbf_surface(
     nx, ny = int(round(lx / resolution)), int(round(ly / resolution))
     xs = (np.arange(nx) + 0.5) * resolution
     ys = (np.arange(ny) + 0.5) * resolution
-    z = np.zeros((ny, nx))
-    for (cx, cy), a, s in zip(centres, amps, widths):
-        z += a * np.outer(np.exp(-((ys - cy) ** 2) / (2 * s * s)), np.exp(-((xs - cx) ** 2) / (2 * s * s)))
+    # Each Gaussian is separable, so the sum is one matrix product: (ny × n)·(n × nx).
+    gx = np.exp(-((xs[None, :] - centres[:, :1]) ** 2) / (2 * widths[:, None] ** 2))
+    gy = np.exp(-((ys[None, :] - centres[:, 1:]) ** 2) / (2 * widths[:, None] ** 2))
+    z = (gy.T * amps[None, :]) @ gx
     return Heightmap((0.0, 0.0), resolution, round_heights(z))
 
 

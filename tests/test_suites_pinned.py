@@ -1,0 +1,94 @@
+"""Pinned suite digests: an accidental change to a generator, a suite file or the world model
+changes a digest here and fails, so published results stay tied to the scenarios they ran on.
+
+If a change is intended, update the digest and say in the commit which suites changed and why
+(stored runs of the old scenarios no longer count for the new suite).
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from earthbench.errors import SuiteError
+from earthbench.suite import load_suite, parse_suite
+from terrains.common import dig_area_volume
+
+PINNED = {
+    "paper-switch": ("44330e676a7c6f3cd5e8b4fa7c03fb69e1acc9e35e8230cbb15f78df967257a6", 30),
+    "paper-extensive": ("7bcd71d54536530206b7fea12e231a6f55c8f0ab14406da31dfd52795f327caf", 40),
+    "bench": ("7e0dffdf3e21c6384d1c8da2780a59918d75e64918212234d104925f6670f1a1", 20),
+    "dem": ("5e856db285831e09db36da3d4bc7e9538095b4d270c183027760d14e1c684880", 20),
+    "scale": ("15c8dca18688c5dc9235bdfc53d61affe0da5d83c613413346a6d7a843d58f63", 15),
+    "standard": ("ee060f3ffea5a59bde3690940dabe22d47930d1fe85dc85a313d5a1d04d36b55", 110),
+}
+
+
+@pytest.fixture(scope="module")
+def suites():
+    return {name: load_suite(name) for name in PINNED}
+
+
+@pytest.mark.parametrize("name", sorted(PINNED))
+def test_suite_digest_is_pinned(suites, name):
+    digest, count = PINNED[name]
+    s = suites[name]
+    assert len(s.scenarios) == count
+    assert s.digest == digest
+
+
+@pytest.mark.parametrize("name", sorted(PINNED))
+def test_suite_scenarios_hold_twice_their_target(suites, name):
+    for sc in suites[name].scenarios:
+        assert re.fullmatch(rf"{name}/[\w.-]+/s\d+/v[\d.]+", sc.id), sc.id
+        assert sc.track == "backhoe"
+        assert dig_area_volume(sc) >= 2 * sc.task.target_volume, sc.id
+        assert sc.machines.truck.capacity >= sc.task.target_volume, sc.id
+
+
+def test_paper_suites_follow_the_paper(suites):
+    ext = suites["paper-extensive"]
+    assert sorted({s.task.target_volume for s in ext.scenarios}) == [4.0, 5.0, 6.0, 7.0]
+    assert sorted({s.meta["seed"] for s in ext.scenarios}) == list(range(10))
+    assert {s.meta["n_bases"] for s in ext.scenarios} == {30}
+    sw = suites["paper-switch"]
+    assert sorted({round(s.task.target_volume / 0.28, 6) for s in sw.scenarios}) == [2.0, 3.0, 4.0]
+    assert {s.meta["n_bases"] for s in sw.scenarios} == {14}
+    for s in ext.scenarios + sw.scenarios:
+        m = s.machines
+        assert (m.excavator_pose.x, m.excavator_pose.y, m.truck_pose.x, m.truck_pose.y) == (13.0, 7.2, 2.0, 13.0)
+        assert s.terrain.extent == (0.0, 12.0, 0.0, 6.0)
+
+
+def test_scale_targets_grow_with_area(suites):
+    per_area = {
+        round(s.task.target_volume / ((s.terrain.extent[1]) * (s.terrain.extent[3])), 9) for s in suites["scale"].scenarios
+    }
+    assert per_area == {round(4.0 / 72.0, 9)}
+
+
+def test_standard_is_the_union_and_shares_digests(suites):
+    parts = ("paper-switch", "paper-extensive", "bench", "dem")
+    union = sorted(sc.digest for p in parts for sc in suites[p].scenarios)
+    assert sorted(sc.digest for sc in suites["standard"].scenarios) == union
+    ids = {sc.id for sc in suites["standard"].scenarios}
+    assert "standard/paper-extensive.rbf30/s0/v4" in ids
+
+
+def test_include_errors(tmp_path):
+    base = tmp_path / "a.toml"
+    base.write_text('name = "a"\ninclude = ["b.toml"]\n')
+    (tmp_path / "b.toml").write_text('name = "b"\ninclude = ["a.toml"]\n')
+    with pytest.raises(SuiteError, match="cycle"):
+        load_suite(base)
+    wl = tmp_path / "w.toml"
+    wl.write_text('name = "w"\ntrack = "wheel_loader"\ninclude = ["paper-switch"]\n')
+    with pytest.raises(SuiteError, match="track"):
+        load_suite(wl)
+    with pytest.raises(SuiteError, match="Did you mean 'paper-switch'"):
+        parse_suite('name = "x"\ninclude = ["paper-swich"]\n')
+    with pytest.raises(SuiteError, match="list of suite names"):
+        parse_suite('name = "x"\ninclude = "bench"\n')
+    with pytest.raises(SuiteError, match="at least one"):
+        parse_suite('name = "x"\n')
