@@ -1,0 +1,50 @@
+"""``earthbench rescore``: judge stored plans again (after a referee or metric fix).
+
+Only runs that returned a plan (reason ok or invalid, or error because the referee itself
+failed) are re-judged; their reason, metrics and violations are replaced, their solve times
+kept, and ``rescored_at`` is set. Each run is updated in its own transaction.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..runner import score
+from ..store import Store
+from .run import default_db
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("rescore", help="re-run the referee on stored plans", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--db", default=default_db(), metavar="PATH", help="results database")
+    p.add_argument("--suite", help="only this suite")
+    p.add_argument("--planner", action="append", default=[], metavar="NAME", help="only this planner (repeatable)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    changed = same = 0
+    with Store(args.db, create=False) as store:
+        store.check_writable()
+        rows = [r for r in store.query(suite=args.suite, planner=args.planner) if r["plan"] is not None]
+        scenarios = {}
+        for r in rows:
+            digest = r["scenario_digest"]
+            if digest not in scenarios:
+                scenarios[digest] = store.scenario(digest)
+            plan = store.plan_json(r["id"])
+            verdict, metrics = score(scenarios[digest], plan, r["threshold"])
+            metrics.update(solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
+            reason = "ok" if verdict.valid else "invalid"
+            before = (r["reason"], r["volume_ratio"], bool(r["success"]))
+            store.update_score(r["id"], reason, metrics, [v.to_dict() for v in verdict.violations])
+            if before != (reason, metrics["volume_ratio"], bool(metrics["success"])):
+                changed += 1
+                print(f"run {r['id']} {r['scenario_id']} × {r['planner']}: {before[0]} → {reason}, "
+                      f"volume ratio {before[1]} → {metrics['volume_ratio']:.4g}", file=sys.stderr)
+            else:
+                same += 1
+    print(f"rescored {changed + same} run(s): {changed} changed, {same} unchanged")
+    return 0

@@ -1,0 +1,100 @@
+"""``earthbench runs``: list stored runs with filters, or show one run in full."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+
+from ..runner import REASONS
+from ..store import Store
+from .run import default_db
+
+COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio", "time_per_m3", "solve_time_s")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("runs", help="list stored runs (filters), or show one with --id")
+    p.add_argument("--db", default=default_db(), metavar="PATH", help="results database")
+    p.add_argument("--suite", help="only this suite")
+    p.add_argument("--planner", action="append", default=[], metavar="NAME", help="only this planner (repeatable)")
+    p.add_argument("--reason", action="append", default=[], choices=REASONS, help="only this termination reason (repeatable)")
+    p.add_argument("--scenario", metavar="TEXT", help="only scenarios whose id contains TEXT")
+    p.add_argument("--limit", type=int, default=50, help="at most this many rows, newest first (0: all; default 50)")
+    p.add_argument("--format", choices=("table", "csv", "json"), default="table", help="output format (default: table)")
+    p.add_argument("--id", type=int, metavar="RUN", help="show one run in full: config, violations, error, output tail")
+    p.add_argument("--plan-out", metavar="FILE", help="with --id: write the run's plan JSON to FILE")
+    return p
+
+
+def _cell(v: object) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return "inf" if math.isinf(v) else f"{v:.3g}"
+    return str(v)
+
+
+def run(args: argparse.Namespace) -> int:
+    with Store(args.db, create=False) as store:
+        if args.id is not None:
+            return _show(store, args)
+        rows = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
+        if args.format == "json":
+            json.dump([{c: r[c] for c in COLUMNS} for r in rows], sys.stdout, indent=1)
+            print()
+        elif args.format == "csv":
+            w = csv.writer(sys.stdout)
+            w.writerow(COLUMNS)
+            for r in rows:
+                w.writerow([r[c] for c in COLUMNS])
+        else:
+            table = [list(COLUMNS)] + [[_cell(r[c]) for c in COLUMNS] for r in rows]
+            widths = [max(len(t[i]) for t in table) for i in range(len(COLUMNS))]
+            for n, t in enumerate(table):
+                print("  ".join(c.ljust(w) for c, w in zip(t, widths)).rstrip())
+                if n == 0:
+                    print("  ".join("-" * w for w in widths))
+            print(f"({len(rows)} run(s){'; more with --limit 0' if args.limit and len(rows) == args.limit else ''})", file=sys.stderr)
+    return 0
+
+
+def _show(store: Store, args: argparse.Namespace) -> int:
+    rows = store.query(run_id=args.id)
+    if not rows:
+        print(f"earthbench: error: no run with id {args.id} in {args.db}", file=sys.stderr)
+        return 2
+    r = rows[0]
+    cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
+    env = store.db.execute("SELECT * FROM environments WHERE id=?", (r["environment_id"],)).fetchone()
+    print(f"run {r['id']}: {r['scenario_id']} × {r['planner']} {r['planner_version']} (config {r['config_hash']})")
+    print(f"  suite {r['suite']} ({r['suite_digest'][:12]}), scenario digest {r['scenario_digest'][:12]}")
+    print(f"  reason {r['reason']}, success {bool(r['success'])} (threshold {r['threshold']})")
+    print(f"  solve {_cell(r['solve_time_s'])} s wall, {_cell(r['solve_cpu_s'])} s CPU; start-up {_cell(r['startup_s'])} s; "
+          f"peak RSS {_cell(r['peak_rss_mb'])} MB; cores {r['cores']}; {r['started_at']} → {r['finished_at']}")
+    if cfg:
+        print(f"  config {cfg[0]}")
+    if env:
+        print(f"  machine {env['cpu_model']} ({env['cores']} cores), {env['os']}, Python {env['python']}, "
+              f"commit {env['project_commit']}, plugin commit {env['plugin_commit']}")
+    if r["metrics"]:
+        print("  metrics:")
+        for k, v in json.loads(r["metrics"]).items():
+            print(f"    {k:<28} {_cell(v)}")
+    for v in json.loads(r["violations"] or "[]"):
+        print(f"  violation: action {v['action']}: {v['rule']} ({v['magnitude']:.3g}) {v['message']}")
+    if r["error"]:
+        print("  error:\n    " + r["error"].strip().replace("\n", "\n    "))
+    if r["log_tail"]:
+        print("  output (tail):\n    " + r["log_tail"].strip().replace("\n", "\n    "))
+    if args.plan_out:
+        plan = store.plan_json(args.id)
+        if plan is None:
+            print(f"earthbench: run {args.id} has no plan ({r['reason']})", file=sys.stderr)
+            return 1
+        with open(args.plan_out, "w") as f:
+            f.write(plan)
+        print(f"plan written to {args.plan_out}")
+    return 0

@@ -1,0 +1,66 @@
+"""The live progress line of ``earthbench run``: counts by termination reason and an ETA.
+
+On a terminal the line is redrawn in place; elsewhere (CI logs, pipes) one line is printed
+per finished case, so a log shows every case and its outcome.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+from .runner import REASONS, Case, CaseResult
+
+
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    h, rem = divmod(s, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+
+
+class Progress:
+    """Counts finished cases by reason; the ETA is the mean time per case so far × cases left."""
+
+    def __init__(self, total: int, *, stream: TextIO | None = None, live: bool | None = None, quiet: bool = False):
+        self.total = total
+        self.stream = stream or sys.stderr
+        self.live = self.stream.isatty() if live is None else live
+        self.quiet = quiet
+        self.counts = {r: 0 for r in REASONS}
+        self.done = 0
+        self.t0 = time.monotonic()
+
+    def line(self) -> str:
+        elapsed = time.monotonic() - self.t0
+        counts = " ".join(f"{r} {n}" for r, n in self.counts.items() if n or r == "ok")
+        eta = f"ETA {_clock(elapsed / self.done * (self.total - self.done))}" if self.done else "ETA –"
+        width = len(str(self.total))
+        return f"[{self.done:>{width}}/{self.total}] {counts} | {_clock(elapsed)} elapsed, {eta}"
+
+    def start(self) -> None:
+        self.t0 = time.monotonic()
+        if self.live and not self.quiet and self.total:
+            self.stream.write("\r" + self.line() + "\x1b[K")
+            self.stream.flush()
+
+    def update(self, case: Case, result: CaseResult) -> None:
+        self.done += 1
+        self.counts[result.reason] = self.counts.get(result.reason, 0) + 1
+        if self.quiet:
+            return
+        t = f"{result.solve_time_s:.2f} s" if result.solve_time_s is not None else "–"
+        detail = f"{case.label}: {result.reason} ({t})"
+        if result.reason in ("error", "crashed", "memory", "timeout") and result.error:
+            detail += " — " + result.error.strip().splitlines()[-1][:160]
+        if self.live:
+            self.stream.write("\r\x1b[K" + detail + "\n" + self.line() + "\x1b[K")
+        else:
+            self.stream.write(self.line() + "  " + detail + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.live and not self.quiet and self.total:
+            self.stream.write("\n")
+            self.stream.flush()
