@@ -137,9 +137,10 @@ class Case:
     plugins: tuple[str, ...] = ()
 
     @property
-    def key(self) -> tuple[str, str, str, str, str]:
+    def key(self) -> tuple[str, str, str, str]:
+        """(scenario digest, planner, version, config hash): the resume key of the store."""
         p = self.planner
-        return (self.suite, self.scenario.digest, p.name, p.version, p.config_hash)
+        return (self.scenario.digest, p.name, p.version, p.config_hash)
 
     @property
     def label(self) -> str:
@@ -150,7 +151,7 @@ class Case:
 class CaseResult:
     """What happened in one case. ``metrics`` is None unless the planner returned a plan."""
 
-    key: tuple[str, str, str, str, str]
+    key: tuple[str, str, str, str]
     scenario_id: str
     reason: str
     solve_time_s: float | None = None
@@ -655,9 +656,12 @@ def run_cases(
     """
     report = RunReport(planned=len(cases))
     done = set() if rerun else store.finished_keys()
-    todo = [c for c in cases if c.key not in done]
+    by_key: dict[tuple[str, str, str, str], Case] = {}
+    for c in cases:  # one case per key: a scenario listed twice is run once
+        if c.key not in done:
+            by_key.setdefault(c.key, c)
+    todo = list(by_key.values())
     report.skipped = len(cases) - len(todo)
-    by_key = {c.key: c for c in todo}
     if progress is not None:
         progress.total = len(todo)
         progress.start()
@@ -680,3 +684,20 @@ def run_cases(
         if progress is not None:
             progress.close()
     return report
+
+
+def run_suite(
+    suite: Any,
+    store: Any,
+    executor: Executor | None = None,
+    *,
+    planners: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    seeds: Iterable[int] | None = None,
+    rerun: bool = False,
+    progress: Any = None,
+) -> RunReport:
+    """The Python API of ``earthbench run``: register the suite in the store, run what is missing."""
+    cases, _ = build_cases(suite, planners, plugins=plugins, seeds=seeds)
+    store.register_suite(suite)
+    return run_cases(cases, store, executor or LocalExecutor(cores_per_case=suite.budget.cores), rerun=rerun, progress=progress)

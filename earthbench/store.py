@@ -4,13 +4,17 @@ Why SQLite: embedded, a single file to copy or merge, safe against a killed writ
 killed mid-case loses only that case: its transaction never commits), and readable by
 pandas. Tables:
 
-* ``runs`` — one row per finished case: suite and suite digest, scenario id/digest/family/
-  seed, planner name/version/config hash, termination ``reason``, ``success``, the main
-  metrics as real columns, every metric as JSON (``metrics``), the referee's ``violations``
-  (JSON), the plan itself (zlib-compressed JSON, so any run can be re-scored), the error
-  text and the tail of the case's output. ``UNIQUE(suite, scenario_digest, planner,
-  planner_version, config_hash)`` is the resume key: a case is stored at most once per suite.
-  The suite is part of the key because a run is scored under its suite's threshold.
+* ``runs`` — one row per finished case: scenario id/digest/family/seed, the suite it ran
+  under (provenance) and its digest, planner name/version/config hash, termination
+  ``reason``, ``success`` (under that suite's threshold), the main metrics as real columns,
+  every metric as JSON (``metrics``), the referee's ``violations`` (JSON), the plan itself
+  (zlib-compressed JSON, so any run can be re-scored), the error text and the tail of the
+  case's output. ``UNIQUE(scenario_digest, planner, planner_version, config_hash)`` is the
+  resume key: a case is stored once, whichever suite ran it (the budget is part of the
+  scenario digest, so runs under different budgets never mix).
+* ``suites`` and ``suite_scenarios`` — each suite version (name, digest, threshold) that was
+  run, and its scenarios' ids and digests: how a suite finds its runs, including those stored
+  while running another suite with the same scenarios (``standard`` includes ``paper-switch``).
 * ``planner_configs`` — (name, version, config hash) → the full configuration as JSON.
 * ``environments`` — CPU model, cores, OS, Python and package versions, git commits of the
   project and of the planner's plugin, hostname; deduplicated by a hash of their content.
@@ -68,6 +72,18 @@ CREATE TABLE scenarios (
     id TEXT NOT NULL, track TEXT NOT NULL, target_volume REAL NOT NULL,
     doc BLOB NOT NULL
 );
+CREATE TABLE suites (
+    id INTEGER PRIMARY KEY,
+    name TEXT NOT NULL, digest TEXT NOT NULL, track TEXT NOT NULL, threshold REAL NOT NULL,
+    description TEXT, registered_at TEXT,
+    UNIQUE (name, digest)
+);
+CREATE TABLE suite_scenarios (
+    suite_id INTEGER NOT NULL REFERENCES suites(id),
+    scenario_id TEXT NOT NULL, scenario_digest TEXT NOT NULL, family TEXT, seed INTEGER,
+    PRIMARY KEY (suite_id, scenario_id)
+);
+CREATE INDEX suite_scenarios_digest ON suite_scenarios (scenario_digest);
 CREATE TABLE runs (
     id INTEGER PRIMARY KEY,
     suite TEXT NOT NULL, suite_digest TEXT NOT NULL,
@@ -82,7 +98,7 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT,
-    UNIQUE (suite, scenario_digest, planner, planner_version, config_hash)
+    UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
@@ -94,6 +110,10 @@ def _compress(text: str) -> bytes:
 
 def _decompress(blob: bytes | None) -> str | None:
     return None if blob is None else zlib.decompress(blob).decode()
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
 def _json(obj: Any) -> str:
@@ -178,11 +198,35 @@ class Store:
         self.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def finished_keys(self, suite: str | None = None) -> set[tuple[str, str, str, str, str]]:
-        """Resume keys (suite, scenario digest, planner, version, config hash) already stored."""
-        sql = "SELECT suite, scenario_digest, planner, planner_version, config_hash FROM runs"
-        rows = self.db.execute(sql + " WHERE suite = ?", (suite,)) if suite else self.db.execute(sql)
+    def finished_keys(self) -> set[tuple[str, str, str, str]]:
+        """Resume keys (scenario digest, planner, version, config hash) already stored."""
+        rows = self.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")
         return {tuple(r) for r in rows}  # type: ignore[misc]
+
+    def register_suite(self, suite: Any) -> int:
+        """Record a suite version and its scenarios (once per digest), in one transaction."""
+        row = self.db.execute("SELECT id FROM suites WHERE name=? AND digest=?", (suite.name, suite.digest)).fetchone()
+        if row:
+            return row[0]
+        try:
+            with self.db:
+                self.db.execute("BEGIN IMMEDIATE")
+                cur = self.db.execute(
+                    "INSERT INTO suites (name, digest, track, threshold, description, registered_at) VALUES (?, ?, ?, ?, ?, ?)",
+                    (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now()),
+                )
+                sid = cur.lastrowid
+                self.db.executemany(
+                    "INSERT INTO suite_scenarios (suite_id, scenario_id, scenario_digest, family, seed) VALUES (?, ?, ?, ?, ?)",
+                    [(sid, sc.id, sc.digest, sc.meta.get("family"), sc.meta.get("seed")) for sc in suite.scenarios],
+                )
+            return sid
+        except sqlite3.OperationalError as exc:
+            raise StoreError(self._explain(exc)) from None
+
+    def suite_version(self, name: str) -> sqlite3.Row | None:
+        """The most recently registered version (id, digest, threshold, …) of a suite name."""
+        return self.db.execute("SELECT * FROM suites WHERE name=? ORDER BY id DESC LIMIT 1", (name,)).fetchone()
 
     def record(self, case: Case, result: CaseResult, *, replace: bool = False) -> bool:
         """Store one finished case in one transaction. Returns False if it was already stored."""
@@ -193,15 +237,10 @@ class Store:
         try:
             self.db.execute("BEGIN IMMEDIATE")
             try:
+                key_sql = "scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?"
                 if replace:
-                    self.db.execute(
-                        "DELETE FROM runs WHERE suite=? AND scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?",
-                        case.key,
-                    )
-                elif self.db.execute(
-                    "SELECT 1 FROM runs WHERE suite=? AND scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?",
-                    case.key,
-                ).fetchone():
+                    self.db.execute(f"DELETE FROM runs WHERE {key_sql}", case.key)
+                elif self.db.execute(f"SELECT 1 FROM runs WHERE {key_sql}", case.key).fetchone():
                     self.db.execute("ROLLBACK")
                     return False
                 self._scenario(sc)
@@ -276,7 +315,7 @@ class Store:
                 self.db.execute(
                     f"UPDATE runs SET reason=:reason, success=:success, metrics=:metrics, violations=:violations, rescored_at=:at, {sets} WHERE id=:id",
                     {**cols, "reason": reason, "success": int(bool(metrics.get("success"))), "metrics": _json(metrics),
-                     "violations": _json(list(violations)), "at": datetime.now(timezone.utc).isoformat(timespec="seconds"), "id": run_id},
+                     "violations": _json(list(violations)), "at": _now(), "id": run_id},
                 )
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
@@ -286,9 +325,10 @@ class Store:
               scenario: str | None = None, run_id: int | None = None, limit: int | None = None) -> list[sqlite3.Row]:
         """Rows of ``runs`` (newest first) matching every given filter; ``scenario`` is a substring of the id."""
         where, args = [], []
-        if suite:
-            where.append("suite = ?")
-            args.append(suite)
+        if suite:  # runs of the suite's scenarios, whichever suite ran them
+            where.append("(suite = ? OR scenario_digest IN (SELECT ss.scenario_digest FROM suite_scenarios ss "
+                         "JOIN suites s ON s.id = ss.suite_id WHERE s.name = ?))")
+            args += [suite, suite]
         if planner:
             pl = list(planner)
             where.append(f"planner IN ({', '.join('?' * len(pl))})")
@@ -319,8 +359,22 @@ class Store:
         return Scenario.from_json(_decompress(row[0]))
 
 
-def load_runs(db: str | Path | Store = DEFAULT_DB) -> pd.DataFrame:
-    """Every stored run as a pandas DataFrame, one row per run, metrics as flat columns.
+def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite3.Row]]:
+    ver = store.suite_version(suite)
+    if ver is None:
+        known = [r[0] for r in store.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+        raise StoreError(f"suite {suite!r} has no runs in {str(store.path)!r}; suites there: {', '.join(known) or '(none)'}")
+    members = {r["scenario_digest"]: r for r in store.db.execute("SELECT * FROM suite_scenarios WHERE suite_id=?", (ver["id"],))}
+    return ver, members
+
+
+def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> pd.DataFrame:
+    """Stored runs as a pandas DataFrame, one row per run, metrics as flat columns.
+
+    Without ``suite``: every run, labelled with the suite it ran under. With ``suite``: the
+    runs of that suite's scenarios (its most recently run version), whichever suite ran them,
+    relabelled with the suite's name, digest, scenario ids and threshold (``success``
+    recomputed as valid and volume ratio ≥ threshold).
 
     Columns: ``id``, ``suite``, ``suite_digest``, ``scenario_id``, ``scenario_digest``,
     ``family``, ``seed``, ``track``, ``target_volume``, ``planner``, ``planner_version``,
@@ -341,6 +395,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB) -> pd.DataFrame:
 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
+        view = _suite_view(store, suite) if suite else None
         rows = store.db.execute(
             """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
@@ -363,9 +418,17 @@ def load_runs(db: str | Path | Store = DEFAULT_DB) -> pd.DataFrame:
     metric_names: list[str] = []
     records = []
     for r in rows:
-        d = {k: r[k] for k in head if k not in ("success",)}
+        d = {k: r[k] for k in head}
         d["success"] = bool(r["success"])
         metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+        if view is not None:
+            ver, members = view
+            m = members.get(r["scenario_digest"])
+            if m is None:
+                continue
+            d.update(suite=ver["name"], suite_digest=ver["digest"], scenario_id=m["scenario_id"], family=m["family"],
+                     seed=m["seed"], threshold=ver["threshold"])
+            d["success"] = bool(metrics.get("valid") and metrics.get("volume_ratio", 0.0) >= ver["threshold"])
         for k, v in metrics.items():
             k = "n_violations" if k == "violations" else k
             if k in ("success", "solve_time_s", "solve_cpu_s", "target_volume"):
@@ -382,25 +445,31 @@ def load_runs(db: str | Path | Store = DEFAULT_DB) -> pd.DataFrame:
 
 
 def summary_rows(store: Store, suite: str, planners: Iterable[str] | None = None) -> list[dict[str, Any]]:
-    """Per-planner counts and central values of one suite, for the table after a run."""
+    """Per (planner, version, config) counts and central values over a suite's scenarios."""
     import statistics
 
+    ver, members = _suite_view(store, suite)
+    keep = set(planners) if planners is not None else None
+    groups: dict[tuple[str, str, str], list[sqlite3.Row]] = {}
+    for r in store.db.execute(
+        "SELECT planner, planner_version, config_hash, scenario_digest, reason, valid, volume_ratio, time_per_m3, solve_time_s "
+        "FROM runs ORDER BY planner, planner_version, config_hash"
+    ):
+        if r["scenario_digest"] in members and (keep is None or r["planner"] in keep):
+            groups.setdefault((r["planner"], r["planner_version"], r["config_hash"]), []).append(r)
     out = []
-    for (name,) in store.db.execute("SELECT DISTINCT planner FROM runs WHERE suite=? ORDER BY planner", (suite,)).fetchall():
-        if planners is not None and name not in planners:
-            continue
-        rows = store.db.execute(
-            "SELECT reason, success, volume_ratio, time_per_m3, solve_time_s FROM runs WHERE suite=? AND planner=?", (suite, name)
-        ).fetchall()
-        counts = {}
+    for (name, version, chash), rows in groups.items():
+        counts: dict[str, int] = {}
         for r in rows:
             counts[r["reason"]] = counts.get(r["reason"], 0) + 1
+        ok = [r for r in rows if r["reason"] == "ok"]
         vr = [r["volume_ratio"] for r in rows if r["volume_ratio"] is not None]
-        tpm = [r["time_per_m3"] for r in rows if r["time_per_m3"] is not None and r["reason"] == "ok" and math.isfinite(r["time_per_m3"])]
+        tpm = [r["time_per_m3"] for r in ok if r["time_per_m3"] is not None and math.isfinite(r["time_per_m3"])]
         st = [r["solve_time_s"] for r in rows if r["solve_time_s"] is not None]
+        success = sum(1 for r in ok if r["volume_ratio"] is not None and r["volume_ratio"] >= ver["threshold"])
         out.append({
-            "planner": name, "runs": len(rows), "success": sum(r["success"] for r in rows) / len(rows),
-            "counts": counts,
+            "planner": name, "version": version, "config_hash": chash, "runs": len(rows), "of": len(members),
+            "success": success / len(rows), "counts": counts,
             "volume_ratio_mean": statistics.fmean(vr) if vr else None,
             "volume_ratio_sd": statistics.stdev(vr) if len(vr) > 1 else None,
             "time_per_m3_median": statistics.median(tpm) if tpm else None,

@@ -58,10 +58,12 @@ def print_summary(store: Store, suite: str, planners: list[str] | None = None, f
         return
     head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/m³ med", "solve s med", *REASONS]
     table = [head]
+    names = [r["planner"] for r in rows]
     for r in rows:
         vr = _fmt(r["volume_ratio_mean"]) + ("±" + _fmt(r["volume_ratio_sd"]) if r["volume_ratio_sd"] is not None else "")
+        label = f"{r['planner']} {r['version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
         table.append([
-            r["planner"], str(r["runs"]), f"{100 * r['success']:.0f}%", vr, _fmt(r["time_per_m3_median"], ".1f"),
+            label, f"{r['runs']}/{r['of']}", f"{100 * r['success']:.0f}%", vr, _fmt(r["time_per_m3_median"], ".1f"),
             _fmt(r["solve_time_median"], ".2f"), *(str(r["counts"].get(k, 0)) for k in REASONS),
         ])
     widths = [max(len(row[i]) for row in table) for i in range(len(head))]
@@ -88,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     with Store(args.db) as store:
         store.check_writable()
+        store.register_suite(suite)
         executor = LocalExecutor(jobs=args.jobs, cores_per_case=suite.budget.cores)
         from ..progress import Progress
 
