@@ -5,6 +5,23 @@ order, applies every dig to the grid with the flat-cut model of :func:`apply_cut
 dumped material to the truck, and records every broken rule as a :class:`Violation` (action
 index, rule, magnitude). A plan with any violation is invalid: reported, never ranked.
 
+Wheel loader (track ``wheel_loader``, :class:`~earthbench.world.LoaderSpec`): its pose is the
+centre of its front axle and its bucket's cutting edge lies ``bucket_offset`` ahead. A
+``charge`` starts at the loader's pose, drives the penetration along its heading at ≤ the
+penetration speed, and fills the bucket (:func:`charge_cut`) from the material above the floor
+that the cutting edge's path (bucket width × penetration) covers, in order along the path, up
+to the capacity; what the bucket cannot take stays in place. Loader moves keep the minimum
+turning radius between every two samples (radius of the arc through both samples; a turn in
+place has radius 0 and is flagged). The *traversable step* rule reads "higher" as **height
+above the base level**: the floor (design grade), or without a floor the initial terrain height
+under the loader's starting pose. Every point of the axle's path (moves, and a charge after
+its cut) is densified to half a cell and the cell containing it must not stand more than
+``max_step`` above the base level — so the loader drives on the floor and onto the pile only
+where its bucket has cut it down; points off the map are taken as level ground.
+A loader dump needs the truck still, the cutting edge within ``dump_reach`` of the truck's
+loading circle, the truck's centre within 45° of the loader's heading, and ``min_dump_time``.
+Loader–truck clearance is checked like the excavator's.
+
 Tolerances: speeds and rates get ``RATE_TOL`` (1e-3, relative); durations, distances and
 depths get ``ABS_TOL`` (1e-6 s or m) so that exact arithmetic by a planner is never punished
 while nothing material is rounded in its favour.
@@ -22,8 +39,8 @@ from shapely.geometry import LineString, Point, Polygon
 
 from .errors import PlanFormatError
 from .motion import wrap
-from .plan import Dig, Dump, Move, Plan
-from .world import ExcavatorSpec, Heightmap, Pose, Scenario
+from .plan import Charge, Dig, Dump, Move, Plan
+from .world import ExcavatorSpec, Heightmap, LoaderSpec, Pose, Scenario
 
 RATE_TOL = 1e-3
 ABS_TOL = 1e-6
@@ -49,7 +66,14 @@ RULES: dict[str, str] = {
     "truck_moving": "the truck moves during a dump",
     "dump_reach": "the truck is out of the bucket's reach",
     "collision": "machine centres closer than the clearance",
+    "entry_pose": "a charge does not start at the loader's pose",
+    "penetration_speed": "a charge drives faster than the loader's penetration speed",
+    "turning_radius": "a loader move turns tighter than its minimum turning radius",
+    "step": "the loader crosses a cell higher than its traversable step above the floor",
 }
+
+#: A loader dumps only into a truck whose centre lies within this angle of its heading.
+LOADER_DUMP_HALF_ANGLE = math.pi / 4
 
 
 @dataclass(frozen=True)
@@ -162,6 +186,71 @@ def apply_cut(
     return removed
 
 
+def charge_cut(
+    terrain: Heightmap,
+    z: np.ndarray,
+    spec: LoaderSpec,
+    entry: tuple[float, float, float],
+    penetration: float,
+    level: float,
+    capacity: float,
+) -> float:
+    """Cut ``z`` in place along a charge from ``entry`` (the loader's pose) and return the volume.
+
+    The cutting edge starts ``spec.bucket_offset`` ahead of the pose and sweeps ``penetration``
+    metres along the heading; the cells whose centre lies in that ``bucket_width`` wide path are
+    lowered to ``level`` in path order until ``capacity`` is reached (the last cell partly),
+    exactly as :func:`apply_cut` does for a backhoe drag.
+    """
+    x, y, yaw = entry
+    edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
+    return apply_cut(terrain, z, edge, yaw, spec.bucket_width, penetration, level, capacity)
+
+
+def loader_base_level(scenario: Scenario) -> float:
+    """The level the traversable-step rule measures from: the floor, or without one the initial
+    terrain height under the loader's starting pose."""
+    if scenario.site.floor is not None:
+        return scenario.site.floor
+    p = scenario.machines.loader_pose
+    return scenario.terrain.height_at(p.x, p.y) if p is not None else 0.0
+
+
+def densify(xy: np.ndarray, spacing: float) -> np.ndarray:
+    """Points along the polyline ``xy[k, 2]`` no farther apart than ``spacing`` (ends included)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if len(xy) < 2:
+        return xy
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    n = np.maximum(np.ceil(seg / spacing).astype(int), 1)
+    f = np.concatenate([np.arange(k) / k for k in n])
+    i = np.repeat(np.arange(len(seg)), n)
+    pts = xy[i] + f[:, None] * (xy[i + 1] - xy[i])
+    return np.vstack([pts, xy[-1:]])
+
+
+def cell_heights(terrain: Heightmap, z: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Height of the cell containing each point of ``pts[k, 2]``; NaN for points off the map."""
+    pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+    ny, nx = z.shape
+    i = np.floor((pts[:, 0] - terrain.origin[0]) / terrain.resolution).astype(int)
+    j = np.floor((pts[:, 1] - terrain.origin[1]) / terrain.resolution).astype(int)
+    ok = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+    out = np.full(len(pts), np.nan)
+    out[ok] = z[j[ok], i[ok]]
+    return out
+
+
+def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, max_step: float) -> tuple[float, int]:
+    """Largest height above ``base + max_step`` of the cells the polyline ``xy`` crosses, and the
+    index of its densified point (≤ 0 means traversable); the loader's step rule."""
+    pts = densify(xy, terrain.resolution / 2)
+    h = cell_heights(terrain, z, pts) - base - max_step
+    h = np.where(np.isnan(h), -np.inf, h)
+    k = int(np.argmax(h))
+    return float(h[k]), k
+
+
 def cut_level(terrain: Heightmap, z: np.ndarray, contact: tuple[float, float], depth: float) -> float:
     """The flat cut level of a dig: the current height at the contact minus the depth."""
     return terrain.height_at(contact[0], contact[1], z) - depth
@@ -219,10 +308,17 @@ class _Replay:
             shapely.prepare(k)
         m = scenario.machines
         self.specs = {"excavator": m.excavator, "truck": m.truck}
+        if m.loader is not None:
+            self.specs["loader"] = m.loader
+            self.base = loader_base_level(scenario)
         moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
         for a in plan.actions:
             if isinstance(a, Move) and a.machine in moves:
                 moves[a.machine].append(a)
+            elif isinstance(a, Charge) and a.machine in moves:  # a charge moves the loader too
+                (x, y, yaw), (ex, ey, _) = a.entry, a.end
+                if a.t_end > a.t_start:
+                    moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
         self.timelines = {mid: _Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
         self.busy_until = {mid: 0.0 for mid in m.ids}
         self.pose = {mid: m.pose(mid) for mid in m.ids}
@@ -253,6 +349,8 @@ class _Replay:
                 self.dig(n, a)
             elif isinstance(a, Dump):
                 self.dump(n, a)
+            elif isinstance(a, Charge):
+                self.charge(n, a)
             self.busy_until[a.machine] = max(self.busy_until[a.machine], a.t_end)
         self.collisions()
         return Verdict(
@@ -299,8 +397,84 @@ class _Replay:
                 if line.intersects(ko):
                     depth = ko.boundary.distance(line) if not ko.contains(line) else 1.0
                     self.flag(n, "keep_out", max(depth, ABS_TOL), f"{a.machine}'s path enters a keep-out zone")
+        if isinstance(spec, LoaderSpec):
+            self._loader_move(n, a, spec, p, dist, dyaw)
         self.travel[a.machine] += float(dist.sum())
         self.pose[a.machine] = Pose(float(p[-1, 1]), float(p[-1, 2]), float(p[-1, 3]))
+
+    # -- wheel loader ------------------------------------------------------------------------------
+    def _loader_move(self, n: int, a: Move, spec: LoaderSpec, p: np.ndarray, dist: np.ndarray, dyaw: np.ndarray) -> None:
+        ang = np.abs(dyaw)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            radius = np.where(ang > 1e-12, dist / (2.0 * np.sin(ang / 2.0)), np.inf)
+        k = int(np.argmin(radius))
+        if radius[k] < spec.min_turning_radius * (1 - RATE_TOL) - ABS_TOL:
+            what = "turns in place" if dist[k] <= ABS_TOL else f"turns on a {radius[k]:.3f} m radius"
+            self.flag(n, "turning_radius", spec.min_turning_radius - radius[k], f"{a.machine} {what} between samples {k} and {k + 1}; minimum {spec.min_turning_radius} m")
+        self._step(n, a.machine, p[:, 1:3], spec)
+
+    def _step(self, n: int, machine: str, xy: np.ndarray, spec: LoaderSpec) -> None:
+        excess, _ = step_excess(self.terrain, self.z, xy, self.base, spec.max_step)
+        if excess > ABS_TOL:
+            self.flag(n, "step", excess, f"{machine} crosses a cell {spec.max_step + excess:.3f} m above the base level {self.base:g} m; traversable step {spec.max_step} m")
+
+    def charge(self, n: int, a: Charge) -> None:
+        spec = self.specs.get(a.machine)
+        if not isinstance(spec, LoaderSpec):
+            self.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot charge; only a wheel loader charges")
+            return
+        here = self.pose[a.machine]
+        x, y, yaw = a.entry
+        gap, turn = math.hypot(x - here.x, y - here.y), abs(wrap(yaw - here.yaw))
+        if gap > ABS_TOL or turn > ABS_TOL:
+            self.flag(n, "entry_pose", max(gap, turn), f"{a.machine} is at ({here.x:.3f}, {here.y:.3f}, yaw {here.yaw:.3f}) but the charge enters at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})")
+        if self.bucket > ABS_TOL:
+            self.flag(n, "bucket_not_empty", self.bucket, f"the bucket still holds {self.bucket:.4f} m³")
+        dur = a.t_end - a.t_start
+        speed = a.penetration / dur if dur > 0 else math.inf
+        if speed > spec.penetration_speed * (1 + RATE_TOL):
+            self.flag(n, "penetration_speed", speed - spec.penetration_speed, f"the charge drives {a.penetration:.3f} m in {dur:.3f} s ({speed:.4f} m/s); limit {spec.penetration_speed} m/s")
+        if dur < spec.min_charge_time - ABS_TOL:
+            self.flag(n, "duration", spec.min_charge_time - dur, f"charge lasts {dur:.3f} s; the loader needs at least {spec.min_charge_time} s")
+        edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
+        fp = footprint(edge, yaw, spec.bucket_width, a.penetration)
+        if not self.dig_area_tol.contains(fp):
+            out = fp.difference(self.dig_area).area
+            self.flag(n, "outside_dig_area", max(out, ABS_TOL), f"{out:.4f} m² of the bucket's path lies outside the dig area")
+        ex, ey, _ = a.end
+        axle = LineString([(x, y), (ex, ey)])
+        for ko in self.keep_outs:
+            if fp.intersects(ko) or axle.intersects(ko):
+                self.flag(n, "keep_out", max(fp.intersection(ko).area, ABS_TOL), "the loader or its bucket enters a keep-out zone")
+        level = self.sc.site.floor if self.sc.site.floor is not None else self.base
+        vol = charge_cut(self.terrain, self.z, spec, a.entry, a.penetration, level, spec.bucket_capacity - self.bucket)
+        self.bucket += vol
+        self.removed += vol
+        self.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity))
+        self._step(n, a.machine, np.array([[x, y], [ex, ey]]), spec)
+        self.travel[a.machine] += a.penetration
+        self.pose[a.machine] = Pose(ex, ey, yaw)
+
+    def _loader_dump(self, n: int, a: Dump, spec: LoaderSpec) -> None:
+        truck_spec = self.specs["truck"]
+        truck = self.timelines["truck"]
+        if truck.moving_during(a.t_start, a.t_end):
+            self.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+        pose = self.timelines[a.machine].pose(a.t_start)
+        tpos = truck.pose(a.t_start)
+        edge = (pose.x + spec.bucket_offset * math.cos(pose.yaw), pose.y + spec.bucket_offset * math.sin(pose.yaw))
+        gap = math.hypot(tpos.x - edge[0], tpos.y - edge[1]) - truck_spec.loading_radius
+        if gap > spec.dump_reach + ABS_TOL:
+            self.flag(n, "dump_reach", gap - spec.dump_reach, f"the bucket edge is {gap:.3f} m from the truck's loading circle; dump reach {spec.dump_reach} m")
+        off = abs(wrap(math.atan2(tpos.y - pose.y, tpos.x - pose.x) - pose.yaw))
+        if off > LOADER_DUMP_HALF_ANGLE + ABS_TOL:
+            self.flag(n, "dump_reach", off - LOADER_DUMP_HALF_ANGLE, f"the truck lies {math.degrees(off):.1f}° off the loader's heading; at most {math.degrees(LOADER_DUMP_HALF_ANGLE):.0f}°")
+        if a.t_end - a.t_start < spec.min_dump_time - ABS_TOL:
+            self.flag(n, "duration", spec.min_dump_time - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s")
+        take = min(self.bucket, max(truck_spec.capacity - self.loaded, 0.0))
+        self.loaded += take
+        self.bucket -= take
+        self.dumps += 1
 
     # -- excavator actions ---------------------------------------------------------------------
     def _swing_time(self, base: Pose, target: tuple[float, float], spec: ExcavatorSpec) -> tuple[float, float]:
@@ -350,6 +524,9 @@ class _Replay:
 
     def dump(self, n: int, a: Dump) -> None:
         spec = self.specs.get(a.machine)
+        if isinstance(spec, LoaderSpec):
+            self._loader_dump(n, a, spec)
+            return
         if a.machine != "excavator" or not isinstance(spec, ExcavatorSpec):
             self.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot dump into the truck")
             return
@@ -376,18 +553,21 @@ class _Replay:
 
     # -- collisions ------------------------------------------------------------------------------
     def collisions(self) -> None:
-        if "excavator" not in self.timelines:
-            return
-        exc, truck = self.timelines["excavator"], self.timelines["truck"]
+        for machine in ("excavator", "loader"):
+            if machine in self.timelines:
+                self._collision(machine)
+
+    def _collision(self, machine: str) -> None:
+        exc, truck = self.timelines[machine], self.timelines["truck"]
         times = np.unique(np.concatenate([exc.t, truck.t]))
         d = np.linalg.norm(exc.positions(times) - truck.positions(times), axis=1)
-        clearance = self.specs["excavator"].clearance
+        clearance = self.specs[machine].clearance
         bad = d < clearance - ABS_TOL
         if not bad.any():
             return
         k = int(np.argmin(d))
-        who = [n for n, a in enumerate(self.plan.actions) if isinstance(a, Move) and a.t_start - ABS_TOL <= times[k] <= a.t_end + ABS_TOL]
-        self.flag(who[0] if who else None, "collision", clearance - d[k], f"excavator and truck {d[k]:.3f} m apart at t={times[k]:.3f} s ({int(bad.sum())} samples); clearance {clearance} m")
+        who = [n for n, a in enumerate(self.plan.actions) if isinstance(a, (Move, Charge)) and a.t_start - ABS_TOL <= times[k] <= a.t_end + ABS_TOL]
+        self.flag(who[0] if who else None, "collision", clearance - d[k], f"{machine} and truck {d[k]:.3f} m apart at t={times[k]:.3f} s ({int(bad.sum())} samples); clearance {clearance} m")
 
 
 def judge(scenario: Scenario, plan: Plan | dict | str) -> Verdict:

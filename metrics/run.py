@@ -6,6 +6,16 @@ dumps by the one excavator; its actions never overlap, each dig lasts at least t
 stroke time ``t_s`` and each dump at least the minimum dump time ``t_d``. Hence
 ``makespan ≥ (V / C)(t_s + t_d)`` and ``makespan / V ≥ (t_s + t_d) / C``. The bound ignores
 swinging and driving, so it is loose but never wrong.
+
+Wheel loader (track ``wheel_loader``): each charge needs an empty bucket and fills it with at
+most ``C`` m³, so loading ``V`` takes at least ``V / C`` non-empty dumps, each preceded by its
+own charge; the loader's actions never overlap, a charge lasts at least ``min_charge_time``
+``t_c`` and a dump at least ``min_dump_time`` ``t_d``. Hence ``makespan / V ≥ (t_c + t_d) / C``
+(driving between pile and truck, and the penetration time, are left out).
+
+A site with several loading machines (an excavator and a loader) can load in parallel: each
+machine ``i`` loads at most ``C_i / (t_i + t_d,i)`` m³ per second, so the bound is
+``1 / Σ_i C_i / (t_i + t_d,i)``; with one machine it is that machine's bound above.
 """
 
 from __future__ import annotations
@@ -21,11 +31,23 @@ DEFAULT_SUCCESS_THRESHOLD = 0.9
 
 
 def lower_bound_time_per_m3(scenario: Scenario) -> float:
-    """The least time per m³ any valid plan can reach on this scenario (s/m³)."""
-    exc = scenario.machines.excavator
-    if exc is None:
-        raise ValueError(f"no lower bound is defined for track {scenario.track!r} without an excavator")
-    return (exc.min_stroke_time + exc.min_dump_time) / exc.bucket_capacity
+    """The least time per m³ any valid plan can reach on this scenario (s/m³).
+
+    Excavator: ``(min_stroke_time + min_dump_time) / bucket_capacity``; wheel loader:
+    ``(min_charge_time + min_dump_time) / bucket_capacity``; both on one site: the parallel
+    bound of the module docstring.
+    """
+    m = scenario.machines
+    bounds = []
+    if m.excavator is not None:
+        bounds.append((m.excavator.min_stroke_time + m.excavator.min_dump_time) / m.excavator.bucket_capacity)
+    if m.loader is not None:
+        bounds.append((m.loader.min_charge_time + m.loader.min_dump_time) / m.loader.bucket_capacity)
+    if not bounds:
+        raise ValueError(f"no lower bound is defined for track {scenario.track!r} without an excavator or a loader")
+    if len(bounds) == 1:
+        return bounds[0]
+    return 1.0 / sum(1.0 / b for b in bounds)
 
 
 def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, Any]:
