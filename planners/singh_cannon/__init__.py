@@ -1,0 +1,1 @@
+"""Singh and Cannon's coarse-to-fine planners (backhoe and wheel loader)."""
