@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, ExcavatorSpec, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
 
 from .common import check_scenario, round_heights
 
@@ -117,9 +117,18 @@ def bench(
         z += a * np.outer(np.exp(-((ys - cy) ** 2) / (2 * s * s)), np.exp(-((xs - cx) ** 2) / (2 * s * s)))
     z = np.clip(z, 0.0, None)
 
-    x_lo = toe0 - irregularity - 0.3
+    x_lo = max(toe0 - irregularity - 0.3, 0.0)
     x_hi = ex - 0.5  # the excavator's pad stays outside the dig area
-    y_lo, y_hi = ey - face_length / 2, ey + face_length / 2
+    y_lo, y_hi = max(ey - face_length / 2, 0.0), min(ey + face_length / 2, ly)
+    spec = ExcavatorSpec()
+    if not (spec.reach_min <= ex - toe0 <= spec.reach_max and x_lo < x_hi):
+        raise ScenarioError(
+            f"bench: the nominal toe lies {ex - toe0:.2f} m in front of the excavator, outside its reach "
+            f"{spec.reach_min}–{spec.reach_max} m; lower setback or height, or steepen face_angle"
+        )
+    d_truck = math.hypot(truck[0] - ex, truck[1] - ey)
+    if d_truck - TruckSpec().loading_radius > spec.reach_max:
+        raise ScenarioError(f"bench: the truck stands {d_truck:.2f} m from the excavator, beyond dump reach; move it closer")
     dig_area = ((x_lo, y_lo), (x_hi, y_lo), (x_hi, y_hi), (x_lo, y_hi))
     sc = Scenario(
         id=scenario_id or f"bench-s{seed}-v{target_volume:g}",

@@ -44,15 +44,17 @@ def sample_dem() -> tuple[np.ndarray, float, float, float, float]:
     """(elevation[row south → north, col west → east] in m, cell dx and dy in m, west lon, south lat)."""
     from matplotlib import cbook
 
-    d = cbook.get_sample_data(SAMPLE_DEM)
-    elev = np.flipud(np.asarray(d["elevation"], dtype=np.float64))
-    lat_n, lat_s = float(d["ymin"]), float(d["ymax"])  # the file labels its north edge "ymin"
+    with cbook.get_sample_data(SAMPLE_DEM) as d:
+        elev = np.flipud(np.asarray(d["elevation"], dtype=np.float64))
+        lat_n, lat_s = float(d["ymin"]), float(d["ymax"])  # the file labels its north edge "ymin"
+        dlon, dlat, west = float(d["dx"]), float(d["dy"]), float(d["xmin"])
     south, north = min(lat_n, lat_s), max(lat_n, lat_s)
     lat_mid = math.radians(0.5 * (south + north))
-    dx = float(d["dx"]) * _M_PER_DEGREE * math.cos(lat_mid)
-    dy = float(d["dy"]) * _M_PER_DEGREE
+    dx = dlon * _M_PER_DEGREE * math.cos(lat_mid)
+    dy = dlat * _M_PER_DEGREE
+    elev = np.ascontiguousarray(elev)
     elev.setflags(write=False)
-    return elev, dx, dy, float(d["xmin"]), south
+    return elev, dx, dy, west, south
 
 
 def dem_crop(

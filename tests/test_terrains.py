@@ -250,3 +250,10 @@ def test_heightmap_file_checks_the_target(tmp_path):
     np.save(p, _grid())
     with pytest.raises(ScenarioError, match="holds"):
         heightmap_file(0, 100.0, path=str(p), resolution=0.1, truck_capacity=200.0)
+
+
+def test_bench_refuses_poses_the_referee_would_reject():
+    with pytest.raises(ScenarioError, match="reach"):
+        bench(0, 4.0, setback=5.0, height=1.8, face_angle=30.0)
+    with pytest.raises(ScenarioError, match="dump reach"):
+        bench(0, 4.0, truck=(1.0, 0.5, 0.0))
