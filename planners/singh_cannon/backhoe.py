@@ -1,0 +1,502 @@
+"""``singh-cannon-backhoe``: the multi-resolution bench-loading planner of Singh and Cannon.
+
+Singh & Cannon, "Multi-resolution planning for earthmoving" (ICRA 1998), section 3.1: a coarse
+planner tessellates the dig face into regions and a refined planner searches each region for
+the locally best dig with a forward model. What we build, and the choices the paper leaves open:
+
+Coarse planner (:meth:`_Run.coarse_plan`)
+    From the excavator's current pose, the *face* is the material above the floor (design grade)
+    inside the dig area and the reach annulus. It is cut into
+
+    - **lanes** (left to right): radial sectors of angular width ``lane_overlap · bucket_width /
+      r_out``, where ``r_out`` is the farthest material in reach, so neighbouring strokes overlap
+      slightly even at the outer edge and leave no ribs; "left" is counter-clockwise, as seen
+      from the cab looking out at the face;
+    - **bands** (top to bottom): horizontal layers below the highest material in reach, each
+      ``capacity / (bucket_width · band_drag_fraction · max_drag)`` thick (0.8 m for the
+      default machine: a full bucket in half the maximum drag), the last one ending at the floor.
+
+    A region is a (band, lane) pair with the radial bounds of the lane's material above the band
+    bottom; regions holding less than ``V_min`` are dropped. Regions are visited band by band
+    (top first), lanes left to right, and the refined planner digs in the current region until
+    it finds no feasible dig, then moves on. When no region is left, the excavator moves: the
+    planner scores stations on a grid by the material they reach (capped at what is still
+    needed) minus a travel cost, and drives (``earthbench.motion.turn_drive_turn``) to the best
+    station from which the refined planner finds a feasible dig; a new coarse plan is made there.
+    The truck follows when needed to a spot within dump reach, clear of the excavator by the
+    clearance along its whole path (detouring round the excavator if necessary), preferring
+    spots outside the dig area.
+
+Refined planner (:mod:`.backhoe_model`)
+    ``n_d × n_alpha`` (20 × 10 = 200) candidates over the region's radial bounds and the approach
+    angle; the forward model predicts the bucket's trajectory, swept volume, time and energy; the
+    best candidate by ξ·ψ·ζ becomes a referee ``dig`` (contact on the radial line, heading toward
+    the machine, depth h(α), drag length where the predicted bucket is full). The cut level of a
+    region's digs may not go below the band bottom (nor the floor).
+
+Execution model: the chosen dig is applied to the planner's copy of the grid with the referee's
+own :func:`~earthbench.referee.apply_cut`, so the predicted volume of every dig is the one the
+referee will measure. Each dig is followed by a dump into the truck. When nothing worth
+``fill_min`` of a bucket remains anywhere, the planner relaxes V_min through ``relax_fills``
+before giving up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, Point, Polygon
+
+from earthbench.motion import travel_time, turn_drive_turn, wrap
+from earthbench.plan import Dig, Dump, Move, Plan, Prediction
+from earthbench.planner import Planner
+from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.world import ExcavatorSpec, Pose, Scenario
+
+from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
+
+_EPS_T = 1e-6
+
+
+@dataclass(frozen=True)
+class SinghCannonBackhoeConfig:
+    n_d: int = 20
+    """Candidate distances along the radial line per region."""
+    n_alpha: int = 10
+    """Candidate approach angles per region (n_d × n_alpha ≈ the paper's 200 starting poses)."""
+    fill_min: float = 0.9
+    """V_min as a fraction of the bucket capacity: ξ vetoes digs below it."""
+    relax_fills: tuple[float, ...] = (0.6, 0.3)
+    """V_min fractions tried, in order, when no station offers a dig of ``fill_min``."""
+    lane_overlap: float = 0.9
+    """Lane width at the outer edge of the face, as a fraction of the bucket width."""
+    band_drag_fraction: float = 0.5
+    """Band thickness = capacity / (bucket width · this · max drag length)."""
+    energy_lo: float = 4_000.0
+    energy_hi: float = 40_000.0
+    """ψ(energy) cut-offs (J)."""
+    time_span: float = 8.0
+    """ζ(time) falls from 1 at the minimum stroke time to 0 this many seconds later."""
+    station_step: float = 0.5
+    """Spacing (m) of the candidate stations when the excavator must move."""
+    stations_tried: int = 15
+    """Best-scored stations checked with the refined planner before relaxing V_min."""
+    travel_value: float = 0.035
+    """m³ of reachable material worth one second of travel when choosing a station."""
+    truck_distance: float = 5.0
+    """Preferred centre distance (m) from the excavator to the truck when the truck must move."""
+    max_digs: int = 1000
+
+
+@dataclass(frozen=True)
+class Region:
+    """One coarse-plan region: a lane (radial line ``bearing``) within a band above ``level_min``."""
+
+    band: int
+    lane: int
+    bearing: float
+    level_min: float
+    d_lo: float
+    d_hi: float
+    volume: float
+
+
+@dataclass
+class _Choice:
+    region: Region
+    line: RadialLine
+    d: float
+    alpha: float
+    depth: float
+    drag: float
+    volume: float
+    energy: float
+    time: float
+    quality: float
+    swing: float
+
+
+class SinghCannonBackhoe(Planner):
+    """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
+
+    name = "singh-cannon-backhoe"
+    version = "1.0"
+    tracks = ("backhoe",)
+    Config = SinghCannonBackhoeConfig
+
+    def plan(self, scenario: Scenario) -> Plan:
+        return _Run(scenario, self.config).run()
+
+    def model(self) -> ForwardModel:
+        return forward_model(self.config)
+
+
+def forward_model(cfg: SinghCannonBackhoeConfig) -> ForwardModel:
+    return ForwardModel(
+        soil=SoilModel(),
+        n_d=cfg.n_d,
+        n_alpha=cfg.n_alpha,
+        fill_min=cfg.fill_min,
+        energy_lo=cfg.energy_lo,
+        energy_hi=cfg.energy_hi,
+        time_span=cfg.time_span,
+    )
+
+
+class _Run:
+    """The state of one planning call: the planner's copy of the grid, poses, clock, actions."""
+
+    def __init__(self, sc: Scenario, cfg: SinghCannonBackhoeConfig):
+        self.sc, self.cfg = sc, cfg
+        self.spec: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
+        self.truck_spec = sc.machines.truck
+        self.model = forward_model(cfg)
+        self.terrain = sc.terrain
+        self.z = np.array(sc.terrain.z, dtype=np.float64)
+        self.area = Polygon(sc.site.dig_area)
+        shapely.prepare(self.area)
+        inner = self.area.buffer(-1e-3)
+        self.area_inner = inner if not inner.is_empty else self.area
+        shapely.prepare(self.area_inner)
+        self.area_tol = self.area.buffer(1e-6)
+        self.keep_outs = [Polygon(k) for k in sc.site.keep_outs]
+        self.keep_outs_pad = [k.buffer(1e-3) for k in self.keep_outs]
+        for k in self.keep_outs + self.keep_outs_pad:
+            shapely.prepare(k)
+        xs, ys = self.terrain.cell_centres()
+        self.X, self.Y = np.meshgrid(xs, ys)
+        self.in_area = shapely.contains_xy(self.area, self.X, self.Y)
+        if sc.site.floor is not None:
+            self.floor = float(sc.site.floor)
+        else:
+            self.floor = float(self.z[self.in_area].min()) if self.in_area.any() else float(self.z.min())
+        self.base: Pose = sc.machines.excavator_pose  # type: ignore[assignment]
+        self.truck: Pose = sc.machines.truck_pose
+        self.turn = 0.0
+        self.t = 0.0  # the excavator's clock
+        self.truck_ready = 0.0
+        self.loaded = 0.0
+        self.actions: list = []
+        self.log: list[dict] = []
+        self.station = 0
+        self.cap = self.spec.bucket_capacity
+        self.v_min = cfg.fill_min * self.cap
+        self.events: list[dict] = []
+
+    # -- coarse planner ---------------------------------------------------------------------------
+    def coarse_plan(self, base: Pose, v_min: float) -> list[Region]:
+        e, r = self.spec, self.terrain.resolution
+        dx, dy = self.X - base.x, self.Y - base.y
+        dist = np.hypot(dx, dy)
+        excess = self.z - self.floor
+        mat = self.in_area & (dist >= e.reach_min) & (dist <= e.reach_max) & (excess > 1e-3)
+        if not mat.any():
+            return []
+        mx, my, mz, md = dx[mat], dy[mat], self.z[mat], dist[mat]
+        w = excess[mat]
+        centre = math.atan2(float((w * my / md).sum()), float((w * mx / md).sum()))
+        rel = np.asarray(wrap(np.arctan2(my, mx) - centre))
+        r_out = float(md.max())
+        dth = self.cfg.lane_overlap * e.bucket_width / r_out
+        lanes = []
+        c = float(rel.max()) - dth / 2
+        while c > float(rel.min()) - dth / 2:
+            lanes.append(centre + c)
+            c -= dth
+        band_t = self.cap / (e.bucket_width * self.cfg.band_drag_fraction * e.max_drag_length)
+        z_top = float(mz.max())
+        n_bands = max(1, math.ceil((z_top - self.floor) / band_t - 1e-9))
+        regions = []
+        for band in range(n_bands):
+            zb = max(self.floor, z_top - band_t * (band + 1))
+            above = mz > zb + 1e-3
+            for lane, theta in enumerate(lanes):
+                ct, st = math.cos(theta), math.sin(theta)
+                along = ct * mx + st * my
+                sel = above & (np.abs(ct * my - st * mx) <= e.bucket_width / 2) & (along > 0)
+                if not sel.any():
+                    continue
+                vol = float((mz[sel] - zb).sum()) * r * r
+                if vol < v_min:
+                    continue
+                d_lo = max(float(along[sel].min()) + 0.1, e.reach_min + self.model.min_drag)
+                d_hi = min(float(along[sel].max()) + 0.1, e.reach_max)
+                if d_hi < d_lo:
+                    continue
+                regions.append(Region(band, lane, float(wrap(theta)), zb, d_lo, d_hi, vol))
+        return regions
+
+    # -- refined planner --------------------------------------------------------------------------
+    def line(self, base: Pose, bearing: float) -> RadialLine:
+        return RadialLine(self.terrain, self.spec, (base.x, base.y), bearing, self.area_inner, self.keep_outs_pad)
+
+    def refine(self, region: Region, base: Pose, turn: float, v_min: float, line: RadialLine | None = None) -> _Choice | None:
+        e = self.spec
+        line = line or self.line(base, region.bearing)
+        swing = abs(wrap(region.bearing - (base.yaw + turn))) / e.swing_rate
+        dd, aa = candidate_grid(self.model, e, region.d_lo, region.d_hi)
+        cand = evaluate(line, self.z, dd, aa, self.model, level_min=region.level_min, capacity=self.cap,
+                        swing_time=swing, v_min=v_min)
+        q = np.where(cand.feasible, cand.quality, 0.0)
+        for _ in range(5):
+            k = int(np.argmax(q))
+            if q[k] <= 0:
+                return None
+            ch = _Choice(region, line, float(cand.d[k]), float(cand.alpha[k]), float(cand.depth[k]), float(cand.drag[k]),
+                         float(cand.volume[k]), float(cand.energy[k]), float(cand.time[k]), float(q[k]), swing)
+            if self.exact_ok(ch, base):
+                return ch
+            q[k] = 0.0
+        return None
+
+    def dig_geometry(self, ch: _Choice, base: Pose) -> tuple[tuple[float, float], float]:
+        ux, uy = math.cos(ch.region.bearing), math.sin(ch.region.bearing)
+        contact = (base.x + ux * ch.d, base.y + uy * ch.d)
+        return contact, float(wrap(ch.region.bearing + math.pi))
+
+    def exact_ok(self, ch: _Choice, base: Pose) -> bool:
+        """The referee's own workspace checks on the chosen dig (sampling may miss a corner)."""
+        e = self.spec
+        contact, heading = self.dig_geometry(ch, base)
+        fp = footprint(contact, heading, e.bucket_width, ch.drag)
+        if not self.area_tol.contains(fp) or any(fp.intersects(k) for k in self.keep_outs):
+            return False
+        end = (contact[0] + math.cos(heading) * ch.drag, contact[1] + math.sin(heading) * ch.drag)
+        for p in (contact, end):
+            r = math.hypot(p[0] - base.x, p[1] - base.y)
+            if r > e.reach_max - 1e-9 or r < e.reach_min + 1e-9:
+                return False
+        level = cut_level(self.terrain, self.z, contact, ch.depth)
+        return level >= self.floor + 1e-6
+
+    def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float) -> tuple[int, _Choice | None]:
+        """The first region from ``start`` on with a feasible dig, and that dig."""
+        for k in range(start, len(regions)):
+            ch = self.refine(regions[k], base, turn, v_min)
+            if ch is not None:
+                return k, ch
+        return len(regions), None
+
+    # -- execution ----------------------------------------------------------------------------------
+    def do_dig(self, ch: _Choice) -> float:
+        e = self.spec
+        contact, heading = self.dig_geometry(ch, self.base)
+        level = cut_level(self.terrain, self.z, contact, ch.depth)
+        vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap)
+        swing = abs(wrap(ch.region.bearing - (self.base.yaw + self.turn))) / e.swing_rate
+        duration = max(ch.time, swing + e.min_stroke_time) + _EPS_T
+        self.actions.append(Dig("excavator", self.t, self.t + duration, contact, heading, ch.depth, ch.drag))
+        self.log.append({
+            "station": self.station, "band": ch.region.band, "lane": ch.region.lane,
+            "bearing": ch.region.bearing, "d": ch.d, "alpha": ch.alpha, "depth": ch.depth,
+            "drag": ch.drag, "level": level, "level_min": ch.region.level_min,
+            "region_d": [ch.region.d_lo, ch.region.d_hi], "predicted_volume": ch.volume,
+            "volume": vol, "energy": ch.energy, "time": ch.time, "quality": ch.quality,
+            "base": [self.base.x, self.base.y],
+        })
+        self.t += duration
+        self.turn = ch.region.bearing - self.base.yaw
+        return vol
+
+    def do_dump(self, vol: float) -> None:
+        e = self.spec
+        t0 = max(self.t, self.truck_ready)
+        bearing = math.atan2(self.truck.y - self.base.y, self.truck.x - self.base.x)
+        swing = abs(wrap(bearing - (self.base.yaw + self.turn))) / e.swing_rate
+        t1 = t0 + swing + e.min_dump_time + _EPS_T
+        self.actions.append(Dump("excavator", t0, t1))
+        self.t = t1
+        self.turn = bearing - self.base.yaw
+        self.loaded += min(vol, max(self.truck_spec.capacity - self.loaded, 0.0))
+
+    def truck_in_reach(self, base: Pose, truck: tuple[float, float]) -> bool:
+        d = math.hypot(truck[0] - base.x, truck[1] - base.y)
+        r = self.truck_spec.loading_radius
+        return d - r <= self.spec.reach_max - 0.05 and d >= self.spec.clearance + 0.1 and d + r >= self.spec.reach_min + 0.05
+
+    def clear(self, a: tuple[float, float], b: tuple[float, float], other: tuple[float, float]) -> bool:
+        seg = LineString([a, b]) if math.hypot(a[0] - b[0], a[1] - b[1]) > 1e-9 else Point(a)
+        if any(seg.intersects(k) for k in self.keep_outs):
+            return False
+        return seg.distance(Point(other)) >= self.spec.clearance + 0.05
+
+    def truck_route(self, base: Pose) -> list[tuple[float, float]] | None:
+        """Waypoints taking the truck within dump reach of ``base`` ([] if it is already)."""
+        here = (self.truck.x, self.truck.y)
+        if self.truck_in_reach(base, here):
+            return []
+        e = self.spec
+        b = (base.x, base.y)
+        radii = sorted({self.cfg.truck_distance, self.cfg.truck_distance + 0.8, self.cfg.truck_distance - 0.8,
+                        e.clearance + 0.4, e.reach_max + self.truck_spec.loading_radius - 0.3})
+        spots = []
+        for rad in radii:
+            for a in np.linspace(-math.pi, math.pi, 36, endpoint=False):
+                p = (base.x + rad * math.cos(a), base.y + rad * math.sin(a))
+                if not self.truck_in_reach(base, p) or any(k.buffer(0.5).contains(Point(p)) for k in self.keep_outs):
+                    continue
+                cost = math.hypot(p[0] - here[0], p[1] - here[1]) / self.truck_spec.travel_speed
+                if self.area.contains(Point(p)):
+                    cost += 30.0
+                spots.append((cost, p))
+        spots.sort()
+        ring = e.clearance + 1.0
+        vias = [(base.x + ring * math.cos(a), base.y + ring * math.sin(a)) for a in np.linspace(-math.pi, math.pi, 16, endpoint=False)]
+        for _, p in spots[:40]:
+            if self.clear(here, p, b):
+                return [p]
+            best = None
+            for v in vias:
+                if self.clear(here, v, b) and self.clear(v, p, b):
+                    length = math.dist(here, v) + math.dist(v, p)
+                    if best is None or length < best[0]:
+                        best = (length, v)
+            if best is not None:
+                return [best[1], p]
+        return None
+
+    def drive(self, machine: str, goal: tuple[float, float], t0: float) -> float:
+        pose = self.base if machine == "excavator" else self.truck
+        spec = self.spec if machine == "excavator" else self.truck_spec
+        path = turn_drive_turn(pose, goal, t0, spec.travel_speed, spec.yaw_rate)
+        if len(path) < 2:
+            return t0
+        self.actions.append(Move(machine, tuple(path)))
+        end = Pose(path[-1][1], path[-1][2], path[-1][3])
+        if machine == "excavator":
+            self.base = end  # the upper body turns with the base: ``turn`` is relative
+        else:
+            self.truck = end
+        return path[-1][0]
+
+    def bring_truck(self, route: list[tuple[float, float]], t0: float) -> None:
+        t = max(t0, self.truck_ready)
+        for p in route:
+            t = self.drive("truck", p, t)
+        self.truck_ready = t
+
+    # -- relocation ---------------------------------------------------------------------------------
+    def stations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate stations and the material each reaches (block sums on 0.25 m blocks)."""
+        e, r = self.spec, self.terrain.resolution
+        f = max(1, int(round(0.25 / r)))
+        excess = np.where(self.in_area, np.clip(self.z - self.floor, 0.0, None), 0.0) * r * r
+        ny, nx = excess.shape
+        ny2, nx2 = (ny + f - 1) // f, (nx + f - 1) // f
+        pad = np.zeros((ny2 * f, nx2 * f))
+        pad[:ny, :nx] = excess
+        blocks = pad.reshape(ny2, f, nx2, f).sum(axis=(1, 3))
+        xs, ys = self.terrain.cell_centres()
+        bx = xs[0] - r / 2 + (np.arange(nx2) + 0.5) * f * r
+        by = ys[0] - r / 2 + (np.arange(ny2) + 0.5) * f * r
+        BX, BY = np.meshgrid(bx, by)
+        keep = blocks > 1e-6
+        mx, my, mv = BX[keep], BY[keep], blocks[keep]
+        xmin, xmax, ymin, ymax = self.terrain.extent
+        pad_m = e.reach_max - 1.0
+        s = self.cfg.station_step
+        gx, gy = np.meshgrid(np.arange(xmin - pad_m, xmax + pad_m + 1e-9, s), np.arange(ymin - pad_m, ymax + pad_m + 1e-9, s))
+        st = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        reach = np.zeros(len(st))
+        for a in range(0, len(st), 256):
+            d = np.hypot(st[a:a + 256, 0, None] - mx[None, :], st[a:a + 256, 1, None] - my[None, :])
+            reach[a:a + 256] = (mv[None, :] * ((d >= e.reach_min + 0.3) & (d <= e.reach_max - 0.2))).sum(axis=1)
+        return st, reach
+
+    def relocate(self, v_min: float) -> bool:
+        e = self.spec
+        st, reach = self.stations()
+        need = max(1.5 * (self.sc.task.target_volume - self.loaded), 4 * self.cap)
+        dx, dy = st[:, 0] - self.base.x, st[:, 1] - self.base.y
+        dist = np.hypot(dx, dy)
+        bearing = np.arctan2(dy, dx)
+        turn = np.minimum(np.abs(wrap(bearing - self.base.yaw)), np.abs(wrap(bearing + math.pi - self.base.yaw)))
+        travel = dist / e.travel_speed + turn / e.yaw_rate
+        tdist = np.hypot(st[:, 0] - self.truck.x, st[:, 1] - self.truck.y)
+        truck_extra = np.where(tdist - self.truck_spec.loading_radius > e.reach_max - 0.05, np.abs(tdist - self.cfg.truck_distance) / self.truck_spec.travel_speed + 15.0, 0.0)
+        inside = shapely.contains_xy(self.area, st[:, 0], st[:, 1])
+        score = np.minimum(reach, need) - self.cfg.travel_value * (travel + truck_extra + 10.0 * inside)
+        ok = (reach >= v_min) & (dist > 0.3) & (tdist >= e.clearance + 0.2)
+        order = [k for k in np.argsort(-score) if ok[k]]
+        tried = 0
+        here = (self.base.x, self.base.y)
+        for k in order:
+            if tried >= self.cfg.stations_tried:
+                break
+            goal = (float(st[k, 0]), float(st[k, 1]))
+            if any(ko.buffer(0.5).contains(Point(goal)) for ko in self.keep_outs):
+                continue
+            if not self.clear(here, goal, (self.truck.x, self.truck.y)):
+                continue
+            tried += 1
+            path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
+            pose = Pose(path[-1][1], path[-1][2], path[-1][3])
+            regions = self.coarse_plan(pose, v_min)
+            idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
+            if ch is None:
+                continue
+            route = self.truck_route(pose)
+            if route is None:
+                continue
+            t_end = self.drive("excavator", goal, self.t)
+            self.events.append({"event": "move", "t": self.t, "to": list(goal), "regions": len(regions)})
+            self.t = t_end
+            self.station += 1
+            if route:
+                self.bring_truck(route, self.t)
+            self.regions, self.ptr = regions, idx
+            return True
+        return False
+
+    # -- the loop -----------------------------------------------------------------------------------
+    def run(self) -> Plan:
+        sc = self.sc
+        target = sc.task.target_volume
+        route = self.truck_route(self.base)
+        if route:
+            self.bring_truck(route, 0.0)
+        fills = (self.cfg.fill_min,) + tuple(f for f in self.cfg.relax_fills if f < self.cfg.fill_min)
+        level = 0
+        self.v_min = fills[0] * self.cap
+        self.regions = self.coarse_plan(self.base, self.v_min)
+        self.ptr = 0
+        status = "target reached"
+        digs = 0
+        while self.loaded < target - 1e-9:
+            if self.loaded >= self.truck_spec.capacity - 1e-9:
+                status = "truck full"
+                break
+            if digs >= self.cfg.max_digs:
+                status = "dig limit"
+                break
+            self.ptr, ch = self.best_dig(self.regions, self.ptr, self.base, self.turn, self.v_min)
+            if ch is None:
+                self.events.append({"event": "exhausted", "t": self.t, "station": self.station, "v_min": self.v_min})
+                if self.relocate(self.v_min):
+                    continue
+                level += 1
+                if level >= len(fills):
+                    status = "no feasible dig left"
+                    break
+                self.v_min = fills[level] * self.cap
+                self.regions, self.ptr = self.coarse_plan(self.base, self.v_min), 0
+                continue
+            if self.truck_route(self.base):  # the truck is not in reach here (only at the start)
+                route = self.truck_route(self.base)
+                if route is None:
+                    status = "truck cannot reach"
+                    break
+                self.bring_truck(route, self.t)
+            vol = self.do_dig(ch)
+            digs += 1
+            self.do_dump(vol)
+        plan = Plan(
+            tuple(self.actions),
+            Prediction(volume=self.loaded, makespan=max((a.t_end for a in self.actions), default=0.0)),
+            info={"planner": "singh-cannon-backhoe", "status": status, "digs": self.log, "events": self.events,
+                  "stations": self.station},
+        )
+        return plan
