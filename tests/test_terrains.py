@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from earthbench.errors import ScenarioError
 from earthbench.plan import Dig, Dump, Plan
@@ -257,3 +259,15 @@ def test_bench_refuses_poses_the_referee_would_reject():
         bench(0, 4.0, setback=5.0, height=1.8, face_angle=30.0)
     with pytest.raises(ScenarioError, match="dump reach"):
         bench(0, 4.0, truck=(1.0, 0.5, 0.0))
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_any_seed_holds_the_largest_suite_targets(seed):
+    """Not only the suites' seeds: every seed's site holds twice the suites' largest target."""
+    from terrains.dem import dem
+
+    b = bench(seed, 8.0)
+    assert reachable_volume(b) >= 8.0
+    assert dig_area_volume(dem(seed, 7.0)) >= 14.0
+    assert dig_area_volume(rbf(seed, 7.0, n_bases=30)) >= 14.0
