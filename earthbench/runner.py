@@ -194,27 +194,51 @@ def _child_env(cores: int) -> dict[str, str]:
     return env
 
 
-def _kill_tree(pid: int, grace: float = TERM_GRACE_S) -> None:
-    """SIGTERM the case's process group and every descendant, then SIGKILL what is left."""
+def _kill_tree(pid: int, grace: float = TERM_GRACE_S, *, reap: bool = True) -> tuple[int, Any] | None:
+    """SIGTERM the case's process group and every descendant, then SIGKILL what is left.
+
+    Descendants that left the group (``setsid``) are found through psutil. With ``reap`` the
+    case process itself is waited for here and its ``(status, rusage)`` returned.
+    """
     try:
-        procs = [psutil.Process(pid)]
-        procs += procs[0].children(recursive=True)
-    except psutil.NoSuchProcess:
-        procs = []
+        kids = psutil.Process(pid).children(recursive=True)
+    except psutil.Error:
+        kids = []
+    reaped = None
     for sig in (signal.SIGTERM, signal.SIGKILL):
         try:
             os.killpg(pid, sig)
         except (ProcessLookupError, PermissionError):
             pass
-        for p in procs:
+        for p in kids:
             try:
                 p.send_signal(sig)
             except psutil.Error:
                 pass
-        if sig == signal.SIGTERM:
-            _, procs = psutil.wait_procs(procs, timeout=grace)
-            if not procs and not _group_alive(pid):
-                return
+        end = time.monotonic() + (grace if sig == signal.SIGTERM else 5.0)
+        while time.monotonic() < end:
+            if reap and reaped is None:
+                try:
+                    got, status, ru = os.wait4(pid, os.WNOHANG)
+                    if got:
+                        reaped = (status, ru)
+                except ChildProcessError:
+                    reaped = (0, None)
+            kids = [p for p in kids if _running(p)]
+            if (reaped is not None or not reap) and not kids and not _group_alive(pid):
+                return reaped
+            time.sleep(0.02)
+    if reap and reaped is None:
+        _, status, ru = os.wait4(pid, 0)
+        reaped = (status, ru)
+    return reaped
+
+
+def _running(p: psutil.Process) -> bool:
+    try:
+        return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
+        return False
 
 
 def _group_alive(pgid: int) -> bool:
@@ -367,13 +391,12 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
                 except psutil.Error:
                     pass
             o.elapsed = time.monotonic() - o.started["t"] if o.started else None
-            _kill_tree(proc.pid)
-            _, status, ru = os.wait4(proc.pid, 0)
+            status, ru = _kill_tree(proc.pid)
             o.status = os.waitstatus_to_exitcode(status)
             proc.returncode = o.status
-            o.maxrss_mb = ru.ru_maxrss / 1024.0
+            o.maxrss_mb = ru.ru_maxrss / 1024.0 if ru is not None else None
         elif _group_alive(proc.pid):  # the planner left processes behind
-            _kill_tree(proc.pid, grace=0.2)
+            _kill_tree(proc.pid, grace=0.2, reap=False)
     finally:
         sel.close()
         os.close(r)
