@@ -77,7 +77,9 @@ def bench(
     budget: Budget | None = None,
     scenario_id: str | None = None,
 ) -> Scenario:
-    """A bench-loading scenario. Parameters (lengths in m, angles in degrees):
+    """Bench loading: a backhoe on a raised bench digs its face and loads a truck below.
+
+    Parameters (lengths in m, angles in degrees):
 
     - ``height``: bench height above the lower level (fixed, or a (low, high) range drawn per seed).
     - ``face_angle``: face slope from horizontal (fixed or range); run = height / tan(angle).

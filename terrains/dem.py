@@ -117,7 +117,9 @@ def dem(
     budget: Budget | None = None,
     scenario_id: str | None = None,
 ) -> Scenario:
-    """A scenario on a crop of the sample DEM. Parameters:
+    """Real terrain: a crop of matplotlib's USGS sample DEM on the paper's site and poses.
+
+    Parameters:
 
     - ``size``, ``resolution``: site extent (m, origin (0, 0)) and cell size (m).
     - ``ground_scale``: metres of real ground per metre of site (default 100).

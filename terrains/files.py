@@ -133,7 +133,9 @@ def heightmap_file(
     budget: Budget | None = None,
     scenario_id: str | None = None,
 ) -> Scenario:
-    """A scenario on the heightmap in ``path``. Parameters:
+    """Your own heightmap file (.npy, .npz or CSV grid) as a scenario.
+
+    Parameters:
 
     - ``path``: the ``.npy``/``.npz``/``.csv`` file; ``resolution`` (m) and ``origin`` (x, y of
       the lower-left cell corner, default (0, 0)) as described in the module doc.

@@ -90,7 +90,9 @@ def rbf(
     budget: Budget | None = None,
     scenario_id: str | None = None,
 ) -> Scenario:
-    """A scenario on an rbf map; the floor is z = 0. Parameters:
+    """Gaussian mounds on the STL-TAMP paper's map and poses (14 or 30 bases); floor z = 0.
+
+    Parameters:
 
     - ``n_bases``: number of Gaussian mounds (paper: 14 for task switching, 30 extensive).
     - ``size``: map extent (lx, ly) in m, origin at (0, 0); ``resolution``: cell size in m.
