@@ -58,7 +58,8 @@ def reachable_volume(scenario: Scenario) -> float:
 
 def check_scenario(scenario: Scenario, factor: float = MIN_VOLUME_FACTOR) -> Scenario:
     """Raise ScenarioError unless the site holds ``factor`` × target above the floor, the truck
-    can carry the target, and the initial poses keep the excavator–truck clearance.
+    can carry the target, and the initial poses keep the excavator–truck (and loader–truck)
+    clearance.
 
     Returns the scenario unchanged so generators can ``return check_scenario(Scenario(...))``.
     """
@@ -75,13 +76,15 @@ def check_scenario(scenario: Scenario, factor: float = MIN_VOLUME_FACTOR) -> Sce
             f"scenario {sc.id!r}: the truck carries {sc.machines.truck.capacity:g} m³, less than the "
             f"target {target:g} m³; raise the generator's truck_capacity"
         )
-    exc, pose = sc.machines.excavator, sc.machines.excavator_pose
-    if exc is not None and pose is not None:
-        t = sc.machines.truck_pose
+    t = sc.machines.truck_pose
+    for name in ("excavator", "loader"):
+        spec, pose = getattr(sc.machines, name, None), getattr(sc.machines, f"{name}_pose", None)
+        if spec is None or pose is None:
+            continue
         d = math.hypot(t.x - pose.x, t.y - pose.y)
-        if d < exc.clearance:
+        if d < spec.clearance:
             raise ScenarioError(
-                f"scenario {sc.id!r}: excavator and truck start {d:.3f} m apart, closer than the "
-                f"clearance {exc.clearance:g} m; move one of them"
+                f"scenario {sc.id!r}: {name} and truck start {d:.3f} m apart, closer than the "
+                f"clearance {spec.clearance:g} m; move one of them"
             )
     return sc

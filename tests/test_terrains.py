@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -271,3 +272,13 @@ def test_any_seed_holds_the_largest_suite_targets(seed):
     assert reachable_volume(b) >= 8.0
     assert dig_area_volume(dem(seed, 7.0)) >= 14.0
     assert dig_area_volume(rbf(seed, 7.0, n_bases=30)) >= 14.0
+
+
+def test_check_scenario_enforces_the_clearance():
+    from earthbench.world import Pose
+    from terrains.common import check_scenario
+
+    sc = bench(0, 4.0)
+    close = sc.replace(machines=dataclasses.replace(sc.machines, truck_pose=Pose(8.0, 6.0, 0.0)))
+    with pytest.raises(ScenarioError, match="excavator and truck start 2.000 m apart"):
+        check_scenario(close)
