@@ -1,0 +1,134 @@
+"""The results store: bad files, locks, newer schemas, one row per key, pandas view."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+
+import pytest
+
+from earthbench.errors import StoreError
+from earthbench.runner import Case, CaseResult, PlannerRef
+from earthbench.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.suite import parse_suite
+
+SUITE = """
+name = "st"
+[budget]
+wall_s = 5
+[[family]]
+name = "f"
+generator = "rbf"
+targets = [0.28]
+seeds = [0, 1]
+[family.params]
+n_bases = 2
+size = [3.0, 2.0]
+resolution = 0.1
+"""
+
+
+@pytest.fixture(scope="module")
+def suite():
+    return parse_suite(SUITE)
+
+
+def case_of(suite, n=0):
+    return Case(suite.name, suite.digest, 0.9, suite.scenarios[n], PlannerRef.resolve("greedy"))
+
+
+def result_of(case, reason="ok", **kw):
+    metrics = {"valid": True, "violations": 0, "volume_ratio": 0.0, "loaded_volume": 0.0, "time_per_m3": math.inf,
+               "success": False, "solve_time_s": 0.1, "solve_cpu_s": 0.1, "my_plugin_metric": 7.5}
+    base = dict(key=case.key, scenario_id=case.scenario.id, reason=reason, solve_time_s=0.1, solve_cpu_s=0.1,
+                metrics=metrics if reason in ("ok", "invalid") else None,
+                plan_json='{"schema": "earthbench.plan/1", "actions": []}' if reason in ("ok", "invalid") else None,
+                environment={"hostname": "h", "cpu_model": "cpu", "cores": 2, "packages": {"numpy": "2"}})
+    base.update(kw)
+    return CaseResult(**base)
+
+
+def test_not_sqlite_is_refused(tmp_path):
+    f = tmp_path / "notes.db"
+    f.write_text("these are my notes, not a database\n" * 100)
+    with pytest.raises(StoreError, match="not an SQLite database"):
+        Store(f)
+    assert f.read_text().startswith("these are my notes")
+
+
+def test_foreign_sqlite_is_refused(tmp_path):
+    f = tmp_path / "other.db"
+    con = sqlite3.connect(f)
+    con.execute("CREATE TABLE t (x)")
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match="not an earthbench results store"):
+        Store(f)
+
+
+def test_newer_schema_is_refused_and_left_untouched(tmp_path):
+    f = tmp_path / "new.db"
+    Store(f).close()
+    con = sqlite3.connect(f)
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.commit()
+    con.close()
+    before = f.read_bytes()
+    with pytest.raises(StoreError, match="newer than this earthbench"):
+        Store(f)
+    assert f.read_bytes() == before
+
+
+def test_locked_database_gives_a_clear_error(tmp_path, suite):
+    f = tmp_path / "locked.db"
+    Store(f).close()
+    holder = sqlite3.connect(f, isolation_level=None)
+    holder.execute("BEGIN EXCLUSIVE")
+    try:
+        with pytest.raises(StoreError, match="locked by another process"):
+            with Store(f, timeout=0.2) as store:
+                store.check_writable()
+        with Store(f, timeout=0.2) as store:  # opening to read works; the first write fails clearly
+            with pytest.raises(StoreError, match="locked"):
+                store.record(case_of(suite), result_of(case_of(suite)))
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+
+
+def test_missing_database_for_reading(tmp_path):
+    with pytest.raises(StoreError, match="no results database"):
+        Store(tmp_path / "absent.db", create=False)
+
+
+def test_one_row_per_key_and_a_flat_dataframe(tmp_path, suite):
+    f = tmp_path / "r.db"
+    with Store(f) as store:
+        store.register_suite(suite)
+        c0, c1 = case_of(suite, 0), case_of(suite, 1)
+        assert store.record(c0, result_of(c0))
+        assert not store.record(c0, result_of(c0, reason="invalid"))  # already stored: nothing counted twice
+        assert store.record(c1, result_of(c1, reason="timeout", error="ran past its budget"))
+        assert store.finished_keys() == {c0.key, c1.key}
+        assert store.record(c0, result_of(c0, reason="invalid"), replace=True)
+        assert store.scenario(c0.scenario.digest) == c0.scenario
+        assert store.db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    df = load_runs(f)
+    assert len(df) == 2
+    by = df.set_index("scenario_id")
+    ok = by.loc["st/f/s0/v0.28"]
+    assert ok.reason == "invalid" and ok.time_per_m3 == math.inf and ok.my_plugin_metric == 7.5
+    assert ok.planner == "greedy" and ok.cpu_model == "cpu" and '"min_fill"' in ok.config
+    t = by.loc["st/f/s1/v0.28"]
+    assert t.reason == "timeout" and math.isnan(t.volume_ratio) and not t.success and t.error == "ran past its budget"
+    for col in ("suite", "suite_digest", "scenario_digest", "planner_version", "config_hash", "solve_time_s",
+                "solve_cpu_s", "n_violations", "violation_rules", "project_commit", "threshold", "seed", "family"):
+        assert col in df.columns
+
+
+def test_cancelled_results_are_never_stored(tmp_path, suite):
+    with Store(tmp_path / "c.db") as store:
+        c = case_of(suite)
+        with pytest.raises(ValueError):
+            store.record(c, result_of(c, reason="cancelled"))
+        assert store.finished_keys() == set()
