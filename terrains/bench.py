@@ -24,7 +24,8 @@ Layout (x east, y north; default 14 m × 12 m at 0.05 m cells)::
 Geometry the referee needs, true for every seed with the defaults: the nominal toe lies
 2.5 + run ≤ 4.3 m from the base (inside the 2.0–6.1 m reach annulus); the truck's centre lies
 √(6² + 3²) = 6.71 m from the base, so its loading circle (radius 1.0 m) is within the 6.1 m
-reach and the 3.5 m clearance holds; the truck stands at least 1.5 m west of any toe.
+reach and the 3.5 m clearance holds; the truck (x = 4.0) stands on the floor, west of every
+toe (x ≥ 7.5 − 1.8 − 0.4 = 5.3 m: crest, longest run, largest wander).
 """
 
 from __future__ import annotations
