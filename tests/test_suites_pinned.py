@@ -16,6 +16,8 @@ from earthbench.suite import load_suite, parse_suite
 from terrains.common import dig_area_volume
 
 PINNED = {
+    "smoke": ("17d4380c5c43371f276a09a68ddbca1ca2f0a1dcebc5a5074e0f614493ed4f5c", 4),
+    "quick": ("d932d20f08b28b37607f10d898b8d37e1bcf471d60b81ebdb1d0f57bac46b32e", 4),
     "paper-switch": ("44330e676a7c6f3cd5e8b4fa7c03fb69e1acc9e35e8230cbb15f78df967257a6", 30),
     "paper-extensive": ("7bcd71d54536530206b7fea12e231a6f55c8f0ab14406da31dfd52795f327caf", 40),
     "bench": ("7e0dffdf3e21c6384d1c8da2780a59918d75e64918212234d104925f6670f1a1", 20),
