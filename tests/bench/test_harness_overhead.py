@@ -1,0 +1,36 @@
+"""Harness overhead per case: spawn a fenced subprocess, import, plan (instantly), judge, store.
+
+Goal (issue 3): median under 1.0 s on 2 cores. Run with
+``python -m pytest tests/bench/test_harness_overhead.py --benchmark-only``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from earthbench.registry import load_plugin_file
+from earthbench.runner import build_cases, run_case
+from earthbench.store import Store
+from earthbench.suite import load_suite
+
+PLUGIN = str(Path(__file__).parents[1] / "plugins" / "faulty_planners.py")
+
+
+@pytest.mark.parametrize("planner", ["t-fast", "greedy"])
+def test_overhead_per_case(benchmark, tmp_path, planner):
+    load_plugin_file(PLUGIN)
+    suite = load_suite("smoke")
+    cases, _ = build_cases(suite, [planner], plugins=[PLUGIN])
+    case = cases[0]
+    store = Store(tmp_path / "bench.db")
+    store.register_suite(suite)
+
+    def one() -> str:
+        result = run_case(case)
+        store.record(case, result, replace=True)
+        return result.reason
+
+    assert benchmark.pedantic(one, rounds=10, iterations=1, warmup_rounds=1) == "ok"
+    store.close()
