@@ -185,6 +185,7 @@ class _Run:
         self.cap = self.spec.bucket_capacity
         self.v_min = cfg.fill_min * self.cap
         self.events: list[dict] = []
+        self._lines: dict[tuple[float, float, float], RadialLine] = {}
 
     # -- coarse planner ---------------------------------------------------------------------------
     def coarse_plan(self, base: Pose, v_min: float) -> list[Region]:
@@ -231,7 +232,14 @@ class _Run:
 
     # -- refined planner --------------------------------------------------------------------------
     def line(self, base: Pose, bearing: float) -> RadialLine:
-        return RadialLine(self.terrain, self.spec, (base.x, base.y), bearing, self.area_inner, self.keep_outs_pad)
+        """The radial line's strip cells and workspace samples (independent of the heights: cached)."""
+        key = (base.x, base.y, bearing)
+        line = self._lines.get(key)
+        if line is None:
+            if len(self._lines) > 2000:
+                self._lines.clear()
+            line = self._lines[key] = RadialLine(self.terrain, self.spec, (base.x, base.y), bearing, self.area_inner, self.keep_outs_pad)
+        return line
 
     def refine(self, region: Region, base: Pose, turn: float, v_min: float, line: RadialLine | None = None) -> _Choice | None:
         e = self.spec

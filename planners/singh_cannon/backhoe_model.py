@@ -67,6 +67,9 @@ import shapely
 from earthbench.world import ExcavatorSpec, Heightmap
 
 
+_FACTORS: dict = {}
+
+
 @dataclass(frozen=True)
 class SoilModel:
     """Soil parameters of the resistance model (SI units, angles in radians)."""
@@ -79,6 +82,18 @@ class SoilModel:
     """φ, internal friction angle."""
     interface_friction: float = math.radians(20.0)
     """δ, soil–steel friction angle."""
+
+    def factors_cached(self, rake: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`factors` for many rake angles with few distinct values (memoised per value)."""
+        uniq, inv = np.unique(np.asarray(rake, dtype=float), return_inverse=True)
+        key = (self, uniq.tobytes())
+        hit = _FACTORS.get(key)
+        if hit is None:
+            hit = self.factors(uniq)
+            if len(_FACTORS) > 256:
+                _FACTORS.clear()
+            _FACTORS[key] = hit
+        return hit[0][inv], hit[1][inv], hit[2][inv]
 
     def factors(self, rake: np.ndarray, t_ref: float = 0.3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(N_γ, N_c, horizontal fraction)`` for each rake angle, at the critical failure plane."""
@@ -268,29 +283,37 @@ def evaluate(
     ok &= level >= level_min + 1e-6
     drag_max = np.where(ok, drag_max, 0.0)
 
-    # restrict the strip to the distances some candidate can sweep
+    # each candidate's window of strip cells, [a, b) in drag order (s descending), gathered into
+    # a (K, W) matrix: the cells with 0 <= d - s <= drag_max, the referee's "along" coordinate
     s = line.s
-    a = int(np.searchsorted(-s, -(d.max() + r), side="left"))
-    b = int(np.searchsorted(-s, -(np.min(d - drag_max) - r), side="right"))
-    s = s[a:b]
-    zc = z[line.jj[a:b], line.ii[a:b]]
-    ds = d[:, None] - s[None, :]  # the referee's "along" coordinate
-    win = (ds >= 0.0) & (ds <= drag_max[:, None])
-    t = np.where(win, np.maximum(zc[None, :] - level[:, None], 0.0), 0.0)
+    a = np.searchsorted(-s, -d, side="left")
+    b = np.where(ok, np.searchsorted(-s, -(d - drag_max), side="right"), a)
+    width = max(int((b - a).max()) if d.size else 0, 1)
+    idx = a[:, None] + np.arange(width)[None, :]
+    win = idx < b[:, None]
+    idx = np.minimum(idx, max(s.size - 1, 0))
+    if s.size:
+        zc = z[line.jj[idx], line.ii[idx]]
+        ds = d[:, None] - s[idx]
+    else:
+        zc = np.zeros(idx.shape)
+        ds = np.zeros(idx.shape)
+        win[:] = False
+    t = np.where(win, np.maximum(zc - level[:, None], 0.0), 0.0)
     e = t * (r * r)
     cum = np.cumsum(e, axis=1)
-    total = cum[:, -1] if cum.shape[1] else np.zeros(d.shape)
+    total = cum[:, -1]
     vol = np.minimum(total, capacity)
     full = cum >= capacity
-    has_full = full.any(axis=1) if cum.shape[1] else np.zeros(d.shape, dtype=bool)
-    first = np.argmax(full, axis=1) if cum.shape[1] else np.zeros(d.shape, dtype=int)
-    stop = np.where(has_full, ds[np.arange(d.size), first] if cum.shape[1] else 0.0, drag_max)
+    has_full = full.any(axis=1)
+    first = np.argmax(full, axis=1)
+    stop = np.where(has_full, ds[np.arange(d.size), first], drag_max)
     drag = np.where(has_full, np.minimum(drag_max, stop + 0.25 * r), drag_max)
     # fraction of each cell's excess that enters the bucket
     with np.errstate(divide="ignore", invalid="ignore"):
         frac = np.where(e > 0, np.clip((capacity - (cum - e)) / e, 0.0, 1.0), 0.0)
-    n_g, n_c, horiz = model.soil.factors(alpha)
-    force = (model.soil.unit_weight * t * t * n_g[:, None] + model.soil.cohesion * t * n_c[:, None]) * horiz[:, None]
+    n_g, n_c, horiz = model.soil.factors_cached(alpha)
+    force = (model.soil.unit_weight * t * n_g[:, None] + model.soil.cohesion * n_c[:, None]) * t * horiz[:, None]
     energy = (force * frac).sum(axis=1) * (r * r)
     swept = np.where(has_full, stop, drag_max)
     stroke = h / model.penetration_speed + np.maximum(swept / model.drag_speed, energy / model.drag_power) + model.curl_time
