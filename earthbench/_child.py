@@ -69,8 +69,9 @@ def main(case_file: str, fd: int) -> None:
         scenario = Scenario.from_dict(doc["scenario"])
         overrides = doc.get("overrides", {})
         del doc
-    except BaseException:  # noqa: BLE001 - everything the planner's import can do is reported
-        send({"event": "done", "outcome": "error", "error": "could not load the planner:\n" + traceback.format_exc()})
+    except BaseException as exc:  # noqa: BLE001 - everything the planner's import can do is reported
+        outcome = "memory" if isinstance(exc, MemoryError) else "error"
+        send({"event": "done", "outcome": outcome, "error": "could not load the planner:\n" + traceback.format_exc()})
         return
 
     send({"event": "started", "t": time.monotonic(), "cpu": _cpu()})

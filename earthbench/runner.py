@@ -315,11 +315,12 @@ class _Outcome:
     elapsed: float | None = None
     cpu: float | None = None
     t_spawn: float = 0.0
+    startup_s: float = STARTUP_S
 
 
 def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, startup_s: float, stop: threading.Event | None) -> _Outcome:
     """Read the child's messages until it exits, enforcing start-up, wall and exit deadlines."""
-    o = _Outcome(t_spawn=t_spawn)
+    o = _Outcome(t_spawn=t_spawn, startup_s=startup_s)
     sel = selectors.DefaultSelector()
     sel.register(r, selectors.EVENT_READ)
     os.set_blocking(r, False)
@@ -352,7 +353,7 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
                     buf += chunk
                     while b"\n" in buf:
                         line, buf = buf.split(b"\n", 1)
-                        msg = json.loads(line)
+                        msg = _message(line)
                         if msg.get("event") == "started":
                             o.started = msg
                             deadline = msg["t"] + wall_s
@@ -377,7 +378,7 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
                     buf += chunk
                 for line in buf.split(b"\n"):
                     if line.strip():
-                        msg = json.loads(line)
+                        msg = _message(line)
                         if msg.get("event") == "done":
                             o.done = msg
                         elif msg.get("event") == "started":
@@ -403,6 +404,14 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
     return o
 
 
+def _message(line: bytes) -> dict[str, Any]:
+    try:
+        msg = json.loads(line)
+    except ValueError:
+        return {}
+    return msg if isinstance(msg, dict) else {}
+
+
 def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
     budget = case.scenario.budget
     common = dict(
@@ -418,7 +427,7 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
             if o.started:
                 msg = f"the planner ran past its wall budget of {budget.wall_s:g} s and was ended"
             else:
-                msg = f"the case did not reach the planner call within {STARTUP_S:g} s of start-up"
+                msg = f"the case did not reach the planner call within {o.startup_s:g} s of start-up"
             return CaseResult(reason="timeout", solve_time_s=o.elapsed, solve_cpu_s=o.cpu, error=msg, **common)
         st = o.status
         how = f"killed by {signal.Signals(-st).name}" if st is not None and st < 0 else f"exited with status {st}"
@@ -654,6 +663,9 @@ def build_cases(
                 notes.append(f"planner {name!r} supports {', '.join(ref.tracks)}, not this suite's {suite.track!r} track: skipped")
             continue
         refs.append(ref)
+    for name in suite.config:
+        if name not in PLANNERS:
+            notes.append(f"the suite configures planner {name!r}, which is not registered: its [config.{name}] is unused")
     plugin_paths = tuple(str(Path(p).resolve()) for p in plugins)
     cases = [
         Case(suite.name, suite.digest, suite.success_threshold, sc, ref, plugin_paths)

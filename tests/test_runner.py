@@ -154,3 +154,8 @@ def test_unknown_planner_suggests_close_names(bad):
     load_plugin_file(PLUGIN)
     with pytest.raises(UnknownNameError, match="t-"):
         build_cases(tiny_suite(), [bad])
+
+
+def test_start_up_is_bounded_too(tmp_path):
+    _, df = run_all(tiny_suite(), ["t-fast"], tmp_path / "s.db", startup_s=0.01)
+    assert df.reason[0] == "timeout" and "start-up" in df.error[0]
