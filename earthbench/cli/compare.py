@@ -1,0 +1,50 @@
+"""``earthbench compare DB_A [DB_B]``: paired per-metric differences of two planner configurations.
+
+With two databases, side A is read from DB_A and side B from DB_B (e.g. before and after a
+change, run on the same suite); with one, both sides come from it. Each side is a selection
+PLANNER[@VERSION][#CONFIG] (--a, --b) that must match exactly one configuration; it may be
+left out when the database holds only one. Runs are paired by scenario digest; each metric
+gets the medians, the median and mean difference B − A and a two-sided Wilcoxon
+signed-rank p-value; success gets an exact McNemar test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .run import default_db
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("compare", help="paired comparison of two planners/versions (Wilcoxon signed-rank per metric)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("db_a", nargs="?", default=default_db(), metavar="DB_A", help="results database of side A")
+    p.add_argument("db_b", nargs="?", metavar="DB_B", help="results database of side B (default: DB_A)")
+    p.add_argument("--a", metavar="PLANNER[@VERSION][#CONFIG]", help="side A's planner configuration")
+    p.add_argument("--b", metavar="PLANNER[@VERSION][#CONFIG]", help="side B's planner configuration")
+    p.add_argument("--suite", help="only the runs of this suite's scenarios")
+    p.add_argument("--metric", action="append", default=[], metavar="NAME", help="compare this metric (repeatable; default: the main ones)")
+    p.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdicts (default 0.05)")
+    p.add_argument("--csv", metavar="FILE", help="also write the per-metric table as CSV")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..compare import DEFAULT_METRICS, CompareError, Selector, compare, format_comparison
+    from ..store import load_runs
+
+    runs_a = load_runs(args.db_a, suite=args.suite)
+    runs_b = load_runs(args.db_b, suite=args.suite) if args.db_b else runs_a
+    if not args.db_b and not (args.a and args.b):
+        raise CompareError("with one database, name both sides: --a PLANNER[@VERSION][#CONFIG] --b PLANNER[@VERSION][#CONFIG]")
+    a = Selector.parse(args.a).pick(runs_a, "A")
+    b = Selector.parse(args.b).pick(runs_b, "B")
+    if not args.db_b and a.index.equals(b.index):
+        raise CompareError("--a and --b select the same configuration")
+    res = compare(a, b, tuple(args.metric) or DEFAULT_METRICS, args.alpha)
+    print(format_comparison(res, args.alpha))
+    if args.csv:
+        res.table.to_csv(args.csv, index=False)
+        print(f"table written to {args.csv}", file=sys.stderr)
+    return 0

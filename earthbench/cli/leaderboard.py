@@ -1,0 +1,39 @@
+"""``earthbench leaderboard``: turn the results store into ``leaderboard/`` (tables, CSVs, page, figures).
+
+Writes README.md (one ranked table per suite and track, each with its ranking rule and a
+reproducibility stamp), runs.csv, summary.csv, a self-contained index.html and figures/
+(PNG and SVG): loaded volume against total time, performance profiles, and terrain before
+and after for one case per planner.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from .run import default_db
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("leaderboard", help="write leaderboard tables, CSVs, an HTML page and figures from the store",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--db", default=default_db(), metavar="PATH", help="results database (default: $EARTHBENCH_DB or earthbench.db)")
+    p.add_argument("--out", default="leaderboard", metavar="DIR", help="output directory (default: leaderboard/)")
+    p.add_argument("--suite", action="append", default=[], metavar="NAME",
+                   help="publish only this suite (repeatable; default: every suite with runs in the store)")
+    p.add_argument("--no-figures", action="store_true", help="tables, CSVs and page only")
+    p.add_argument("--no-terrain", action="store_true", help="skip the terrain before/after figures (no re-judging)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..publish import publish
+
+    t0 = time.perf_counter()
+    res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain)
+    runs = 0 if res.runs is None else len(res.runs)
+    tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
+    print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "
+          f"({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+    return 0
