@@ -4,7 +4,7 @@ Singh & Cannon, "Multi-resolution planning for earthmoving" (ICRA 1998), section
 planner tessellates the dig face into regions and a refined planner searches each region for
 the locally best dig with a forward model. What we build, and the choices the paper leaves open:
 
-Coarse planner (:meth:`_Run.coarse_plan`)
+Coarse planner (:meth:`Session.coarse_plan`)
     From the excavator's current pose, the *face* is the material above the floor (design grade)
     inside the dig area and the reach annulus. It is cut into
 
@@ -128,7 +128,12 @@ class SinghCannonBackhoe(Planner):
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
-        return _Run(scenario, self.config).run()
+        return Session(scenario, self.config).run()
+
+    def session(self, scenario: Scenario) -> "Session":
+        """A planning session at the scenario's initial state, to call the coarse and refined
+        planners step by step (tests, benchmarks, figures)."""
+        return Session(scenario, self.config)
 
     def model(self) -> ForwardModel:
         return forward_model(self.config)
@@ -146,7 +151,7 @@ def forward_model(cfg: SinghCannonBackhoeConfig) -> ForwardModel:
     )
 
 
-class _Run:
+class Session:
     """The state of one planning call: the planner's copy of the grid, poses, clock, actions."""
 
     def __init__(self, sc: Scenario, cfg: SinghCannonBackhoeConfig):

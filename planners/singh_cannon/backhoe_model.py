@@ -321,12 +321,22 @@ def evaluate(
     time = swing_time + stroke
 
     vmin = model.fill_min * capacity if v_min is None else v_min
-    xi = np.where(vol >= vmin - 1e-12, np.minimum(vol, capacity) / capacity, 0.0)
-    psi = np.clip((model.energy_hi - energy) / (model.energy_hi - model.energy_lo), 0.0, 1.0)
-    t_lo = spec.min_stroke_time
-    zeta = np.clip((t_lo + model.time_span - time) / model.time_span, 0.0, 1.0)
+    xi = xi_volume(vol, vmin, capacity)
+    psi = falling(energy, model.energy_lo, model.energy_hi)
+    zeta = falling(time, spec.min_stroke_time, spec.min_stroke_time + model.time_span)
     quality = np.where(ok, xi * psi * zeta, 0.0)
     return Candidates(d, alpha, h, level, drag, vol, energy, time, quality, ok & (quality > 0))
+
+
+def xi_volume(v: np.ndarray, v_min: float, v_max: float) -> np.ndarray:
+    """ξ of Fig. 7: 0 below ``v_min`` (vetoed), ``v / v_max`` up to ``v_max``, 1 beyond."""
+    v = np.asarray(v, dtype=float)
+    return np.where(v >= v_min - 1e-12, np.minimum(v, v_max) / v_max, 0.0)
+
+
+def falling(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """ψ and ζ of Fig. 7: 1 up to ``lo``, falling linearly to 0 at the cut-off ``hi``, 0 beyond."""
+    return np.clip((hi - np.asarray(x, dtype=float)) / (hi - lo), 0.0, 1.0)
 
 
 def candidate_grid(model: ForwardModel, spec: ExcavatorSpec, d_lo: float, d_hi: float) -> tuple[np.ndarray, np.ndarray]:
