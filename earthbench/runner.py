@@ -38,6 +38,7 @@ import queue
 import selectors
 import shutil
 import signal
+import site
 import socket
 import subprocess
 import sys
@@ -185,8 +186,14 @@ def _child_env(cores: int) -> dict[str, str]:
     env = dict(os.environ)
     for var in THREAD_VARS:
         env[var] = str(cores)
-    # the child sees the modules the harness sees (test modules, plugins on sys.path)
-    paths = [p for p in sys.path if p and os.path.isdir(p)]
+    # the child sees the modules the harness sees (test modules, plugins added to sys.path), but
+    # the interpreter's own directories stay where its start-up puts them, after the stdlib
+    own = {os.path.realpath(d) for d in (*site.getsitepackages(), site.getusersitepackages())}
+    prefixes = tuple(os.path.realpath(p) + os.sep for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
+    paths = [
+        p for p in sys.path
+        if p and os.path.isdir(p) and os.path.realpath(p) not in own and not (os.path.realpath(p) + os.sep).startswith(prefixes)
+    ]
     if env.get("PYTHONPATH"):
         paths.append(env["PYTHONPATH"])
     env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
