@@ -159,3 +159,21 @@ def test_unknown_planner_suggests_close_names(bad):
 def test_start_up_is_bounded_too(tmp_path):
     _, df = run_all(tiny_suite(), ["t-fast"], tmp_path / "s.db", startup_s=0.01)
     assert df.reason[0] == "timeout" and "start-up" in df.error[0]
+
+
+def test_progress_line_counts_reasons_and_gives_an_eta():
+    import io
+
+    from earthbench.progress import Progress
+    from earthbench.runner import CaseResult
+
+    (case,), _ = build_cases(tiny_suite(), ["greedy"])
+    out = io.StringIO()
+    p = Progress(3, stream=out, live=True)
+    p.start()
+    p.update(case, CaseResult(key=case.key, scenario_id=case.scenario.id, reason="ok", solve_time_s=0.5))
+    p.update(case, CaseResult(key=case.key, scenario_id=case.scenario.id, reason="timeout", error="ran past\nits wall budget"))
+    p.close()
+    text = out.getvalue()
+    assert "[2/3] ok 1 timeout 1" in text and "ETA" in text and "its wall budget" in text and "\r" in text
+    assert text.endswith("\n")
