@@ -219,3 +219,30 @@ class Const(Formula):
 
     def rho(self, signal: Signal, k: int = 0, *, smooth: float | None = None) -> Any:
         return self.value
+
+
+def robustness_constraints(formula: Formula, signal: Signal, k: int = 0, *, smooth: float | None = None) -> list[Any]:
+    """Expressions ``r_j`` with ``min_j r_j = ρ^φ`` at the top-level min-operators of ``φ``.
+
+    ``ρ^{φ1 ∧ φ2} ≥ s`` holds exactly when ``ρ^{φ1} ≥ s`` and ``ρ^{φ2} ≥ s``, and
+    ``ρ^{G[a,b] φ} ≥ s`` when ``ρ^φ ≥ s`` at every step of the window. An optimiser that needs a
+    lower bound on the robustness can therefore impose one constraint per conjunct/step instead
+    of one smoothed minimum over all of them: the bound is then exact (no smoothing error) at
+    the top level, and each constraint touches only its own steps — the smoothed minimum over
+    a long horizon ties every step's variables together and makes the Hessian dense. Below the
+    top-level ``∧``/``G`` (inside ``∨``, ``F``, ``¬``) the robustness is evaluated as usual,
+    smooth when ``smooth`` is given.
+    """
+    if isinstance(formula, And):
+        out: list[Any] = []
+        for a in formula.args:
+            out.extend(robustness_constraints(a, signal, k, smooth=smooth))
+        return out
+    if isinstance(formula, Globally):
+        out = []
+        for j in _window(signal, k, formula.a, formula.b):
+            out.extend(robustness_constraints(formula.arg, signal, j, smooth=smooth))
+        return out
+    if isinstance(formula, Const):
+        return []
+    return [formula.rho(signal, k, smooth=smooth)]

@@ -150,6 +150,7 @@ def fit_rbf(
     window: tuple[float, float, float, float] | None = None,
     margin: int = 1,
     solver: str = "cvxpy",
+    shape: tuple[int, int] | None = None,
 ) -> RbfSurface:
     """Fit an :class:`RbfSurface` to ``terrain`` (or to the cells inside ``window``).
 
@@ -157,6 +158,8 @@ def fit_rbf(
     ``regularization`` λ (per cell, so it does not depend on the grid size); ``margin``
     lattice nodes are added outside the fitted region so its border is not under-supported.
     ``window = (xmin, xmax, ymin, ymax)`` fits only the cells whose centres fall inside it.
+    ``shape = (ny, nx)`` fixes the lattice size (centred on the fitted cells) so that fits of
+    different windows share one layout, e.g. as the parameter vector of a parametric NLP.
     ``solver="cvxpy"`` (default) solves with cvxpy; ``"cholesky"`` solves the identical
     normal equations directly (used to cross-check cvxpy in the tests).
     """
@@ -174,8 +177,11 @@ def fit_rbf(
         xs, ys = xs[ix], ys[iy]
         z = z[np.ix_(iy, ix)]
     sigma = sigma_factor * spacing
-    nx = int(math.ceil((xs[-1] - xs[0]) / spacing)) + 1 + 2 * margin
-    ny = int(math.ceil((ys[-1] - ys[0]) / spacing)) + 1 + 2 * margin
+    if shape is None:
+        nx = int(math.ceil((xs[-1] - xs[0]) / spacing)) + 1 + 2 * margin
+        ny = int(math.ceil((ys[-1] - ys[0]) / spacing)) + 1 + 2 * margin
+    else:
+        ny, nx = int(shape[0]), int(shape[1])
     # centre the lattice on the fitted cells
     x0 = 0.5 * (xs[0] + xs[-1]) - 0.5 * (nx - 1) * spacing
     y0 = 0.5 * (ys[0] + ys[-1]) - 0.5 * (ny - 1) * spacing

@@ -81,3 +81,15 @@ def test_casadi_expressions_match_numpy():
     # the smooth robustness is differentiable: its gradient exists and is finite everywhere
     g = ca.Function("g", [xs, ys], [ca.gradient(spec.rho(sym, smooth=30.0), ca.vertcat(xs, ys))])
     assert np.all(np.isfinite(np.array(g(np.zeros(8), np.zeros(8)))))
+
+
+def test_robustness_constraints_decompose_top_level_min():
+    from planners.stl import robustness_constraints
+
+    rng = np.random.default_rng(11)
+    spec = And((Globally(Predicate.lt("y", 1.0), 1, 6), Finally(Predicate.gt("x", 0.5), 0, 4)))
+    for _ in range(50):
+        sig = {"x": rng.normal(size=8), "y": rng.normal(size=8)}
+        parts = robustness_constraints(spec, sig)
+        assert len(parts) == 7
+        assert min(parts) == pytest.approx(spec.rho(sig))

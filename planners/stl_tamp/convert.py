@@ -1,0 +1,276 @@
+"""From an NLP solution to plan actions the referee accepts.
+
+The NLP's trajectories are a model; the referee judges the plan on the real heightmap with
+its flat cut. The conversion therefore replays every decision on an exact copy of what the
+referee will do (``earthbench.referee.apply_cut``/``cut_level`` on our own copy of the grid,
+``earthbench.motion.swing_time`` for durations) and re-checks every rule before it emits an
+action:
+
+- Moves: the base and truck paths are the NLP's controls, clipped to 99.9 % of the limits and
+  re-integrated with the same mid-step heading rule (so each pair of samples is an exact
+  unicycle chord: no lateral slip, speed and yaw rate within the limits), starting exactly where
+  the machine is. Moves whose displacement is below 1 µm are dropped.
+- Collisions: the excavator–truck centre distance is checked in continuous time (both paths
+  are piecewise linear between samples) before a move is accepted.
+- Digs: a phase with ``η ≥ eta_on`` becomes a dig at the NLP's contact and drag heading, at
+  the full cut depth (less where the floor is closer); the referee's capacity cap then fills the
+  bucket. The dig is skipped if its contact or drag end leaves the reach annulus of the real
+  base pose, its footprint leaves the dig area, the truck is out of dump reach, or the cut
+  would take less than ``min_dig_volume``. The last dig's depth is bisected so that the loaded
+  volume meets the target instead of overshooting it.
+- Durations: a dig lasts the swing to its bearing plus the minimum stroke time, a dump the
+  swing to the truck plus the minimum dump time (plus 1 µs each, never less).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from earthbench.motion import swing_time, wrap
+from earthbench.plan import Dig, Dump, Move
+from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.world import Pose, Scenario
+
+EPS_T = 1e-6
+
+
+class ConversionError(RuntimeError):
+    """A solution could not be turned into valid actions (reported with the solve's status)."""
+
+
+@dataclass
+class SimState:
+    """The world as the referee will see it after the actions emitted so far."""
+
+    scenario: Scenario
+    z: np.ndarray
+    t: float
+    exc: Pose
+    turn: float
+    truck: Pose
+    loaded: float = 0.0
+    actions: list[Any] = field(default_factory=list)
+    digs: int = 0
+    dig_area: Any = None
+
+    @classmethod
+    def start(cls, scenario: Scenario) -> SimState:
+        m = scenario.machines
+        area = Polygon(scenario.site.dig_area)
+        shapely.prepare(area)
+        return cls(scenario, np.array(scenario.terrain.z, dtype=float), 0.0, m.excavator_pose, 0.0, m.truck_pose,
+                   dig_area=area)
+
+    @property
+    def s0(self) -> np.ndarray:
+        return np.array([self.exc.x, self.exc.y, self.exc.yaw, self.turn, 0.3, -1.5,
+                         self.truck.x, self.truck.y, self.truck.yaw])
+
+
+def integrate(start: Pose, v: np.ndarray, w: np.ndarray, dts: np.ndarray, vmax: float, wmax: float) -> np.ndarray:
+    """Nodes (len+1, 3) of the mid-step unicycle from ``start`` under clipped ``v``, ``ω``."""
+    v = np.clip(v, -vmax * 0.999, vmax * 0.999)
+    w = np.clip(w, -wmax * 0.999, wmax * 0.999)
+    out = np.zeros((len(dts) + 1, 3))
+    out[0] = (start.x, start.y, start.yaw)
+    for k, dt in enumerate(dts):
+        x, y, yaw = out[k]
+        mid = yaw + 0.5 * w[k] * dt
+        out[k + 1] = (x + v[k] * dt * math.cos(mid), y + v[k] * dt * math.sin(mid), yaw + w[k] * dt)
+    return out
+
+
+def _samples(nodes: np.ndarray, times: np.ndarray) -> list[tuple[float, float, float, float]]:
+    return [(float(t), float(x), float(y), float(yaw)) for t, (x, y, yaw) in zip(times, nodes)]
+
+
+def min_distance(a: list[tuple[float, float, float, float]] | Pose, b: list[tuple[float, float, float, float]] | Pose) -> float:
+    """Least centre distance of two piecewise-linear paths (or a path and a still pose)."""
+    def arr(p: Any) -> np.ndarray:
+        if isinstance(p, Pose):
+            return np.array([[0.0, p.x, p.y], [1e12, p.x, p.y]])
+        return np.array([(s[0], s[1], s[2]) for s in p])
+
+    A, B = arr(a), arr(b)
+    t0, t1 = max(A[0, 0], B[0, 0]), min(A[-1, 0], B[-1, 0])
+    if t1 < t0:
+        return math.inf
+    ts = np.unique(np.concatenate([A[:, 0], B[:, 0], [t0, t1]]))
+    ts = ts[(ts >= t0) & (ts <= t1)]
+
+    def pos(P: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(t, P[:, 0], P[:, 1]), np.interp(t, P[:, 0], P[:, 2])], axis=1)
+
+    d = pos(A, ts) - pos(B, ts)
+    best = float(np.min(np.hypot(d[:, 0], d[:, 1])))
+    for k in range(len(ts) - 1):  # relative motion is linear on each interval: minimise the quadratic
+        p0, p1 = d[k], d[k + 1]
+        dv = p1 - p0
+        den = float(dv @ dv)
+        if den > 0:
+            s = min(max(-float(p0 @ dv) / den, 0.0), 1.0)
+            best = min(best, float(np.hypot(*(p0 + s * dv))))
+    return best
+
+
+class Converter:
+    """Emits the actions of solved phases into a :class:`SimState`."""
+
+    def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, clearance_margin: float = 0.01):
+        self.sc = scenario
+        self.exc_spec = scenario.machines.excavator
+        self.truck_spec = scenario.machines.truck
+        self.eta_on, self.min_dig_volume, self.depth = eta_on, min_dig_volume, depth
+        self.clearance = self.exc_spec.clearance + clearance_margin
+        self.floor = scenario.site.floor
+
+    # -- moves ------------------------------------------------------------------------------------
+    def move_excavator(self, st: SimState, v: np.ndarray, w: np.ndarray, dts: np.ndarray) -> bool:
+        if len(dts) == 0:
+            return True
+        nodes = integrate(st.exc, v, w, dts, self.exc_spec.travel_speed, self.exc_spec.yaw_rate)
+        if np.max(np.hypot(nodes[:, 0] - nodes[0, 0], nodes[:, 1] - nodes[0, 1])) < 1e-6 and abs(nodes[-1, 2] - nodes[0, 2]) < 1e-6:
+            return True
+        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
+        path = _samples(nodes, times)
+        if min_distance(path, st.truck) < self.clearance:
+            return False
+        st.actions.append(Move("excavator", tuple(path)))
+        st.t = float(times[-1])
+        st.exc = Pose(*nodes[-1])
+        return True
+
+    def move_both(self, st: SimState, ve: np.ndarray, we: np.ndarray, vt: np.ndarray, wt: np.ndarray, dts: np.ndarray) -> str:
+        """Phase 0: both machines move at once; falls back to one after the other. Returns how."""
+        es = self.exc_spec
+        ts = self.truck_spec
+        ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
+        nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
+        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
+        e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
+        t_moves = np.max(np.hypot(nt[:, 0] - nt[0, 0], nt[:, 1] - nt[0, 1])) > 1e-6 or abs(nt[-1, 2] - nt[0, 2]) > 1e-6
+        pe, pt = _samples(ne, times), _samples(nt, times)
+        if not t_moves:
+            return "excavator" if self.move_excavator(st, ve, we, dts) else "blocked"
+        if not e_moves:
+            if min_distance(pt, st.exc) < self.clearance:
+                return "blocked"
+            st.actions.append(Move("truck", tuple(pt)))
+            st.truck = Pose(*nt[-1])
+            st.t = max(st.t, float(times[-1]))  # the excavator waits for the truck before dumping
+            return "truck"
+        if min_distance(pe, pt) >= self.clearance:
+            st.actions.append(Move("excavator", tuple(pe)))
+            st.actions.append(Move("truck", tuple(pt)))
+            st.exc, st.truck = Pose(*ne[-1]), Pose(*nt[-1])
+            st.t = float(times[-1])
+            return "together"
+        # one after the other: the truck first (it usually leaves the excavator's way), then the excavator
+        for first in ("truck", "excavator"):
+            if first == "truck":
+                if min_distance(pt, st.exc) < self.clearance:
+                    continue
+                end_truck = Pose(*nt[-1])
+                pe2 = _samples(ne, times + (times[-1] - times[0]))
+                if min_distance(pe2, end_truck) < self.clearance:
+                    continue
+                st.actions.append(Move("truck", tuple(pt)))
+                st.actions.append(Move("excavator", tuple(pe2)))
+                st.exc, st.truck = Pose(*ne[-1]), end_truck
+                st.t = float(pe2[-1][0])
+                return "truck-first"
+            end_exc = Pose(*ne[-1])
+            if min_distance(pe, st.truck) < self.clearance:
+                continue
+            pt2 = _samples(nt, times + (times[-1] - times[0]))
+            if min_distance(pt2, end_exc) < self.clearance:
+                continue
+            st.actions.append(Move("excavator", tuple(pe)))
+            st.actions.append(Move("truck", tuple(pt2)))
+            st.exc, st.truck = end_exc, Pose(*nt[-1])
+            st.t = float(pt2[-1][0])
+            return "excavator-first"
+        return "blocked"
+
+    # -- digs ---------------------------------------------------------------------------------------
+    def dig_ok(self, st: SimState, contact: tuple[float, float], heading: float) -> str | None:
+        """Why a dig here is impossible for the referee (None: it is possible)."""
+        es = self.exc_spec
+        end = (contact[0] + math.cos(heading) * es.max_drag_length, contact[1] + math.sin(heading) * es.max_drag_length)
+        for pt in (contact, end):
+            r = math.hypot(pt[0] - st.exc.x, pt[1] - st.exc.y)
+            if r > es.reach_max - 1e-4 or r < es.reach_min + 1e-4:
+                return "reach"
+        fp = footprint(contact, heading, es.bucket_width, es.max_drag_length)
+        if not st.dig_area.contains(fp):
+            return "outside_dig_area"
+        for ko in self.sc.site.keep_outs:
+            if fp.intersects(Polygon(ko)):
+                return "keep_out"
+        d = math.hypot(st.truck.x - st.exc.x, st.truck.y - st.exc.y)
+        r = self.truck_spec.loading_radius
+        if d - r > es.reach_max - 1e-4 or d + r < es.reach_min + 1e-4:
+            return "dump_reach"
+        return None
+
+    def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float) -> float:
+        es = self.exc_spec
+        z = st.z.copy()
+        level = cut_level(self.sc.terrain, z, contact, depth)
+        return apply_cut(self.sc.terrain, z, contact, heading, es.bucket_width, es.max_drag_length, level, es.bucket_capacity)
+
+    def max_depth(self, st: SimState, contact: tuple[float, float]) -> float:
+        d = min(self.depth, self.exc_spec.max_cut_depth)
+        if self.floor is not None:
+            zc = self.sc.terrain.height_at(contact[0], contact[1], st.z)
+            d = min(d, zc - self.floor - 1e-7)
+        return d
+
+    def dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, remaining: float) -> float:
+        """Dig at ``contact`` and dump into the truck; returns the loaded volume (0: skipped)."""
+        if self.dig_ok(st, contact, heading) is not None:
+            return 0.0
+        depth = self.max_depth(st, contact)
+        if depth <= 1e-3:
+            return 0.0
+        vol = self.cut_volume(st, contact, heading, depth)
+        if vol < self.min_dig_volume:
+            return 0.0
+        if vol > remaining:  # the last bucket: bisect the depth to meet the target
+            lo, hi = 0.0, depth
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                if self.cut_volume(st, contact, heading, mid) >= remaining:
+                    hi = mid
+                else:
+                    lo = mid
+            depth = hi
+            if depth <= 1e-6:
+                return 0.0
+        es = self.exc_spec
+        dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
+        z_level = cut_level(self.sc.terrain, st.z, contact, depth)
+        got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, es.max_drag_length, z_level, es.bucket_capacity)
+        st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
+                              float(depth), float(es.max_drag_length)))
+        st.t += dig_t
+        st.turn = math.atan2(contact[1] - st.exc.y, contact[0] - st.exc.x) - st.exc.yaw
+        dump_t = swing_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + es.min_dump_time + EPS_T
+        st.actions.append(Dump("excavator", st.t, st.t + dump_t))
+        st.t += dump_t
+        st.turn = math.atan2(st.truck.y - st.exc.y, st.truck.x - st.exc.x) - st.exc.yaw
+        take = min(got, max(self.truck_spec.capacity - st.loaded, 0.0))
+        st.loaded += take
+        st.digs += 1
+        return take
+
+
+def wrap_to(angle: float, ref: float) -> float:
+    """``angle`` shifted by multiples of 2π to lie within π of ``ref``."""
+    return ref + wrap(angle - ref)

@@ -1,0 +1,177 @@
+"""Algorithm 1: a global problem over local areas, then one local problem per chosen area.
+
+1. Fit the surface (``terrains.surface.fit_rbf``; counted in the solve time).
+2. Candidate local areas tile the dig area (side √S_l, S_l = 5 buckets); a greedy tour from the
+   excavator's start, by estimated volume per second of travel and digging, seeds the global
+   problem (contact at each area's far edge, base ``base_offset`` beyond the area toward the
+   truck's side, truck behind the base).
+3. Global: the same :class:`~planners.stl_tamp.model.PhaseNLP` with the area as the unit
+   (V_max = 1 m³ per area, m_g phases); the areas with η ≥ ``eta_on`` in phase order are the
+   local areas. If the global solve fails, its seed tour is used (recorded in ``plan.info``).
+4. Local: for each area, a fresh window fit of the *current* grid (after the digs already
+   planned) becomes the terrain parameter; the local NLP (bucket unit, m_l phases) starts from
+   an IK guess at spread-out contacts and the global base/truck poses, with a terminal cost
+   toward the next area's base. Its phases become actions (``convert``), checked against the
+   referee's rules on the real grid. The local target is what the target still lacks
+   (measured with the referee's cut), capped at the area's V_max, so model error in one area
+   is made up in the next; when the global areas run out, further areas come from the tour.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from shapely.geometry import Polygon
+
+from earthbench.world import Scenario
+from terrains.surface import RbfSurface, fit_rbf
+
+from .convert import Converter, SimState
+from .guess import PhaseSeed, build_guess, fill_volumes
+from .model import NX, PhaseNLP, Shape, Solution
+
+_NLP_CACHE: dict[Any, PhaseNLP] = {}
+
+
+class StlTampSolveError(RuntimeError):
+    """A local or global solve failed and the configuration allows no (more) fallbacks."""
+
+
+def get_nlp(shape: Shape, scenario: Scenario, box: tuple[float, float, float, float]) -> tuple[PhaseNLP, bool]:
+    """The process-wide NLP of this shape, machines and site box (built on first use)."""
+    key = (shape, scenario.machines.excavator, scenario.machines.truck, box)
+    hit = key in _NLP_CACHE
+    if not hit:
+        _NLP_CACHE[key] = PhaseNLP(shape, scenario.machines.excavator, scenario.machines.truck, box)
+    return _NLP_CACHE[key], hit
+
+
+@dataclass
+class Area:
+    """A local area: its far-edge contact ``(px, py)``, drag heading, base and truck poses."""
+
+    px: float
+    py: float
+    psi: float
+    base: tuple[float, float]
+    truck: tuple[float, float]
+    estimate: float
+    centre: tuple[float, float]
+    source: str = "tour"
+
+
+@dataclass
+class Trace:
+    """What happened, for ``plan.info`` and the report."""
+
+    fit_time_s: float = 0.0
+    build_time_s: float = 0.0
+    global_: dict[str, Any] = field(default_factory=dict)
+    locals_: list[dict[str, Any]] = field(default_factory=list)
+    fallbacks: int = 0
+
+
+def site_box(scenario: Scenario) -> tuple[float, float, float, float]:
+    xs, ys = zip(*scenario.site.dig_area)
+    return (min(xs), max(xs), min(ys), max(ys))
+
+
+def diggable_volume(scenario: Scenario) -> float:
+    """Material above the floor (or above the lowest cell) inside the dig area (m³)."""
+    t = scenario.terrain
+    xs, ys = t.cell_centres()
+    poly = Polygon(scenario.site.dig_area)
+    from shapely import contains_xy
+
+    X, Y = np.meshgrid(xs, ys)
+    inside = contains_xy(poly, X, Y)
+    floor = scenario.site.floor if scenario.site.floor is not None else float(t.z[inside].min())
+    return float(np.clip(t.z - floor, 0.0, None)[inside].sum() * t.cell_area)
+
+
+def truck_side(scenario: Scenario) -> tuple[float, float]:
+    """Unit axis direction from the dig area's centre toward the truck (the loading side)."""
+    xmin, xmax, ymin, ymax = site_box(scenario)
+    cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
+    tp = scenario.machines.truck_pose
+    dx, dy = tp.x - cx, tp.y - cy
+    if abs(dy) >= abs(dx):
+        return (0.0, 1.0 if dy >= 0 else -1.0)
+    return (1.0 if dx >= 0 else -1.0, 0.0)
+
+
+def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
+                    truck_offset: float) -> list[Area]:
+    """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres)."""
+    t = scenario.terrain
+    xmin, xmax, ymin, ymax = site_box(scenario)
+    ux, uy = truck_side(scenario)
+    floor = scenario.site.floor if scenario.site.floor is not None else float(z.min())
+    xs, ys = t.cell_centres()
+    poly = Polygon(scenario.site.dig_area)
+    nxa = max(int(math.floor((xmax - xmin) / side)), 1)
+    nya = max(int(math.floor((ymax - ymin) / side)), 1)
+    ox = xmin + 0.5 * ((xmax - xmin) - nxa * side)
+    oy = ymin + 0.5 * ((ymax - ymin) - nya * side)
+    out = []
+    psi = math.atan2(uy, ux)  # drag toward the base, i.e. toward the loading side
+    for a in range(nxa):
+        for b in range(nya):
+            x0, y0 = ox + a * side, oy + b * side
+            cx, cy = x0 + side / 2, y0 + side / 2
+            if not poly.contains(Polygon([(x0, y0), (x0 + side, y0), (x0 + side, y0 + side), (x0, y0 + side)])):
+                continue
+            ix = (xs >= x0) & (xs < x0 + side)
+            iy = (ys >= y0) & (ys < y0 + side)
+            cells = z[np.ix_(iy, ix)]
+            est = float(np.minimum(np.clip(cells - floor, 0, None), depth).sum() * t.cell_area)
+            est = min(est, vmax)
+            if est < 0.05:
+                continue
+            base = (cx + ux * base_offset, cy + uy * base_offset)
+            truck = (base[0] + ux * truck_offset, base[1] + uy * truck_offset)
+            px, py = cx - ux * side / 2, cy - uy * side / 2
+            out.append(Area(px, py, psi, base, truck, est, (cx, cy)))
+    return out
+
+
+def greedy_tour(areas: list[Area], start: tuple[float, float], target: float, speed: float, work_per_m3: float,
+                reserve: float = 1.3) -> list[Area]:
+    """Areas in visiting order: best volume per second of travel and work, until ``reserve × target``."""
+    left = list(areas)
+    tour: list[Area] = []
+    pos, got = start, 0.0
+    while left and got < reserve * target:
+        def score(a: Area) -> float:
+            travel = math.hypot(a.base[0] - pos[0], a.base[1] - pos[1]) / speed
+            return a.estimate / (travel + work_per_m3 * a.estimate + 1.0)
+
+        best = max(left, key=score)
+        left.remove(best)
+        tour.append(best)
+        pos, got = best.base, got + best.estimate
+    return tour + sorted(left, key=lambda a: -a.estimate)
+
+
+def local_seeds(area: Area, k_active: int, m: int, bucket_w: float, drag: float, surf: RbfSurface, eta0: float,
+                truck: tuple[float, float]) -> list[PhaseSeed]:
+    """m bucket contacts spread over the area: rows across the drag, the first k_active dig."""
+    ux, uy = math.cos(area.psi), math.sin(area.psi)
+    nx_, ny_ = -uy, ux
+    side = math.hypot(area.centre[0] - area.px, area.centre[1] - area.py) * 2
+    across = max(side - bucket_w, 0.0)
+    cols = max(int(math.floor(side / bucket_w)), 1)
+    offs_c = [(-across / 2 + across * j / (cols - 1)) if cols > 1 else 0.0 for j in range(cols)]
+    rows = [0.0, max(side - drag, 0.0) * 0.5, max(side - drag, 0.0)]
+    slots = [(a, c) for a in rows for c in offs_c]
+    seeds = []
+    for j in range(m):
+        a, c = slots[j % len(slots)]
+        px = area.px + a * ux + c * nx_
+        py = area.py + a * uy + c * ny_
+        seeds.append(PhaseSeed(px, py, area.psi, eta0 if j < k_active else 0.0, area.base, truck, float(surf(px, py))))
+    return seeds

@@ -1,0 +1,296 @@
+"""The ``stl-tamp`` planner: hierarchical STL-TAMP (Satoh, Takano, Oyama) on CasADi + IPOPT."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from earthbench.errors import EarthbenchError
+from earthbench.plan import Plan, Prediction
+from earthbench.planner import Planner
+from earthbench.world import Scenario
+from terrains.surface import fit_rbf
+
+from .convert import Converter, SimState
+from .guess import PhaseSeed, build_guess, fill_volumes
+from .hierarchy import (
+    Area,
+    StlTampSolveError,
+    Trace,
+    candidate_areas,
+    diggable_volume,
+    get_nlp,
+    greedy_tour,
+    local_seeds,
+    site_box,
+    truck_side,
+)
+from .model import NX, Shape, Solution
+
+
+class TargetTooLargeError(EarthbenchError, ValueError):
+    """The target volume exceeds the material the dig area holds above its floor."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """Settings; defaults are the paper's values where it gives them (section V).
+
+    Paper: m_l = 5 digs per local area, n = 10 motion steps, S_l = 5 bucket areas with
+    V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m. Not given in the paper (our choices):
+    the weights α, the ε constants, the sigmoid steepness k = 20 with the quadrature box
+    widened by 3/k (DESIGN §8 calibration), the STL sharpness β.
+    """
+
+    m_local: int = 5
+    n_steps: int = 10
+    contact_step: int = 4
+    m_global_max: int = 12
+    n_global: int = 6
+    area_buckets: float = 5.0
+    area_vmax: float = 1.0
+    dig_depth: float = 0.4
+    sigmoid_k: float = 20.0
+    quad_widen: float = 0.15
+    eps_eta: float = 0.05
+    eps_v: float = 0.01
+    eps_d: float = 0.01
+    beta: float = 30.0
+    alpha_u: float = 0.01
+    alpha_t: float = 1.0
+    alpha_v: float = 2.0e4
+    alpha_eta: float = 2.0
+    alpha_term: float = 0.2
+    eta_init: float = 0.7
+    eta_on: float = 0.25
+    min_dig_volume: float = 0.02
+    fill_estimate: float = 0.85
+    local_fit_spacing: float = 0.5
+    local_fit_half: float = 3.0
+    global_fit_spacing: float = 0.6
+    base_offset: float = 4.0
+    truck_offset: float = 5.0
+    global_layer: bool = True
+    max_iter: int = 250
+    max_cpu_time: float = 4.0
+    global_max_iter: int = 300
+    global_max_cpu_time: float = 10.0
+    mu_strategy: str = "adaptive"
+    on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks) or "raise"
+    max_fallbacks: int = 6
+    max_areas: int = 40
+    volume_tol: float = 1e-4
+
+
+class StlTampPlanner(Planner):
+    """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
+
+    name = "stl-tamp"
+    version = "0.1.0"
+    tracks = ("backhoe",)
+    Config = Config
+
+    # -- shapes ---------------------------------------------------------------------------------
+    def local_shape(self, scenario: Scenario) -> Shape:
+        c, e = self.config, scenario.machines.excavator
+        nt = int(round(2 * c.local_fit_half / c.local_fit_spacing)) + 1
+        return Shape(phases=c.m_local, steps=c.n_steps, contact_step=c.contact_step, unit_width=e.bucket_width,
+                     unit_length=e.max_drag_length, unit_depth=min(c.dig_depth, e.max_cut_depth), vmax=e.bucket_capacity,
+                     work_time=e.min_stroke_time + e.min_dump_time, terrain_shape=(nt, nt),
+                     terrain_spacing=c.local_fit_spacing, terrain_sigma=c.local_fit_spacing, sigmoid_k=c.sigmoid_k,
+                     widen=c.quad_widen, eps_eta=c.eps_eta, eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
+
+    def area_side(self, scenario: Scenario) -> float:
+        e = scenario.machines.excavator
+        return math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length)
+
+    # -- the plan -------------------------------------------------------------------------------
+    def plan(self, scenario: Scenario) -> Plan:
+        t_start = time.perf_counter()
+        c = self.config
+        if scenario.machines.excavator is None:
+            raise EarthbenchError("stl-tamp plans for a backhoe excavator; this scenario has none")
+        target = scenario.task.target_volume
+        holds = diggable_volume(scenario)
+        if target > holds:
+            raise TargetTooLargeError(
+                f"target {target:.3f} m³ exceeds the {holds:.3f} m³ the dig area holds above its floor; "
+                "lower task.target_volume or enlarge the site")
+        trace = Trace()
+        st = SimState.start(scenario)
+        exc = scenario.machines.excavator
+        box = site_box(scenario)
+        side = self.area_side(scenario)
+        conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth)
+
+        # Algorithm 1, step 1: the surface function of the whole map
+        t0 = time.perf_counter()
+        surf_g = fit_rbf(scenario.terrain, spacing=c.global_fit_spacing)
+        trace.fit_time_s += time.perf_counter() - t0
+
+        areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
+        work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
+        tour = greedy_tour(areas, (st.exc.x, st.exc.y), target, exc.travel_speed, work_per_m3)
+        if c.global_layer and tour:
+            chosen = self._global(scenario, st, surf_g, tour, target, side, box, trace)
+        else:
+            chosen = tour
+            trace.global_ = {"used": False}
+        queue = list(chosen) + [a for a in tour if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
+
+        joints = (0.3, -1.5)
+        remaining = target
+        n_areas = 0
+        predicted_model_volume = 0.0
+        regenerated = 0
+        while remaining > c.volume_tol and n_areas < c.max_areas:
+            if not queue:
+                if regenerated >= 3:
+                    break
+                regenerated += 1
+                fresh = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
+                queue = greedy_tour(fresh, (st.exc.x, st.exc.y), remaining, exc.travel_speed, work_per_m3)
+                if not queue:
+                    break
+            area = queue.pop(0)
+            nxt = queue[0].base if queue else area.base
+            got, model_v, joints = self._local(scenario, st, conv, area, nxt, remaining, joints, box, trace)
+            remaining -= got
+            predicted_model_volume += model_v
+            n_areas += 1
+        plan = Plan(
+            actions=tuple(st.actions),
+            predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)),
+            info={
+                "planner": self.name,
+                "areas": n_areas,
+                "digs": st.digs,
+                "nlp_model_volume": predicted_model_volume,
+                "fit_time_s": trace.fit_time_s,
+                "build_time_s": trace.build_time_s,
+                "fallbacks": trace.fallbacks,
+                "global": trace.global_,
+                "local": trace.locals_,
+                "plan_time_s": time.perf_counter() - t_start,
+            },
+        )
+        return plan
+
+    # -- global layer ------------------------------------------------------------------------------
+    def _global(self, scenario: Scenario, st: SimState, surf, tour: list[Area], target: float, side: float,
+                box: tuple[float, float, float, float], trace: Trace) -> list[Area]:
+        c, exc = self.config, scenario.machines.excavator
+        need = int(math.ceil(target / c.area_vmax))
+        m_g = max(1, min(c.m_global_max, need + 2, len(tour)))
+        cap = exc.bucket_capacity * c.fill_estimate
+        shape = Shape(phases=m_g, steps=c.n_global, contact_step=c.n_global // 2, unit_width=side, unit_length=side,
+                      unit_depth=c.dig_depth, vmax=c.area_vmax,
+                      work_time=c.area_vmax / cap * (exc.min_stroke_time + exc.min_dump_time + 2.0),
+                      terrain_shape=surf.shape, terrain_spacing=surf.spacing, terrain_sigma=surf.sigma, quad=(4, 4),
+                      dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
+                      eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
+        t0 = time.perf_counter()
+        nlp, hit = get_nlp(shape, scenario, box)
+        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        floor = scenario.site.floor if scenario.site.floor is not None else 0.0
+        seeds = [PhaseSeed(a.px, a.py, a.psi, c.eta_init if j < need else 0.0, a.base, tour[0].truck,
+                           float(surf(a.px, a.py))) for j, a in enumerate(tour[:m_g])]
+        s0 = st.s0
+        params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=target,
+                            alpha=(c.alpha_u, c.alpha_t, c.alpha_v / 10, c.alpha_eta, 0.0), goal=(s0[0], s0[1]), floor=floor)
+        w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
+        sol = nlp.solve(params, w0, box, max_iter=c.global_max_iter, max_cpu_time=c.global_max_cpu_time,
+                        options={"mu_strategy": c.mu_strategy})
+        trace.global_ = {"used": True, "phases": m_g, "status": sol.status, "iterations": sol.iterations,
+                         "solve_time_s": sol.solve_time_s, "success": sol.success, "eta": np.round(sol.eta, 3).tolist(),
+                         "volume": float(np.sum(sol.V)), "wall_s": time.perf_counter() - t0}
+        if not sol.success:
+            trace.global_["fallback"] = "greedy tour"
+            return tour
+        n = nlp.n
+        out = []
+        for i in range(1, nlp.m1):
+            if sol.eta[i] < c.eta_on:
+                continue
+            u = (math.cos(sol.psi[i]), math.sin(sol.psi[i]))
+            kn = i * n + nlp.kc[i]
+            centre = (sol.px[i] + u[0] * side / 2, sol.py[i] + u[1] * side / 2)
+            out.append(Area(float(sol.px[i]), float(sol.py[i]), float(sol.psi[i]),
+                            (float(sol.X[kn, 0]), float(sol.X[kn, 1])), (float(sol.X[n, 6]), float(sol.X[n, 7])),
+                            float(sol.V[i]), centre, source="global"))
+        return out or tour
+
+    # -- local layer -------------------------------------------------------------------------------
+    def _local(self, scenario: Scenario, st: SimState, conv: Converter, area: Area, goal: tuple[float, float],
+               remaining: float, joints: tuple[float, float], box: tuple[float, float, float, float],
+               trace: Trace) -> tuple[float, float, tuple[float, float]]:
+        c, exc, trk = self.config, scenario.machines.excavator, scenario.machines.truck
+        t_wall = time.perf_counter()
+        shape = self.local_shape(scenario)
+        nlp, hit = get_nlp(shape, scenario, box)
+        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        floor = scenario.site.floor if scenario.site.floor is not None else 0.0
+        # terrain parameter: a fit of the current grid around the area (the digs so far included)
+        t0 = time.perf_counter()
+        hw = c.local_fit_half
+        cx, cy = area.centre
+        surf = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
+                       shape=shape.terrain_shape, margin=0)
+        trace.fit_time_s += time.perf_counter() - t0
+        v_local = min(remaining, c.area_vmax)
+        # keep the truck where it is when it already serves this area's base
+        d_now = math.hypot(st.truck.x - area.base[0], st.truck.y - area.base[1])
+        reach_dt = exc.reach_max + trk.loading_radius - 0.4
+        truck = (st.truck.x, st.truck.y) if exc.clearance + 0.8 <= d_now <= reach_dt else area.truck
+        k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
+        seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
+        s0 = st.s0
+        s0[4], s0[5] = joints
+        params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=v_local,
+                            alpha=(c.alpha_u, c.alpha_t, c.alpha_v, c.alpha_eta, c.alpha_term), goal=goal, floor=floor)
+        w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
+        half = math.hypot(cx - area.px, cy - area.py) + 0.5
+        cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
+        sol = nlp.solve(params, w0, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
+                        options={"mu_strategy": c.mu_strategy})
+        rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
+                               "status": sol.status, "iterations": sol.iterations, "solve_time_s": sol.solve_time_s,
+                               "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),
+                               "model_volume": float(np.sum(sol.V))}
+        if not sol.success:
+            if c.on_failure != "fallback" or trace.fallbacks >= c.max_fallbacks:
+                raise StlTampSolveError(
+                    f"local solve for the area at ({cx:.2f}, {cy:.2f}) failed: IPOPT {sol.status} after "
+                    f"{sol.iterations} iterations ({sol.solve_time_s:.2f} s); fallbacks used {trace.fallbacks} of "
+                    f"{c.max_fallbacks if c.on_failure == 'fallback' else 0}")
+            trace.fallbacks += 1
+            sol = nlp._solution(w0, params, False, "fallback: IK initial guess", 0, 0.0, float("nan"), {})
+            rec["fallback"] = "IK initial guess"
+        got = self._emit(st, conv, nlp, sol, remaining)
+        rec["loaded"] = got
+        rec["wall_s"] = time.perf_counter() - t_wall
+        trace.locals_.append(rec)
+        return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
+
+    def _emit(self, st: SimState, conv: Converter, nlp, sol: Solution, remaining: float) -> float:
+        """Turn the phases of a local solution into actions (see :mod:`.convert`)."""
+        n, kc = nlp.n, nlp.kc
+        dts = np.diff(sol.times)
+        U = sol.U
+        loaded = 0.0
+        conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
+        for i in range(1, nlp.m1):
+            k0 = i * n
+            if kc[i] > 0:
+                conv.move_excavator(st, U[k0:k0 + kc[i], 0], U[k0:k0 + kc[i], 1], dts[k0:k0 + kc[i]])
+            if sol.eta[i] >= self.config.eta_on and remaining - loaded > self.config.volume_tol:
+                loaded += conv.dig_and_dump(st, (float(sol.px[i]), float(sol.py[i])), float(sol.psi[i]), remaining - loaded)
+        return loaded
+
+
+def config_dict(config: Config) -> dict[str, Any]:
+    return asdict(config)
