@@ -1,0 +1,189 @@
+"""earthbench leaderboard / compare / merge on stores written through the real store API."""
+
+from __future__ import annotations
+
+import html
+import re
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from earthbench.cli import main
+from earthbench.compare import Selector, compare
+from earthbench.merge import MergeError, merge
+from earthbench.publish import md_escape, publish
+from earthbench.store import load_runs
+from leaderboard_fixtures import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory) -> Path:
+    return fill_store(tmp_path_factory.mktemp("pub") / "runs.db", suite_of(3), standard_behaviours())
+
+
+@pytest.fixture(scope="module")
+def board(db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("board")
+    return publish(db, out)
+
+
+def test_files_written(board):
+    out = board.out
+    for name in ("README.md", "runs.csv", "summary.csv", "index.html"):
+        assert (out / name).is_file()
+    figs = sorted(p.name for p in (out / "figures").iterdir())
+    # volume-time and profiles, plus one terrain figure per planner, each as PNG and SVG
+    assert len(figs) == 2 * (2 + 4)
+    assert sum(f.endswith(".svg") for f in figs) == 6
+    assert any("terrain-greedy" in f for f in figs)
+
+
+def test_tables_ranked_with_rule_and_stamp(board, db):
+    md = (board.out / "README.md").read_text()
+    assert "Ranking: ranked by success rate (higher first), then median time per m³" in md
+    runs = load_runs(db)
+    assert f"suite digest: {runs['suite_digest'].iloc[0]}" in md
+    assert "project commit: " in md and "CPU: " in md and "generated " in md
+    assert runs["cpu_model"].iloc[0] in md
+    rows = [line for line in md.splitlines() if re.match(r"\| \d+ \|", line)]
+    planners = [r.split(" | ")[1] for r in rows]
+    # greedy succeeds everywhere; flaky times out on every second scenario; half loads half
+    assert planners[0] == "greedy" and planners[1] == "flaky" and planners[-1] == "half"
+    assert md_escape(EVIL) in planners
+    assert "<script>" not in md
+
+
+def test_csvs_match_the_store(board, db):
+    runs = pd.read_csv(board.out / "runs.csv")
+    assert len(runs) == len(load_runs(db)) == 24
+    summary = pd.read_csv(board.out / "summary.csv")
+    g = summary.set_index("planner")
+    assert g.loc["greedy", "success_rate"] == 1.0 and g.loc["greedy", "runs"] == 6
+    assert g.loc["flaky", "n_timeout"] == 3 and g.loc["flaky", "success_rate"] == 0.5
+    assert g.loc["half", "success_rate"] == 0.0
+    # medians recomputed from the CSV of runs
+    ok = runs[(runs.planner == "greedy") & (runs.reason == "ok")]
+    assert g.loc["greedy", "time_per_m3_median"] == pytest.approx(np.median(ok.time_per_m3))
+    assert g.loc["greedy", "solve_time_p90"] == pytest.approx(np.percentile(runs[runs.planner == "greedy"].solve_time_s, 90))
+
+
+def test_html_is_self_contained_and_escaped(board):
+    page = (board.out / "index.html").read_text()
+    assert not re.search(r"""(src|href)\s*=\s*["']?(https?:|//)""", page)
+    assert "<link" not in page and "@import" not in page and "url(" not in page
+    assert EVIL not in page
+    assert html.escape(EVIL) in page
+    assert page.count("<script>") == 1  # only the page's own sorting script
+    assert page.count('src="data:image/png;base64,') == 6
+    assert "Content-Security-Policy" in page and "default-src 'none'" in html.unescape(page)
+
+
+def test_suite_filter_and_unknown_suite(db, tmp_path):
+    res = publish(db, tmp_path / "a", ["pubtest"], figures=False)
+    assert len(res.runs) == 24
+    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "b"), "--suite", "nope", "--no-figures"]) == 2
+
+
+def test_cli_leaderboard(db, tmp_path, capsys):
+    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "lb"), "--no-terrain"]) == 0
+    assert "24 run(s), 1 table(s)" in capsys.readouterr().err
+    assert len(list((tmp_path / "lb" / "figures").iterdir())) == 4
+
+
+def test_mixed_cpu_models_are_said_to_be_mixed(tmp_path):
+    db = fill_store(tmp_path / "m.db", suite_of(2), [Behaviour(ref("greedy")), Behaviour(ref("other"), keep=0.9, cpu_model="Other CPU 9")])
+    res = publish(db, tmp_path / "lb", terrain=False)
+    md = (res.out / "README.md").read_text()
+    assert "Other CPU 9, " in md and "solve times mixed from several CPU models" in md
+
+
+# -- compare -----------------------------------------------------------------------------------------
+
+
+def test_wilcoxon_by_hand():
+    a = pd.DataFrame({"scenario_digest": list("abcdef"), "planner": "a", "planner_version": "1", "config_hash": "x",
+                      "success": True, "solve_time_s": [1.0] * 6, "volume_ratio": [1.0] * 6})
+    b = a.assign(planner="b", solve_time_s=[2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+    c = compare(a, b, ("solve_time_s", "volume_ratio"))
+    st = c.table.set_index("metric")
+    # six positive differences: the exact two-sided p is 2 / 2**6
+    assert st.loc["solve_time_s", "p_value"] == pytest.approx(2 / 64)
+    assert st.loc["solve_time_s", "median_diff"] == 3.5
+    assert st.loc["solve_time_s", "verdict"] == "B worse"
+    assert st.loc["volume_ratio", "p_value"] == 1.0  # every difference zero
+    assert st.loc["volume_ratio", "verdict"] == "no significant difference"
+    assert c.success["both"] == 6 and c.success["p_value"] == 1.0
+
+
+def test_selector():
+    s = Selector.parse("greedy@1.0#07cd")
+    assert (s.planner, s.version, s.config) == ("greedy", "1.0", "07cd")
+    assert Selector.parse("greedy") == Selector("greedy")
+    assert Selector.parse("a@b@2").planner == "a@b"
+
+
+def test_cli_compare_in_one_store(db, capsys, tmp_path):
+    assert main(["compare", str(db), "--a", "greedy", "--b", "half", "--csv", str(tmp_path / "c.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "6 shared scenario(s)" in out
+    t = pd.read_csv(tmp_path / "c.csv").set_index("metric")
+    assert t.loc["volume_ratio", "median_diff"] < 0
+    assert t.loc["volume_ratio", "p_value"] == pytest.approx(2 / 64)
+    assert t.loc["volume_ratio", "verdict"] == "B worse"
+
+
+def test_cli_compare_errors(db, capsys):
+    assert main(["compare", str(db), "--a", "greedy"]) == 2
+    assert main(["compare", str(db), "--a", "nobody", "--b", "half"]) == 2
+    assert "stored configurations" in capsys.readouterr().err
+
+
+# -- merge -------------------------------------------------------------------------------------------
+
+
+def _table(db) -> pd.DataFrame:
+    cols = ["scenario_digest", "planner", "planner_version", "config_hash", "reason", "success", "volume_ratio",
+            "time_per_m3", "solve_time_s", "cpu_model", "project_commit", "config"]
+    return load_runs(db)[cols].sort_values(["scenario_digest", "planner"]).reset_index(drop=True)
+
+
+def test_merge_two_machines(tmp_path):
+    suite = suite_of(2)
+    a = fill_store(tmp_path / "a.db", suite, [Behaviour(ref("greedy"))])
+    b = fill_store(tmp_path / "b.db", suite, [Behaviour(ref("half"), keep=0.5, cpu_model="Other CPU")])
+    assert main(["merge", str(tmp_path / "out.db"), str(a), str(b)]) == 0
+    merged = _table(tmp_path / "out.db")
+    both = pd.concat([_table(a), _table(b)]).sort_values(["scenario_digest", "planner"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(merged, both)
+    # plans survive, byte for byte
+    from earthbench.store import Store
+
+    with Store(tmp_path / "out.db", create=False) as out, Store(a, create=False) as src:
+        got = {(r["scenario_digest"], r["planner"]): out.plan_json(r["id"]) for r in out.query()}
+        for r in src.query():
+            assert got[(r["scenario_digest"], r["planner"])] == src.plan_json(r["id"])
+
+
+def test_merge_refuses_duplicates_and_writes_nothing(tmp_path, capsys):
+    suite = suite_of(2)
+    a = fill_store(tmp_path / "a.db", suite, [Behaviour(ref("greedy"))])
+    b = fill_store(tmp_path / "b.db", suite, [Behaviour(ref("greedy")), Behaviour(ref("half"), keep=0.5)])
+    assert main(["merge", str(tmp_path / "out.db"), str(a), str(b)]) == 2
+    assert "duplicate run" in capsys.readouterr().err
+    with sqlite3.connect(tmp_path / "out.db") as con:
+        assert con.execute("SELECT COUNT(*) FROM runs").fetchone()[0] == 0
+    merge(tmp_path / "out2.db", [a])
+    with pytest.raises(MergeError, match="duplicate"):
+        merge(tmp_path / "out2.db", [a])  # merging the same store twice
+
+
+def test_merge_refuses_mismatched_suite_digests(tmp_path):
+    a = fill_store(tmp_path / "a.db", suite_of(2), [Behaviour(ref("greedy"))])
+    b = fill_store(tmp_path / "b.db", suite_of(3), [Behaviour(ref("half"), keep=0.5)])  # same name, other scenarios
+    with pytest.raises(MergeError, match="different digests"):
+        merge(tmp_path / "out.db", [a, b])
+    with pytest.raises(MergeError, match="also an input"):
+        merge(a, [a])
