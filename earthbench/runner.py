@@ -28,6 +28,7 @@ exited without a result).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import importlib.util
@@ -263,15 +264,18 @@ def run_case(
     stop: threading.Event | None = None,
     startup_s: float = STARTUP_S,
 ) -> CaseResult:
-    """Run one case in a fresh subprocess on ``cores`` (default: the first the budget allows).
+    """Run one case in a fresh subprocess on ``cores``.
+
+    Without ``cores`` the case waits for a free slot of a process-wide :class:`SlotPool`, so
+    concurrent calls in one process (threads of a distributed worker) never share cores.
 
     Never raises for anything the planner does. ``stop`` (set by an executor on Ctrl-C) ends
     the case early; the result then has reason ``"cancelled"`` and must not be stored.
     """
     budget = case.scenario.budget
-    if cores is None:
-        allowed = sorted(os.sched_getaffinity(0))
-        cores = allowed[: budget.cores]
+    if cores is None:  # e.g. on a distributed worker: take a free slot of this process's pool
+        with SlotPool.shared(budget.cores).slot() as slot:
+            return run_case(case, slot, stop=stop, startup_s=startup_s)
     cores = tuple(cores)
     started_at = _now()
     tmp = tempfile.mkdtemp(prefix="earthbench-case-")
@@ -580,6 +584,34 @@ def make_slots(cores_per_case: int, jobs: int | None = None, allowed: Iterable[i
     return [tuple(cpus[i * cores_per_case : (i + 1) * cores_per_case]) for i in range(n)]
 
 
+class SlotPool:
+    """Disjoint core slots handed out to concurrent cases of one process."""
+
+    _shared: dict[int, SlotPool] = {}
+    _lock = threading.Lock()
+
+    def __init__(self, slots: Sequence[tuple[int, ...]]):
+        self.slots = list(slots)
+        self._free: queue.Queue[tuple[int, ...]] = queue.Queue()
+        for s in self.slots:
+            self._free.put(s)
+
+    @classmethod
+    def shared(cls, cores_per_case: int) -> SlotPool:
+        with cls._lock:
+            if cores_per_case not in cls._shared:
+                cls._shared[cores_per_case] = cls(make_slots(cores_per_case))
+            return cls._shared[cores_per_case]
+
+    @contextlib.contextmanager
+    def slot(self) -> Iterator[tuple[int, ...]]:
+        s = self._free.get()
+        try:
+            yield s
+        finally:
+            self._free.put(s)
+
+
 class LocalExecutor:
     """Runs cases on this machine, one per slot, each slot a thread supervising one subprocess."""
 
@@ -590,16 +622,11 @@ class LocalExecutor:
 
     def run(self, cases: Sequence[Case]) -> Iterator[CaseResult]:
         self._stop.clear()
-        free: queue.Queue[tuple[int, ...]] = queue.Queue()
-        for s in self.slots:
-            free.put(s)
+        slots = SlotPool(self.slots)
 
         def task(case: Case) -> CaseResult:
-            slot = free.get()
-            try:
+            with slots.slot() as slot:
                 return run_case(case, slot, stop=self._stop, startup_s=self.startup_s)
-            finally:
-                free.put(slot)
 
         pool = ThreadPoolExecutor(max_workers=len(self.slots), thread_name_prefix="earthbench-slot")
         pending: set[Future[CaseResult]] = set()

@@ -177,3 +177,27 @@ def test_progress_line_counts_reasons_and_gives_an_eta():
     text = out.getvalue()
     assert "[2/3] ok 1 timeout 1" in text and "ETA" in text and "its wall budget" in text and "\r" in text
     assert text.endswith("\n")
+
+
+def test_concurrent_cases_in_one_process_get_disjoint_slots():
+    import threading
+
+    from earthbench.runner import SlotPool
+
+    pool = SlotPool([(0, 1), (2, 3)])
+    held, now, clashes, lock = [], set(), [], threading.Lock()
+
+    def grab():
+        with pool.slot() as s:
+            with lock:
+                clashes.append(s in now)
+                now.add(s)
+                held.append(s)
+            time.sleep(0.05)
+            with lock:
+                now.discard(s)
+
+    threads = [threading.Thread(target=grab) for _ in range(4)]
+    [t.start() for t in threads]
+    [t.join() for t in threads]
+    assert sorted(held) == [(0, 1), (0, 1), (2, 3), (2, 3)] and not any(clashes)
