@@ -40,6 +40,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rerun", action="store_true", help="run cases again even if they are stored, replacing their rows")
     p.add_argument("--seeds", metavar="A-B", help="only scenarios whose seed is in this range, e.g. 0-4 or 3")
     p.add_argument("--quiet", action="store_true", help="no progress output, only the summary")
+    p.add_argument("--executor", choices=("local", "dask"), default=None,
+                   help="where cases run: local slots (default) or a Dask cluster (needs the `dask` extra)")
+    p.add_argument("--scheduler", metavar="ADDR",
+                   help="Dask scheduler address, e.g. tcp://HOST:8786 (implies --executor dask; "
+                        "default: $DASK_SCHEDULER_ADDRESS); workers need --resources \"slots=K\"")
     return p
 
 
@@ -91,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     with Store(args.db) as store:
         store.check_writable()
         store.register_suite(suite)
-        executor = LocalExecutor(jobs=args.jobs, cores_per_case=suite.budget.cores)
+        executor = make_executor(args, suite)
         from ..progress import Progress
 
         progress = Progress(len(cases), quiet=args.quiet)
@@ -110,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         finally:
             if old is not None:
                 signal.signal(signal.SIGTERM, old)
+            getattr(executor, "close", lambda: None)()
         if report.skipped and not args.quiet:
             print(f"{report.skipped} case(s) already stored were skipped (use --rerun to run them again)", file=sys.stderr)
         print_summary(store, suite.name, planners)
@@ -119,6 +125,25 @@ def run(args: argparse.Namespace) -> int:
                   "run the same command again to resume", file=sys.stderr)
             return 130
     return 0
+
+
+def make_executor(args: argparse.Namespace, suite: Any) -> Any:
+    """The local executor, or a :class:`~earthbench.dask_executor.DaskExecutor` for ``--executor dask``."""
+    if (args.executor or ("dask" if args.scheduler else "local")) == "dask":
+        from ..dask_executor import DaskExecutor
+        from ..errors import EarthbenchError
+
+        try:
+            executor = DaskExecutor(scheduler=args.scheduler, jobs=args.jobs)
+        except ImportError as exc:
+            raise EarthbenchError(f"--executor dask needs Dask distributed ({exc}); pip install 'earthbench[dask]'") from None
+        try:
+            executor.check()
+        except BaseException:
+            executor.close()
+            raise
+        return executor
+    return LocalExecutor(jobs=args.jobs, cores_per_case=suite.budget.cores)
 
 
 def _main_thread() -> bool:
