@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
+from scipy.signal import fftconvolve
 from shapely.geometry import LineString, Point, Polygon
 
 from earthbench.motion import travel_time, turn_drive_turn, wrap
@@ -393,31 +394,28 @@ class Session:
 
     # -- relocation ---------------------------------------------------------------------------------
     def stations(self) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate stations and the material each reaches (block sums on 0.25 m blocks)."""
+        """Candidate stations on a ``station_step`` grid covering the map and a reach around it,
+        with the material each reaches: block sums of the excess above the floor convolved (FFT)
+        with the reach annulus, shrunk by a drag's margin at both ends."""
         e, r = self.spec, self.terrain.resolution
-        f = max(1, int(round(0.25 / r)))
+        f = max(1, int(round(self.cfg.station_step / r)))
+        step = f * r
         excess = np.where(self.in_area, np.clip(self.z - self.floor, 0.0, None), 0.0) * r * r
         ny, nx = excess.shape
         ny2, nx2 = (ny + f - 1) // f, (nx + f - 1) // f
         pad = np.zeros((ny2 * f, nx2 * f))
         pad[:ny, :nx] = excess
         blocks = pad.reshape(ny2, f, nx2, f).sum(axis=(1, 3))
-        xs, ys = self.terrain.cell_centres()
-        bx = xs[0] - r / 2 + (np.arange(nx2) + 0.5) * f * r
-        by = ys[0] - r / 2 + (np.arange(ny2) + 0.5) * f * r
-        BX, BY = np.meshgrid(bx, by)
-        keep = blocks > 1e-6
-        mx, my, mv = BX[keep], BY[keep], blocks[keep]
-        xmin, xmax, ymin, ymax = self.terrain.extent
-        pad_m = e.reach_max - 1.0
-        s = self.cfg.station_step
-        gx, gy = np.meshgrid(np.arange(xmin - pad_m, xmax + pad_m + 1e-9, s), np.arange(ymin - pad_m, ymax + pad_m + 1e-9, s))
-        st = np.stack([gx.ravel(), gy.ravel()], axis=1)
-        reach = np.zeros(len(st))
-        for a in range(0, len(st), 256):
-            d = np.hypot(st[a:a + 256, 0, None] - mx[None, :], st[a:a + 256, 1, None] - my[None, :])
-            reach[a:a + 256] = (mv[None, :] * ((d >= e.reach_min + 0.3) & (d <= e.reach_max - 0.2))).sum(axis=1)
-        return st, reach
+        k = int(math.ceil(e.reach_max / step))
+        off = np.arange(-k, k + 1) * step
+        dist = np.hypot(off[None, :], off[:, None])
+        kernel = ((dist >= e.reach_min + 0.3) & (dist <= e.reach_max - 0.2)).astype(float)
+        reach = np.clip(fftconvolve(blocks, kernel, mode="full"), 0.0, None)
+        x0, y0 = self.terrain.origin
+        gx = x0 + (np.arange(nx2 + 2 * k) - k + 0.5) * step
+        gy = y0 + (np.arange(ny2 + 2 * k) - k + 0.5) * step
+        GX, GY = np.meshgrid(gx, gy)
+        return np.stack([GX.ravel(), GY.ravel()], axis=1), reach.ravel()
 
     def relocate(self, v_min: float) -> bool:
         e = self.spec
