@@ -302,6 +302,9 @@ def run_case(
                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, pass_fds=(w,),
                 cwd=tmp, env=_child_env(len(cores)), start_new_session=True,
             )
+        except BaseException:
+            os.close(r)
+            raise
         finally:
             os.close(w)
             log.close()
