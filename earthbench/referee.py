@@ -223,8 +223,8 @@ def densify(xy: np.ndarray, spacing: float) -> np.ndarray:
         return xy
     seg = np.hypot(*np.diff(xy, axis=0).T)
     n = np.maximum(np.ceil(seg / spacing).astype(int), 1)
-    f = np.concatenate([np.arange(k) / k for k in n])
     i = np.repeat(np.arange(len(seg)), n)
+    f = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)) / n[i]
     pts = xy[i] + f[:, None] * (xy[i + 1] - xy[i])
     return np.vstack([pts, xy[-1:]])
 

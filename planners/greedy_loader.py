@@ -1,0 +1,91 @@
+"""``greedy-loader``: the floor every wheel-loader planner must beat.
+
+Per bucket, the loader digs at the point of the pile's zero contour nearest to the truck,
+perpendicular to the contour there: the bucket's cutting edge is centred on that point and
+its heading is normal to the chord between the contour points half a bucket width either side,
+into the pile. If that dig is infeasible (its charge takes nothing, or no route to it or from it
+to the truck keeps the turning radius, the clearance and the traversable step), the next
+nearest contour point is tried. Everything else — the contour, the charge model (the bucket
+takes whole cells up to its capacity with the referee's own cut), the two-arc routes to the
+truck and the return leg — is the shared machinery of :mod:`planners.loader_common`, so the
+difference to ``singh-cannon-loader`` is only the choice of dig: no dig region, no scoring.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from earthbench.plan import Plan
+from earthbench.planner import Planner
+from earthbench.world import Scenario
+from planners.loader_common import CycleBuilder, LoaderPlanConfig, pile_side
+
+
+@dataclass(frozen=True)
+class GreedyLoaderConfig(LoaderPlanConfig):
+    pass
+
+
+def nearest_candidates(line: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every point of a resampled contour line with the unit normal of the chord between the
+    points half a ``width`` before and after it (clamped at the line's ends)."""
+    k = len(line)
+    spacing = float(np.hypot(*(line[1] - line[0]))) if k > 1 else 1.0
+    half = max(1, int(round(width / 2 / max(spacing, 1e-6))))
+    i = np.arange(k)
+    a, b = line[np.maximum(i - half, 0)], line[np.minimum(i + half, k - 1)]
+    t = b - a
+    norm = np.hypot(*t.T)
+    ok = norm > 1e-9
+    t = t[ok] / norm[ok, None]
+    return line[ok], np.stack([-t[:, 1], t[:, 0]], axis=1)
+
+
+class GreedyLoader(Planner):
+    """Nearest contour point to the truck, perpendicular entry; see the module docstring."""
+
+    name = "greedy-loader"
+    version = "1.0"
+    tracks = ("wheel_loader",)
+    Config = GreedyLoaderConfig
+
+    def plan(self, scenario: Scenario) -> Plan:
+        cfg: GreedyLoaderConfig = self.config
+        b = CycleBuilder(scenario, cfg)
+        spec = b.spec
+        truck = scenario.machines.truck_pose
+        target = scenario.task.target_volume
+        stop = "target loaded"
+        while b.loaded < target - 1e-9:
+            if len(b.cycles) >= cfg.max_cycles:
+                stop = "max_cycles"
+                break
+            lines = b.contours()
+            if not lines:
+                stop = "no contour left"
+                break
+            parts = [nearest_candidates(line, spec.bucket_width) for line in lines]
+            M = np.concatenate([p[0] for p in parts])
+            n = np.concatenate([p[1] for p in parts])
+            h = n * pile_side(scenario.terrain, b.z, M, n, b.base)[:, None]
+            order = np.argsort(np.hypot(M[:, 0] - truck.x, M[:, 1] - truck.y), kind="stable")
+            capacity = min(spec.bucket_capacity, target - b.loaded + 0.02)
+            cycle, failed, tries = None, [], 0
+            for k in order:
+                if tries >= cfg.max_tries:
+                    break
+                if failed and np.min(np.hypot(*(np.array(failed) - M[k]).T)) < 0.25:
+                    continue
+                tries += 1
+                cycle = b.try_candidate(M[k], h[k], capacity)
+                if cycle is not None:
+                    cycle.candidate = {"edge_centre": [float(M[k, 0]), float(M[k, 1])]}
+                    break
+                failed.append(M[k])
+            if cycle is None:
+                stop = "no feasible candidate"
+                break
+            b.commit(cycle)
+        return b.plan({"stop": stop, "digs": [c.candidate for c in b.cycles]})

@@ -1,0 +1,513 @@
+"""Shared machinery of the wheel-loader planners: zero contour, charge model, two-arc routes.
+
+Both loader planners (``singh-cannon-loader`` and ``greedy-loader``) differ only in how they
+rank dig candidates; the rest lives here:
+
+- :func:`zero_contour` — the pile's contour at ground level (``floor + contour_level``) as
+  polylines resampled every ``spacing`` metres (contourpy on the cell-centred grid).
+- :func:`entry_for` — from the centre ``M`` of the bucket's cutting edge on the contour and a
+  heading ``h`` into the pile, the entry pose of a charge: the cutting edge starts just before
+  the first material in the bucket's corridor and the loader's pose (front axle) is
+  ``bucket_offset`` behind it.
+- :func:`simulate_charge` — the referee's own cut (:func:`earthbench.referee.charge_cut`) on a
+  copy of the grid. The penetration is chosen so that the bucket takes whole cells up to the
+  capacity and no more, so the loader never drives onto material its bucket cannot take.
+- :func:`search_routes` — car-like routes at or above the minimum turning radius: an optional
+  straight reverse, **two arcs** (a reverse arc, a cusp, a forward arc) and a final straight
+  along a target ray (into the entry pose, or up to the truck). Every combination of a grid of
+  reverse lengths/curvatures and target rays is solved in closed form at once (numpy), sorted
+  by duration, and the fastest few are checked for the traversable step, the truck clearance
+  and the map bounds with the referee's own functions.
+- :class:`CycleBuilder` — turns a ranked list of candidates into charge, reverse out, two arcs
+  to the truck, dump, return; the first candidate whose approach, charge and route to the truck
+  are all feasible wins.
+
+All moves are sampled finely enough (≤ 0.25 m and ≤ 0.08 rad per step) that the referee's
+chord, speed, yaw-rate and curvature checks see exact arcs, at ``MARGIN`` of every limit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from earthbench.motion import wrap
+from earthbench.plan import Charge, Dump, Move, Plan, Prediction
+from earthbench.referee import cell_heights, charge_cut, densify, loader_base_level, step_excess
+from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
+
+MARGIN = 0.995
+RADIUS_MARGIN = 1.002
+Sample = tuple[float, float, float, float]
+
+
+# -- contour -----------------------------------------------------------------------------------
+
+def zero_contour(terrain: Heightmap, z: np.ndarray, level: float, spacing: float, min_length: float) -> list[np.ndarray]:
+    """Polylines (k × 2) of ``z = level``, resampled every ``spacing`` m, at least ``min_length`` long."""
+    import contourpy
+
+    xs, ys = terrain.cell_centres()
+    gen = contourpy.contour_generator(xs, ys, z, line_type=contourpy.LineType.Separate)
+    out = []
+    for line in gen.lines(level):
+        line = np.asarray(line, dtype=float)
+        seg = np.hypot(*np.diff(line, axis=0).T)
+        length = float(seg.sum())
+        if len(line) < 2 or length < min_length:
+            continue
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        q = np.arange(0.0, length + 1e-9, spacing)
+        out.append(np.stack([np.interp(q, s, line[:, 0]), np.interp(q, s, line[:, 1])], axis=1))
+    return out
+
+
+def pile_side(terrain: Heightmap, z: np.ndarray, M: np.ndarray, n: np.ndarray, base: float) -> np.ndarray:
+    """±1 per candidate: the side of ``M`` along the unit normal ``n`` where the material lies."""
+    offs = np.array([0.3, 0.8, 1.5])
+    across = np.array([-0.5, 0.0, 0.5])
+    t = np.stack([-n[:, 1], n[:, 0]], axis=1)
+    side = np.zeros(len(M))
+    for sign in (1.0, -1.0):
+        pts = M[:, None, None, :] + sign * offs[None, :, None, None] * n[:, None, None, :] + across[None, None, :, None] * t[:, None, None, :]
+        h = cell_heights(terrain, z, pts.reshape(-1, 2)).reshape(len(M), -1)
+        side += sign * np.nansum(np.clip(h - base, 0.0, None), axis=1)
+    return np.where(side >= 0, 1.0, -1.0)
+
+
+def box_volumes(terrain: Heightmap, z: np.ndarray, M: np.ndarray, h: np.ndarray, width: float, behind: float, ahead: float, base: float) -> tuple[np.ndarray, np.ndarray]:
+    """Material above ``base`` in the left and right halves of the box ``width`` wide from
+    ``behind`` metres behind to ``ahead`` metres ahead of each ``M`` along ``h`` (vectorised)."""
+    d = terrain.resolution / 2
+    a = np.arange(-behind + d / 2, ahead, d)
+    c = np.arange(-width / 2 + d / 2, width / 2, d)
+    left = np.stack([-h[:, 1], h[:, 0]], axis=1)
+    pts = M[:, None, None, :] + a[None, :, None, None] * h[:, None, None, :] + c[None, None, :, None] * left[:, None, None, :]
+    hts = cell_heights(terrain, z, pts.reshape(-1, 2)).reshape(len(M), len(a), len(c))
+    vol = np.nan_to_num(np.clip(hts - base, 0.0, None)) * d * d
+    half = len(c) // 2
+    return vol[:, :, half:].sum(axis=(1, 2)), vol[:, :, :half].sum(axis=(1, 2))
+
+
+# -- charge --------------------------------------------------------------------------------------
+
+def entry_for(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, M: np.ndarray, h: np.ndarray, base: float, reach: float = 3.0, margin: float = 0.05) -> tuple[float, float, float] | None:
+    """The entry pose (front axle) whose cutting edge starts ``margin`` before the first material
+    (> 1 cm above ``base``) in the bucket's corridor from ``reach`` behind to ``reach`` ahead of M."""
+    r = terrain.resolution
+    xs, ys = terrain.cell_centres()
+    i0 = max(int((M[0] - reach - spec.bucket_width - terrain.origin[0]) / r), 0)
+    i1 = min(int((M[0] + reach + spec.bucket_width - terrain.origin[0]) / r) + 1, len(xs))
+    j0 = max(int((M[1] - reach - spec.bucket_width - terrain.origin[1]) / r), 0)
+    j1 = min(int((M[1] + reach + spec.bucket_width - terrain.origin[1]) / r) + 1, len(ys))
+    px = xs[i0:i1] - M[0]
+    py = ys[j0:j1] - M[1]
+    along = py[:, None] * h[1] + px[None, :] * h[0]
+    across = py[:, None] * h[0] - px[None, :] * h[1]
+    mat = (z[j0:j1, i0:i1] > base + 0.01) & (np.abs(across) <= spec.bucket_width / 2 + r) & (np.abs(along) <= reach)
+    if not mat.any():
+        return None
+    a0 = float(along[mat].min()) - margin
+    yaw = math.atan2(h[1], h[0])
+    off = a0 - spec.bucket_offset
+    return (float(M[0] + off * h[0]), float(M[1] + off * h[1]), yaw)
+
+
+@dataclass(frozen=True)
+class ChargeResult:
+    penetration: float
+    volume: float
+    z: np.ndarray
+    end: tuple[float, float, float]
+
+
+def simulate_charge(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, entry: tuple[float, float, float], capacity: float, max_penetration: float, level: float, base: float) -> ChargeResult | None:
+    """The longest penetration (≤ ``max_penetration``) whose bucket path holds ≤ ``capacity`` in
+    whole cells, cut with the referee's :func:`charge_cut`; None when it takes (almost) nothing
+    or the axle's path would not be traversable."""
+    x, y, yaw = entry
+    ux, uy = math.cos(yaw), math.sin(yaw)
+    ex, ey = x + spec.bucket_offset * ux, y + spec.bucket_offset * uy  # as charge_cut computes it
+    r = terrain.resolution
+    x0, y0 = terrain.origin
+    ny, nx = z.shape
+    half = spec.bucket_width / 2
+    xs_ = (ex, ex + ux * max_penetration)
+    ys_ = (ey, ey + uy * max_penetration)
+    pad = half + r
+    i0 = max(int(math.floor((min(xs_) - pad - x0) / r)), 0)
+    i1 = min(int(math.ceil((max(xs_) + pad - x0) / r)), nx)
+    j0 = max(int(math.floor((min(ys_) - pad - y0) / r)), 0)
+    j1 = min(int(math.ceil((max(ys_) + pad - y0) / r)), ny)
+    if i0 >= i1 or j0 >= j1:
+        return None
+    px = x0 + (np.arange(i0, i1) + 0.5) * r - ex
+    py = y0 + (np.arange(j0, j1) + 0.5) * r - ey
+    along = py[:, None] * uy + px[None, :] * ux
+    across = py[:, None] * ux - px[None, :] * uy
+    inside = (along >= 0) & (along <= max_penetration) & (np.abs(across) <= half)
+    a = along[inside]
+    ex_v = np.maximum(z[j0:j1, i0:i1][inside] - level, 0.0) * r * r
+    if a.size == 0 or ex_v.sum() <= 1e-9:
+        return None
+    order = np.argsort(a, kind="stable")
+    a, ex_v = a[order], ex_v[order]
+    cum = np.cumsum(ex_v)
+    last = np.nonzero(ex_v > 0)[0][-1]
+    if cum[-1] <= capacity:
+        k = last  # everything fits: stop just past the last cell with material
+    else:
+        k = int(np.searchsorted(cum, capacity, side="right")) - 1
+        if k < 0:
+            return None
+        while k >= 0 and k + 1 < len(a) and a[k + 1] == a[k]:  # never split a row of equal along
+            k -= 1
+        if k < 0:
+            return None
+    pen = float((a[k] + a[k + 1]) / 2) if k + 1 < len(a) else float(max_penetration)
+    pen = min(pen, max_penetration)
+    if pen < 0.05:
+        return None
+    zz = np.array(z)
+    vol = charge_cut(terrain, zz, spec, entry, pen, level, capacity)
+    if vol < 0.02 * spec.bucket_capacity:
+        return None
+    end = (x + pen * ux, y + pen * uy, yaw)
+    if step_excess(terrain, zz, np.array([[x, y], [end[0], end[1]]]), base, spec.max_step)[0] > -1e-3:
+        return None
+    return ChargeResult(pen, vol, zz, end)
+
+
+# -- routes ---------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class RouteOptions:
+    """The grid :func:`search_routes` solves over (lengths in m, curvature factors of 1/R_min)."""
+
+    reverse_straights: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0, 3.0)
+    reverse_curvatures: tuple[float, ...] = (1.0, 0.7, 0.45, 0.25)
+    reverse_lengths: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 4.5, 6.0, 8.0)
+    max_checked: int = 25
+
+
+def _arc(x: float, y: float, yaw: float, kappa: float, length: float, n: int) -> np.ndarray:
+    """n+1 poses (x, y, yaw) along an arc of signed ``length`` (negative: reverse)."""
+    s = np.linspace(0.0, length, n + 1)
+    if abs(kappa) < 1e-12:
+        return np.stack([x + s * math.cos(yaw), y + s * math.sin(yaw), np.full_like(s, yaw)], axis=1)
+    th = yaw + kappa * s
+    return np.stack([x + (np.sin(th) - math.sin(yaw)) / kappa, y - (np.cos(th) - math.cos(yaw)) / kappa, th], axis=1)
+
+
+def _speed(spec: LoaderSpec, kappa: float) -> float:
+    v = spec.travel_speed
+    if abs(kappa) > 1e-12:
+        v = min(v, spec.yaw_rate / abs(kappa))
+    return v * MARGIN
+
+
+@dataclass
+class Route:
+    """Samples of a move as arrays: times ``t`` (k) and poses ``p`` (k × 3: x, y, yaw)."""
+
+    t: np.ndarray
+    p: np.ndarray
+    length: float
+
+    @property
+    def samples(self) -> list[Sample]:
+        return [(float(t), float(x), float(y), float(w)) for t, (x, y, w) in zip(self.t, self.p)]
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def end(self) -> Pose:
+        x, y, yaw = self.p[-1]
+        return Pose(float(x), float(y), float(yaw))
+
+    def shifted(self, dt: float) -> Route:
+        return Route(self.t + dt, self.p, self.length)
+
+
+def _build(start: Pose, t0: float, spec: LoaderSpec, segs: list[tuple[float, float]], end_xy: tuple[float, float], end_yaw: float) -> Route:
+    """Samples for segments ``(kappa, signed length)`` from ``start``; the last sample is pinned to
+    ``end_xy``/``end_yaw`` (they agree with the arcs up to rounding)."""
+    ts, ps = [np.array([t0])], [np.array([[start.x, start.y, start.yaw]])]
+    x, y, yaw, t, total = start.x, start.y, start.yaw, t0, 0.0
+    for kappa, length in segs:
+        if abs(length) < 1e-9:
+            continue
+        n = max(1, int(math.ceil(abs(length) / 0.25)), int(math.ceil(abs(kappa * length) / 0.08)))
+        poses = _arc(x, y, yaw, kappa, length, n)[1:]
+        dt = abs(length) / n / _speed(spec, kappa)
+        ts.append(t + dt * np.arange(1, n + 1))
+        ps.append(poses)
+        t += n * dt
+        x, y, yaw = (float(v) for v in poses[-1])
+        total += abs(length)
+    T, P = np.concatenate(ts), np.concatenate(ps)
+    if len(T) > 1:
+        turns = round((P[-1, 2] - end_yaw) / (2 * math.pi))
+        P[-1] = (end_xy[0], end_xy[1], end_yaw + 2 * math.pi * turns)
+    return Route(T, P, total)
+
+
+def _reverse_part(start: Pose, opts: RouteOptions, rmin: float, arcs: int) -> tuple[np.ndarray, ...]:
+    """End poses of every reverse part on the grid: straight ``S``, then ``arcs`` reverse arcs
+    (curvature ``K``, length ``L`` each). Returns S, K (n × arcs), L (n × arcs), qx, qy, thq."""
+    kap = np.array([s * c / rmin for c in opts.reverse_curvatures for s in (1.0, -1.0)])
+    lens = np.array(opts.reverse_lengths)
+    grids = np.meshgrid(np.array(opts.reverse_straights), *([kap, lens] * arcs), indexing="ij")
+    flat = [g.ravel() for g in grids]
+    S, K, L = flat[0], np.stack(flat[1::2], axis=1), np.stack(flat[2::2], axis=1)
+    keep = np.all((L > 0) | (K == kap[0]), axis=1)  # a zero-length arc needs one curvature only
+    if arcs > 1:
+        keep &= (L[:, 0] > 0) | (L[:, 1] == 0)
+    S, K, L = S[keep], K[keep], L[keep]
+    x = start.x - S * math.cos(start.yaw)
+    y = start.y - S * math.sin(start.yaw)
+    th = np.full(len(S), start.yaw)
+    for a in range(arcs):
+        th1 = th - K[:, a] * L[:, a]
+        x = x + (np.sin(th1) - np.sin(th)) / K[:, a]
+        y = y - (np.cos(th1) - np.cos(th)) / K[:, a]
+        th = th1
+    return S, K, L, x, y, th
+
+
+def search_routes(
+    scenario: Scenario,
+    z: np.ndarray,
+    start: Pose,
+    t0: float,
+    rays: np.ndarray,
+    lam_lo: float,
+    lam_hi: float,
+    stop_hi: float,
+    lam_final: float,
+    opts: RouteOptions,
+    base: float,
+    reverse_arcs: int = 1,
+) -> Route | None:
+    """The fastest feasible route from ``start`` to a target ray.
+
+    ``rays`` is (m × 4): base point ``(bx, by)`` and unit direction ``(ux, uy)``; the loader ends
+    at ``B + λ u`` heading ``−u``. The forward arc meets the ray at ``λ ∈ [lam_lo, lam_hi]``; the
+    loader stops there if ``λ ≤ stop_hi``, else drives straight on to ``λ = lam_final``.
+    Structure: reverse straight, ``reverse_arcs`` reverse arcs, (cusp), forward arc, forward
+    straight — with one reverse arc, the two arcs of Singh and Cannon's constraint.
+    """
+    spec: LoaderSpec = scenario.machines.loader
+    rmin = spec.min_turning_radius * RADIUS_MARGIN
+    S0, K0, L0, qx0, qy0, thq0 = _reverse_part(start, opts, rmin, reverse_arcs)
+    ci, ri = np.meshgrid(np.arange(len(S0)), np.arange(len(rays)), indexing="ij")
+    ci, ri = ci.ravel(), ri.ravel()
+    S, K, L, qx, qy, thq = S0[ci], K0[ci], L0[ci], qx0[ci], qy0[ci], thq0[ci]
+    B, U = rays[ri, :2], rays[ri, 2:]
+    th_e = np.arctan2(-U[:, 1], -U[:, 0])
+    delta = (th_e - thq + math.pi) % (2 * math.pi) - math.pi
+    e = np.stack([np.cos(thq + delta / 2), np.sin(thq + delta / 2)], axis=1)
+    dx, dy = B[:, 0] - qx, B[:, 1] - qy
+    det = -e[:, 0] * U[:, 1] + U[:, 0] * e[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = (-dx * U[:, 1] + U[:, 0] * dy) / det
+        lam = (e[:, 0] * dy - e[:, 1] * dx) / det
+        sin_half = np.sin(np.abs(delta) / 2)
+        radius = np.where(sin_half > 1e-9, rho / (2 * sin_half), np.inf)
+        arc_len = np.where(sin_half > 1e-9, radius * np.abs(delta), rho)
+    ok = (np.abs(det) > 1e-9) & (rho > 1e-6) & (lam >= lam_lo) & (lam <= lam_hi) & (radius >= rmin)
+    if not ok.any():
+        return None
+    idx = np.nonzero(ok)[0]
+    final = np.where(lam[idx] <= stop_hi, lam[idx], lam_final)
+    kf = np.where(np.isfinite(radius[idx]), 1.0 / radius[idx], 0.0)
+    v = spec.travel_speed * MARGIN
+    v_rev = np.minimum(spec.travel_speed, spec.yaw_rate / np.maximum(np.abs(K[idx]), 1e-12)) * MARGIN
+    v_fwd = np.minimum(spec.travel_speed, spec.yaw_rate / np.maximum(kf, 1e-12)) * MARGIN
+    dur = S[idx] / v + (L[idx] / v_rev).sum(axis=1) + arc_len[idx] / v_fwd + (lam[idx] - final) / v
+    order = idx[np.argsort(dur, kind="stable")]
+    for k in order[: opts.max_checked]:
+        f = lam[k] if lam[k] <= stop_hi else lam_final
+        end_xy = (B[k, 0] + f * U[k, 0], B[k, 1] + f * U[k, 1])
+        kf_k = (1.0 / radius[k] if np.isfinite(radius[k]) else 0.0) * math.copysign(1.0, delta[k])
+        segs = [(0.0, -S[k])] + [(K[k, a], -L[k, a]) for a in range(reverse_arcs)] + [(kf_k, arc_len[k]), (0.0, lam[k] - f)]
+        route = _build(start, t0, spec, segs, end_xy, float(th_e[k]))
+        if _clear(scenario, z, route, base):
+            return route
+    return None
+
+
+def _clear(scenario: Scenario, z: np.ndarray, route: Route, base: float) -> bool:
+    """On the map (0.5 m margin), clear of the truck (clearance + 0.1 m), traversable step."""
+    spec: LoaderSpec = scenario.machines.loader
+    truck = scenario.machines.truck_pose
+    xmin, xmax, ymin, ymax = scenario.terrain.extent
+    xy = route.p[:, :2]
+    if np.any(xy[:, 0] < xmin + 0.5) or np.any(xy[:, 0] > xmax - 0.5) or np.any(xy[:, 1] < ymin + 0.5) or np.any(xy[:, 1] > ymax - 0.5):
+        return False
+    if np.min(np.hypot(xy[:, 0] - truck.x, xy[:, 1] - truck.y)) < spec.clearance + 0.1:
+        return False
+    return step_excess(scenario.terrain, z, xy, base, spec.max_step)[0] <= -1e-3
+
+
+def search_dubins(
+    scenario: Scenario,
+    z: np.ndarray,
+    start: Pose,
+    t0: float,
+    goal: tuple[float, float, float],
+    opts: RouteOptions,
+    base: float,
+    lead_ins: tuple[float, ...] = (0.5, 2.0),
+) -> Route | None:
+    """The fastest feasible route from ``start`` to the pose ``goal``: a reverse part (straight and
+    one arc, on the grid of ``opts``), a cusp, then a forward Dubins path (arc, straight, arc at the
+    minimum turning radius: LSL, RSR, LSR, RSL) to ``goal`` less a straight lead-in, and the
+    lead-in. Used for the return leg to the pile, where two arcs are often too few."""
+    spec: LoaderSpec = scenario.machines.loader
+    R = spec.min_turning_radius * RADIUS_MARGIN
+    S0, K0, L0, qx0, qy0, thq0 = _reverse_part(start, opts, R, 1)
+    gx, gy, gth = goal
+    lead = np.array(lead_ins)
+    ci, li, ti = np.meshgrid(np.arange(len(S0)), np.arange(len(lead)), np.arange(4), indexing="ij")
+    ci, li, ti = ci.ravel(), li.ravel(), ti.ravel()
+    qx, qy, th = qx0[ci], qy0[ci], thq0[ci]
+    a = lead[li]
+    px, py = gx - a * math.cos(gth), gy - a * math.sin(gth)
+    s1 = np.where((ti == 0) | (ti == 2), 1.0, -1.0)  # first arc: +1 left, -1 right
+    s2 = np.where((ti == 0) | (ti == 3), 1.0, -1.0)  # second arc
+    c1x, c1y = qx - s1 * R * np.sin(th), qy + s1 * R * np.cos(th)
+    c2x, c2y = px - s2 * R * math.sin(gth), py + s2 * R * math.cos(gth)
+    dx, dy = c2x - c1x, c2y - c1y
+    d = np.hypot(dx, dy)
+    ang = np.arctan2(dy, dx)
+    same = s1 == s2
+    with np.errstate(invalid="ignore"):
+        ell = np.where(same, d, np.sqrt(np.maximum(d * d - 4 * R * R, 0.0)))
+        phi = np.where(same, ang, ang + s1 * np.arctan2(2 * R, ell))
+    ok = same | (d >= 2 * R)
+    two_pi = 2 * math.pi
+    a1 = np.mod(s1 * (phi - th), two_pi)
+    a2 = np.mod(s2 * (gth - phi), two_pi)
+    v = spec.travel_speed * MARGIN
+    v_arc = min(spec.travel_speed, spec.yaw_rate * R) * MARGIN
+    v_rev = np.minimum(spec.travel_speed, spec.yaw_rate / np.maximum(np.abs(K0[ci, 0]), 1e-12)) * MARGIN
+    dur = S0[ci] / v + L0[ci, 0] / v_rev + R * (a1 + a2) / v_arc + (ell + a) / v
+    idx = np.nonzero(ok)[0]
+    order = idx[np.argsort(dur[idx], kind="stable")]
+    for k in order[: opts.max_checked]:
+        segs = [(0.0, -S0[ci[k]]), (K0[ci[k], 0], -L0[ci[k], 0]), (s1[k] / R, R * a1[k]), (0.0, ell[k]), (s2[k] / R, R * a2[k]), (0.0, a[k])]
+        route = _build(start, t0, spec, segs, (gx, gy), gth)
+        if _clear(scenario, z, route, base):
+            return route
+    return None
+
+
+def dump_rays(scenario: Scenario, n: int = 48) -> tuple[np.ndarray, float, float, float]:
+    """Rays from the truck's centre in ``n`` directions, and the (lo, hi, target) distances of the
+    loader's pose from the truck at which the bucket edge reaches the loading circle."""
+    spec: LoaderSpec = scenario.machines.loader
+    t = scenario.machines.truck_pose
+    phi = np.arange(n) * 2 * math.pi / n
+    rays = np.stack([np.full(n, t.x), np.full(n, t.y), np.cos(phi), np.sin(phi)], axis=1)
+    hi = spec.bucket_offset + scenario.machines.truck.loading_radius + spec.dump_reach - 0.05
+    lo = spec.clearance + 0.15
+    if hi < lo:
+        raise ValueError(f"the loader cannot dump here: dump distance {hi:.2f} m < clearance {lo:.2f} m")
+    return rays, lo, hi, (lo + hi) / 2
+
+
+# -- cycles ----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class LoaderPlanConfig:
+    """Settings the loader planners share."""
+
+    contour_level: float = 0.02
+    contour_spacing: float = 0.1
+    max_penetration: float = 4.0
+    max_tries: int = 40
+    max_cycles: int = 60
+
+
+@dataclass
+class Cycle:
+    approach: Route
+    charge: Charge
+    charge_result: ChargeResult
+    to_truck: Route
+    dump: Dump
+    candidate: dict = field(default_factory=dict)
+
+
+class CycleBuilder:
+    """State of one loader plan: terrain copy, time, pose, actions; tries candidates in order."""
+
+    def __init__(self, scenario: Scenario, cfg: LoaderPlanConfig, opts: RouteOptions | None = None):
+        self.sc, self.cfg = scenario, cfg
+        self.opts = opts or RouteOptions()
+        self.spec: LoaderSpec = scenario.machines.loader
+        self.base = loader_base_level(scenario)
+        self.level = scenario.site.floor if scenario.site.floor is not None else self.base
+        self.z = np.array(scenario.terrain.z, dtype=float)
+        self.t = 0.0
+        self.pose = scenario.machines.loader_pose
+        self.actions: list = []
+        self.loaded = 0.0
+        self.rays, self.d_lo, self.d_hi, self.d_target = dump_rays(scenario)
+        self.cycles: list[Cycle] = []
+        self.tried = 0
+
+    def contours(self) -> list[np.ndarray]:
+        return zero_contour(self.sc.terrain, self.z, self.level + self.cfg.contour_level, self.cfg.contour_spacing, self.spec.bucket_width)
+
+    def try_candidate(self, M: np.ndarray, h: np.ndarray, capacity: float) -> Cycle | None:
+        """Approach, charge and route to the truck for the bucket edge centred at ``M`` heading
+        ``h`` into the pile; None if any part is infeasible."""
+        self.tried += 1
+        entry = entry_for(self.sc.terrain, self.z, self.spec, M, h, self.base)
+        if entry is None:
+            return None
+        ex, ey, eyaw = entry
+        ray = np.array([[ex, ey, -math.cos(eyaw), -math.sin(eyaw)]])
+        # cheapest checks first: the charge, then the two arcs to the truck, then the approach
+        ch = simulate_charge(self.sc.terrain, self.z, self.spec, entry, capacity, self.cfg.max_penetration, self.level, self.base)
+        if ch is None:
+            return None
+        dur = max(self.spec.min_charge_time, ch.penetration / (self.spec.penetration_speed * MARGIN)) + 1e-6
+        to_truck = search_routes(self.sc, ch.z, Pose(*ch.end), 0.0, self.rays, self.d_lo, 14.0, self.d_hi, self.d_target, self.opts, self.base)
+        if to_truck is None:
+            return None
+        ray = np.array([[ex, ey, -math.cos(eyaw), -math.sin(eyaw)]])
+        approach = search_routes(self.sc, self.z, self.pose, self.t, ray, 0.0, 12.0, 0.0, 0.0, self.opts, self.base)
+        if approach is None:
+            approach = search_dubins(self.sc, self.z, self.pose, self.t, entry, self.opts, self.base)
+        if approach is None:
+            return None
+        t1 = float(approach.t[-1])
+        entry = (ex, ey, float(approach.p[-1, 2]))
+        charge = Charge("loader", t1, t1 + dur, entry, ch.penetration)
+        to_truck = to_truck.shifted(t1 + dur)
+        t2 = float(to_truck.t[-1])
+        dump = Dump("loader", t2, t2 + self.spec.min_dump_time + 1e-6)
+        return Cycle(approach, charge, ch, to_truck, dump)
+
+    def commit(self, c: Cycle) -> None:
+        if len(c.approach.t) > 1:
+            self.actions.append(Move("loader", tuple(c.approach.samples)))
+        self.actions.append(c.charge)
+        self.actions.append(Move("loader", tuple(c.to_truck.samples)))
+        self.actions.append(c.dump)
+        self.z = c.charge_result.z
+        self.loaded += c.charge_result.volume
+        self.t = c.dump.t_end
+        self.pose = c.to_truck.end
+        self.cycles.append(c)
+
+    def plan(self, info: dict) -> Plan:
+        info = dict(info, cycles=len(self.cycles), candidates_tried=self.tried)
+        return Plan(tuple(self.actions), Prediction(volume=self.loaded, makespan=self.t), info)
