@@ -326,6 +326,7 @@ class _Outcome:
     cancelled: bool = False
     status: int | None = None
     maxrss_mb: float | None = None
+    peak_vms_mb: float = 0.0
     elapsed: float | None = None
     cpu: float | None = None
     t_spawn: float = 0.0
@@ -355,6 +356,11 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
             if now >= deadline:
                 o.timed_out = o.done is None
                 break
+            if ps is not None:  # address space, the quantity RLIMIT_AS caps, sampled as we wait
+                try:
+                    o.peak_vms_mb = max(o.peak_vms_mb, ps.memory_info().vms / 2**20)
+                except psutil.Error:
+                    pass
             if not eof:
                 for _ in sel.select(timeout=min(deadline - now, 0.25)):
                     try:
@@ -418,6 +424,15 @@ def _supervise(proc: subprocess.Popen, r: int, t_spawn: float, wall_s: float, st
     return o
 
 
+_MEMORY_WORDS = ("std::bad_alloc", "MemoryError", "Cannot allocate memory", "out of memory", "Unable to allocate")
+
+
+def _mentions_memory(text: str) -> bool:
+    """An allocation failure inside a C/C++ extension shows up only as text (or an abort)."""
+    tail = text[-2000:]
+    return any(w in tail for w in _MEMORY_WORDS)
+
+
 def _message(line: bytes) -> dict[str, Any]:
     try:
         msg = json.loads(line)
@@ -445,13 +460,16 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
             return CaseResult(reason="timeout", solve_time_s=o.elapsed, solve_cpu_s=o.cpu, error=msg, **common)
         st = o.status
         how = f"killed by {signal.Signals(-st).name}" if st is not None and st < 0 else f"exited with status {st}"
-        if st is not None and st < 0 and o.maxrss_mb and o.maxrss_mb >= MEMORY_KILL_FRACTION * budget.memory_mb:
-            return CaseResult(reason="memory", error=f"{how} at {o.maxrss_mb:.0f} MB resident (budget {budget.memory_mb} MB)", **common)
+        near = MEMORY_KILL_FRACTION * budget.memory_mb
+        if (o.maxrss_mb or 0) >= near or o.peak_vms_mb >= near or _mentions_memory(log_tail):
+            return CaseResult(reason="memory", error=f"the case process {how} near its memory budget of {budget.memory_mb} MB "
+                              f"(peak {o.maxrss_mb or 0:.0f} MB resident, {o.peak_vms_mb:.0f} MB address space seen)", **common)
         return CaseResult(reason="crashed", error=f"the case process {how} without a result", **common)
     d = o.done
     times = dict(solve_time_s=d.get("solve_time_s"), solve_cpu_s=d.get("solve_cpu_s"))
     if d["outcome"] in ("error", "memory"):
-        return CaseResult(reason=d["outcome"], error=d.get("error", ""), **times, **common)
+        reason = "memory" if d["outcome"] == "memory" or _mentions_memory(d.get("error", "")) else "error"
+        return CaseResult(reason=reason, error=d.get("error", ""), **times, **common)
     plan_json = d["plan"]
     try:
         verdict, metrics = score(case.scenario, plan_json, case.threshold)

@@ -385,7 +385,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
     ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
     ``volume_prediction_error``, ``makespan_prediction_error`` and any metric a plugin adds —
-    then ``violation_rules`` (comma-separated rules broken), ``error``, ``exit_status``,
+    then ``violation_rules`` (comma-separated rules broken), ``error``, ``log_tail`` (the end
+    of the case's stdout/stderr), ``exit_status``,
     ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
     ``project_commit``, ``plugin_commit``. Metrics are NaN for runs without a plan (timeout,
@@ -400,7 +401,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
-                      r.violations, r.error, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
+                      r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
                       e.project_commit, e.plugin_commit
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
@@ -413,7 +414,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
-    tail = ["violation_rules", "error", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
+    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
             "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit"]
     metric_names: list[str] = []
     records = []

@@ -52,18 +52,19 @@ def run_all(suite, planners, db, **kw):
 
 def test_every_fault_gets_its_reason_and_the_rest_of_the_suite_runs(tmp_path):
     suite = tiny_suite(wall_s=1.5, memory_mb=1024)
-    planners = ["t-raise", "t-nonplan", "t-invalid", "t-sleep", "t-memory", "t-kill", "t-exit", "t-fast"]
+    planners = ["t-raise", "t-nonplan", "t-invalid", "t-sleep", "t-memory", "t-kill", "t-exit", "t-fast", "t-abort-oom"]
     report, df = run_all(suite, planners, tmp_path / "r.db")
     assert report.stored == len(planners) and not report.interrupted
     got = dict(zip(df.planner, df.reason))
     assert got == {
         "t-raise": "error", "t-nonplan": "error", "t-invalid": "invalid", "t-sleep": "timeout",
-        "t-memory": "memory", "t-kill": "crashed", "t-exit": "error", "t-fast": "ok",
+        "t-memory": "memory", "t-kill": "crashed", "t-exit": "error", "t-fast": "ok", "t-abort-oom": "memory",
     }
     row = df.set_index("planner")
     assert "ValueError: planner bug: boom" in row.loc["t-raise", "error"]
     assert "not an earthbench.Plan" in row.loc["t-nonplan", "error"]
     assert "SIGKILL" in row.loc["t-kill", "error"]
+    assert "SIGABRT" in row.loc["t-abort-oom", "error"] and "bad_alloc" in row.loc["t-abort-oom", "log_tail"]
     assert "SystemExit: 3" in row.loc["t-exit", "error"]
     assert {"cut_depth", "duration"} <= set(row.loc["t-invalid", "violation_rules"].split(","))
     assert not row.loc["t-invalid", "success"] and not row.loc["t-fast", "success"]

@@ -119,3 +119,14 @@ class Nap(Planner):
     def plan(self, scenario):
         time.sleep(float(os.environ.get("EARTHBENCH_TEST_NAP", "0.3")))
         return Plan()
+
+
+class NativeOOM(Planner):
+    """Like a C++ solver whose allocation fails: prints bad_alloc and aborts."""
+
+    name = "t-abort-oom"
+
+    def plan(self, scenario):
+        sys.stderr.write("terminate called after throwing an instance of 'std::bad_alloc'\n  what():  std::bad_alloc\n")
+        sys.stderr.flush()
+        os.abort()
