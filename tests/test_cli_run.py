@@ -154,3 +154,12 @@ def test_smoke_runs_from_the_command_line(tmp_path, capsys):
     assert "greedy" in out and "4/4" in out
     df = load_runs(db, suite="smoke")
     assert len(df) == 4 and df.success.all()
+
+
+def test_suites_command(capsys):
+    assert main(["suites"]) == 0
+    out = capsys.readouterr().out
+    assert "smoke" in out and "quick" in out
+    assert main(["suites", "smoke"]) == 0
+    out = capsys.readouterr().out
+    assert "smoke/rbf14/s0/v0.56" in out and "digest" in out

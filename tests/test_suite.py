@@ -101,3 +101,14 @@ def test_seed_ranges():
     assert parse_seed_range("7") == (7,)
     with pytest.raises(SuiteError):
         parse_seed_range("x")
+
+
+def test_quick_runs_every_builtin_planner_of_its_track():
+    from earthbench.registry import PLANNERS
+    from earthbench.runner import build_cases
+
+    quick = load_suite("quick")
+    cases, _ = build_cases(quick)
+    expected = {n for n, c in PLANNERS.items() if "backhoe" in c.tracks and c.__module__.startswith("planners.")}
+    assert expected <= {c.planner.name for c in cases}
+    assert len(cases) == len(quick.scenarios) * len({c.planner.name for c in cases})
