@@ -227,6 +227,7 @@ class RadialLine:
             order = np.argsort(-s[jj, ii], kind="stable")
             self.s = s[jj, ii][order]
             self.jj, self.ii = jj[order] + j0, ii[order] + i0
+        self.flat = self.jj * nx + self.ii
         # workspace samples: the bucket's cross-section (3 points) every SAMPLE metres
         self.s_grid = np.arange(lo, hi + 1e-9, self.SAMPLE)
         if self.s_grid.size == 0:
@@ -284,37 +285,48 @@ def evaluate(
     drag_max = np.where(ok, drag_max, 0.0)
 
     # each candidate's window of strip cells, [a, b) in drag order (s descending), gathered into
-    # a (K, W) matrix: the cells with 0 <= d - s <= drag_max, the referee's "along" coordinate
+    # a (K, W) matrix: the cells with 0 <= d - s <= drag_max, the referee's "along" coordinate.
+    # Only feasible rows are simulated.
+    n = d.size
+    vol = np.zeros(n)
+    energy = np.zeros(n)
+    stop = drag_max.copy()
+    has_full = np.zeros(n, dtype=bool)
+    rows = np.nonzero(ok)[0]
     s = line.s
-    a = np.searchsorted(-s, -d, side="left")
-    b = np.where(ok, np.searchsorted(-s, -(d - drag_max), side="right"), a)
-    width = max(int((b - a).max()) if d.size else 0, 1)
-    idx = a[:, None] + np.arange(width)[None, :]
-    win = idx < b[:, None]
-    idx = np.minimum(idx, max(s.size - 1, 0))
-    if s.size:
-        zc = z[line.jj[idx], line.ii[idx]]
-        ds = d[:, None] - s[idx]
-    else:
-        zc = np.zeros(idx.shape)
-        ds = np.zeros(idx.shape)
-        win[:] = False
-    t = np.where(win, np.maximum(zc - level[:, None], 0.0), 0.0)
-    e = t * (r * r)
-    cum = np.cumsum(e, axis=1)
-    total = cum[:, -1]
-    vol = np.minimum(total, capacity)
-    full = cum >= capacity
-    has_full = full.any(axis=1)
-    first = np.argmax(full, axis=1)
-    stop = np.where(has_full, ds[np.arange(d.size), first], drag_max)
+    if rows.size and s.size:
+        dk, lk = d[rows], level[rows]
+        a = np.searchsorted(-s, -dk, side="left")
+        b = np.searchsorted(-s, -(dk - drag_max[rows]), side="right")
+        width = max(int((b - a).max()), 1)
+        idx = a[:, None] + np.arange(width)[None, :]
+        win = idx < b[:, None]
+        np.minimum(idx, s.size - 1, out=idx)
+        t = np.take(z.ravel(), line.flat[idx])  # cell heights
+        t -= lk[:, None]
+        np.maximum(t, 0.0, out=t)
+        t *= win  # layer thickness above the cut level (m)
+        cap_t = capacity / (r * r)  # the capacity in metres of thickness summed over cells
+        cum = np.cumsum(t, axis=1)
+        full = cum >= cap_t
+        hf = full[:, -1].copy()
+        first = np.argmax(full, axis=1)
+        last = np.where(hf, first, width - 1)
+        ar = np.arange(rows.size)
+        vol[rows] = np.minimum(cum[:, -1], cap_t) * (r * r)
+        stop[rows] = np.where(hf, dk - s[idx[ar, last]], drag_max[rows])
+        has_full[rows] = hf
+        # cutting energy: force per width × cell area, the last cell by the fraction that fits
+        n_g, n_c, horiz = model.soil.factors_cached(alpha[rows])
+        g = t * (model.soil.unit_weight * n_g)[:, None]
+        g += (model.soil.cohesion * n_c)[:, None]
+        g *= t
+        cg = np.cumsum(g, axis=1)
+        t_last, g_last = t[ar, last], g[ar, last]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(hf & (t_last > 0), (cap_t - (cum[ar, last] - t_last)) / t_last, 1.0)
+        energy[rows] = (cg[ar, last] - g_last * (1.0 - np.clip(frac, 0.0, 1.0))) * horiz * (r * r)
     drag = np.where(has_full, np.minimum(drag_max, stop + 0.25 * r), drag_max)
-    # fraction of each cell's excess that enters the bucket
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(e > 0, np.clip((capacity - (cum - e)) / e, 0.0, 1.0), 0.0)
-    n_g, n_c, horiz = model.soil.factors_cached(alpha)
-    force = (model.soil.unit_weight * t * n_g[:, None] + model.soil.cohesion * n_c[:, None]) * t * horiz[:, None]
-    energy = (force * frac).sum(axis=1) * (r * r)
     swept = np.where(has_full, stop, drag_max)
     stroke = h / model.penetration_speed + np.maximum(swept / model.drag_speed, energy / model.drag_power) + model.curl_time
     stroke = np.maximum(spec.min_stroke_time, stroke)
