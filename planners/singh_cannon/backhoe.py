@@ -83,10 +83,13 @@ class SinghCannonBackhoeConfig:
     """ζ(time) falls from 1 at the minimum stroke time to 0 this many seconds later."""
     station_step: float = 0.5
     """Spacing (m) of the candidate stations when the excavator must move."""
-    stations_tried: int = 15
+    stations_tried: int = 10
     """Best-scored stations checked with the refined planner before relaxing V_min."""
     travel_value: float = 0.035
     """m³ of reachable material worth one second of travel when choosing a station."""
+    depleted_weight: float = 0.25
+    """Weight, in station scores, of material in reach of a station already exhausted: the
+    refined planner found no full bucket in it from there, so it counts for less elsewhere."""
     truck_distance: float = 5.0
     """Preferred centre distance (m) from the excavator to the truck when the truck must move."""
     max_digs: int = 1000
@@ -192,6 +195,7 @@ class Session:
         self.v_min = cfg.fill_min * self.cap
         self.events: list[dict] = []
         self._lines: dict[tuple[float, float, float], RadialLine] = {}
+        self.depleted = np.zeros(self.z.shape, dtype=bool)
 
     # -- coarse planner ---------------------------------------------------------------------------
     def coarse_plan(self, base: Pose, v_min: float) -> list[Region]:
@@ -401,6 +405,7 @@ class Session:
         f = max(1, int(round(self.cfg.station_step / r)))
         step = f * r
         excess = np.where(self.in_area, np.clip(self.z - self.floor, 0.0, None), 0.0) * r * r
+        excess = np.where(self.depleted, self.cfg.depleted_weight * excess, excess)
         ny, nx = excess.shape
         ny2, nx2 = (ny + f - 1) // f, (nx + f - 1) // f
         pad = np.zeros((ny2 * f, nx2 * f))
@@ -486,6 +491,8 @@ class Session:
             self.ptr, ch = self.best_dig(self.regions, self.ptr, self.base, self.turn, self.v_min)
             if ch is None:
                 self.events.append({"event": "exhausted", "t": self.t, "station": self.station, "v_min": self.v_min})
+                dist = np.hypot(self.X - self.base.x, self.Y - self.base.y)
+                self.depleted |= (dist >= self.spec.reach_min) & (dist <= self.spec.reach_max)
                 if self.relocate(self.v_min):
                     continue
                 level += 1
