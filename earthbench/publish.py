@@ -291,20 +291,45 @@ def sample_runs(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(picks)
 
 
-def terrain_figure(store: Store, run: pd.Series, cache: dict[str, Any]):
+def terrain_figure(scenario_json: str, plan_json: str, title: str):
+    """Judge a stored plan again on its scenario and draw :func:`earthbench.figures.terrain_before_after`."""
     from .figures import terrain_before_after
     from .plan import Plan
     from .referee import judge
+    from .world import Scenario
 
-    digest = run["scenario_digest"]
-    if digest not in cache:
-        cache[digest] = store.scenario(digest)
-    scenario = cache[digest]
-    plan = Plan.from_json(store.plan_json(int(run["id"])))
+    scenario = Scenario.from_json(scenario_json)
+    plan = Plan.from_json(plan_json)
     verdict = judge(scenario, plan)
     fig = terrain_before_after(scenario, plan, verdict)
-    fig.suptitle(mpl_text(f"{run['solver']} on {run['scenario_id']}"), fontsize=10)
+    fig.suptitle(mpl_text(title), fontsize=10)
     return fig
+
+
+#: Columns the run figures read (the frame shipped to a figure worker).
+FIGURE_COLUMNS = ["scenario_digest", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
+                  "solve_time_s", "cpu_model"]
+
+
+def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
+    """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
+    kind, base, args = job
+    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "terrain": terrain_figure}[kind]
+    return _save(maker(*args), Path(base))[2]
+
+
+def render_all(jobs: list[tuple[str, str, tuple[Any, ...]]], workers: int | None = None) -> list[bytes]:
+    """Render figure jobs, in parallel worker processes when there are several cores (fork on Linux)."""
+    import multiprocessing as mp
+    import os
+
+    n = min(len(jobs), workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+    if n <= 1 or "fork" not in mp.get_all_start_methods():
+        return [_render(j) for j in jobs]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork")) as pool:
+        return list(pool.map(_render, jobs))
 
 
 def _save(fig, base: Path) -> tuple[Path, Path, bytes]:
@@ -479,45 +504,56 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
 
 
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
-            figures: bool = True, terrain: bool = True, generated: str | None = None) -> Published:
-    """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``."""
+            figures: bool = True, terrain: bool = True, generated: str | None = None,
+            workers: int | None = None) -> Published:
+    """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
+
+    ``workers``: processes drawing the figures (default: one per core this process may use).
+    """
     out = Path(out)
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
+    jobs: list[tuple[str, str, tuple[Any, ...]]] = []
+    captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
         summary = aggregate(runs)
         result.runs, result.summary = runs, summary
         sections = []
-        cache: dict[str, Any] = {}
+        scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
             ssum = summary[(summary["suite"] == suite) & (summary["track"] == track)]
             sec: dict[str, Any] = {
                 "suite": suite, "track": track, "rows": table_rows(ssum), "stamp": stamp(srun, suite, track, generated),
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
-            base = slug(f"{suite}-{track}")
-            if figures:
-                title = f"suite {suite}, {track}"
-                for kind, fig, cap in (
-                    ("volume-time", volume_time_figure(srun, title), "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
-                    ("profiles", profiles_figure(srun, title), "Performance profiles: time per m³ and solve time (failures never solved)"),
-                ):
-                    png_path, svg_path, png = _save(fig, fig_dir / f"{base}-{kind}")
-                    result.files += [png_path, svg_path]
-                    sec["figures"].append((cap, png))
-                    sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
-                if terrain:
-                    for _, run in sample_runs(srun).iterrows():
-                        fig = terrain_figure(store, run, cache)
-                        png_path, svg_path, png = _save(fig, fig_dir / f"{base}-terrain-{slug(str(run['solver']))}")
-                        cap = f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})"
-                        result.files += [png_path, svg_path]
-                        sec["figures"].append((cap, png))
-                        sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
             sections.append(sec)
+            if not figures:
+                continue
+            base = slug(f"{suite}-{track}")
+            title = f"suite {suite}, {track}"
+            cols = srun[[c for c in FIGURE_COLUMNS if c in srun]]
+            for kind, cap in (("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
+                              ("profiles", "Performance profiles: time per m³ and solve time (failures never solved)")):
+                path = fig_dir / f"{base}-{kind}"
+                jobs.append((kind, str(path), (cols, title)))
+                captions.append((sec, cap, path))
+            if terrain:
+                for _, run in sample_runs(srun).iterrows():
+                    digest = run["scenario_digest"]
+                    if digest not in scenarios:
+                        scenarios[digest] = store.scenario(digest).to_json()
+                    plan = store.plan_json(int(run["id"]))
+                    path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
+                    jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
+                    captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
+    for (sec, cap, path), png in zip(captions, render_all(jobs, workers)):
+        png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
+        result.files += [png_path, svg_path]
+        sec["figures"].append((cap, png))
+        sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
     runs_csv = runs.drop(columns=[c for c in ("packages",) if c in runs])
     runs_csv.to_csv(out / "runs.csv", index=False)
     summary.to_csv(out / "summary.csv", index=False)

@@ -1,0 +1,41 @@
+"""Speed of ``earthbench leaderboard`` on a store of 2,000 runs (goal, issue 9: under 10 s).
+
+The store: 400 small rbf scenarios × 5 planner configurations, greedy plans (some cut short,
+some replaced by timeouts) judged by the referee and written with ``Store.record`` — about
+half a minute to build, once per session. Each round writes every file: Markdown, both CSVs,
+the HTML page and 9 figures (PNG and SVG), 5 of them terrain before/after re-judged from
+stored plans. Run with ``pytest tests/bench/test_bench_leaderboard.py --benchmark-only``.
+"""
+
+from __future__ import annotations
+
+import resource
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from leaderboard_fixtures import Behaviour, fill_store, ref, standard_behaviours, suite_of  # noqa: E402
+
+from earthbench.publish import publish  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def store_2000(tmp_path_factory) -> Path:
+    behaviours = standard_behaviours() + [Behaviour(ref("greedy", "1.0", {"min_fill": 0.5}), keep=0.9, cpu_model="Other CPU 9000")]
+    return fill_store(tmp_path_factory.mktemp("bench") / "runs.db", suite_of(200), behaviours)
+
+
+def test_leaderboard_2000_runs(benchmark, store_2000, tmp_path):
+    def cpu() -> float:
+        return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime
+                   for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+
+    c0 = cpu()
+    res = benchmark.pedantic(publish, args=(store_2000, tmp_path / "lb"), rounds=3, iterations=1)
+    benchmark.extra_info["cpu_s_per_round"] = round((cpu() - c0) / 3, 2)  # this process and its figure workers
+    assert len(res.runs) == 2000
+    assert len(list((tmp_path / "lb" / "figures").iterdir())) == 2 * (2 + 5)
+    benchmark.extra_info["runs"] = len(res.runs)
+    benchmark.extra_info["files"] = len(res.files)
