@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import psutil
 
@@ -61,6 +61,11 @@ from .errors import PluginError
 from .planner import Planner
 from .registry import PLANNERS
 from .world import Scenario
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .progress import Progress
+    from .store import Store
+    from .suite import Suite
 
 REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
 #: Seconds a case may spend starting (interpreter, imports, reading the scenario) before the planner call.
@@ -695,7 +700,7 @@ class RunReport:
 
 
 def build_cases(
-    suite: Any,
+    suite: Suite,
     planners: Sequence[str] | None = None,
     *,
     plugins: Sequence[str] = (),
@@ -732,11 +737,11 @@ def build_cases(
 
 def run_cases(
     cases: Sequence[Case],
-    store: Any,
+    store: Store,
     executor: Executor,
     *,
     rerun: bool = False,
-    progress: Any = None,
+    progress: Progress | None = None,
 ) -> RunReport:
     """Run every case not yet in ``store`` (all with ``rerun``) and store each as it finishes.
 
@@ -777,15 +782,15 @@ def run_cases(
 
 
 def run_suite(
-    suite: Any,
-    store: Any,
+    suite: Suite,
+    store: Store,
     executor: Executor | None = None,
     *,
     planners: Sequence[str] | None = None,
     plugins: Sequence[str] = (),
     seeds: Iterable[int] | None = None,
     rerun: bool = False,
-    progress: Any = None,
+    progress: Progress | None = None,
 ) -> RunReport:
     """The Python API of ``earthbench run``: register the suite in the store, run what is missing."""
     cases, _ = build_cases(suite, planners, plugins=plugins, seeds=seeds)

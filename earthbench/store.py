@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
     from .runner import Case, CaseResult
+    from .suite import Suite
 
 SCHEMA_VERSION = 1
 APPLICATION_ID = 0x45424E43  # "EBNC"
@@ -203,7 +204,7 @@ class Store:
         rows = self.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")
         return {tuple(r) for r in rows}  # type: ignore[misc]
 
-    def register_suite(self, suite: Any) -> int:
+    def register_suite(self, suite: Suite) -> int:
         """Record a suite version and its scenarios (once per digest), in one transaction."""
         row = self.db.execute("SELECT id FROM suites WHERE name=? AND digest=?", (suite.name, suite.digest)).fetchone()
         if row:
