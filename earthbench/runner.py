@@ -544,7 +544,14 @@ def _machine() -> dict[str, Any]:
             packages[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:
             pass
-    core_dir = str(Path(__file__).resolve().parent)
+    commit = _git_commit(str(Path(__file__).resolve().parent))
+    if commit is None:  # installed with `pip install .`: the checkout it came from, if pip recorded it
+        try:
+            url = json.loads(metadata.distribution("earthbench").read_text("direct_url.json") or "{}").get("url", "")
+            if url.startswith("file://"):
+                commit = _git_commit(url[len("file://"):])
+        except (metadata.PackageNotFoundError, ValueError):
+            pass
     return {
         "hostname": socket.gethostname(),
         "cpu_model": cpu,
@@ -552,7 +559,7 @@ def _machine() -> dict[str, Any]:
         "os": platform.platform(),
         "python": platform.python_version(),
         "packages": packages,
-        "project_commit": _git_commit(core_dir),
+        "project_commit": commit,
     }
 
 
