@@ -19,8 +19,10 @@
   time; solve-time profiles are drawn per CPU model when the runs come from several), and
   ``*-terrain-PLANNER`` (terrain before and after, with machine paths and digs, for one case
   per planner: the scenario most planners have a plan for; its stored plan is judged again
-  with :func:`earthbench.referee.judge` on the scenario the store keeps under the run's digest,
-  which is the scenario the suite generates).
+  with :func:`earthbench.referee.judge` on the scenario the store keeps under the run's digest.
+  That copy is checked to reproduce the digest, so it is exactly the scenario the suite
+  generates; regenerating the suite instead would cost seconds per suite (7 s for
+  ``standard``) and fail on a machine without the suite's plugins).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import html
 import io
 import math
 import re
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -544,7 +547,12 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 for _, run in sample_runs(srun).iterrows():
                     digest = run["scenario_digest"]
                     if digest not in scenarios:
-                        scenarios[digest] = store.scenario(digest).to_json()
+                        sc = store.scenario(digest)
+                        if sc.digest != digest:  # never draw a plan on a terrain it was not made for
+                            warnings.warn(f"stored scenario {run['scenario_id']} does not reproduce its digest; "
+                                          "no terrain figure for it", stacklevel=2)
+                            continue
+                        scenarios[digest] = sc.to_json()
                     plan = store.plan_json(int(run["id"]))
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
                     jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
@@ -574,7 +582,7 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         lines.append("No runs in the store.")
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
-                  f"Ranking: {RANKING_RULE}.", "", "```", *s["stamp"].lines(), "```", "", markdown_table(s["rows"])]
+                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"])]
         for cap, png, svg in s["md_figures"]:
             lines += [f"![{md_escape(cap)}]({png.as_posix()})", "", f"*{md_escape(cap)}* ([SVG]({svg.as_posix()}))", ""]
     return "\n".join(lines) + "\n"
