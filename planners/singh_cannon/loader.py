@@ -51,8 +51,10 @@ from planners.loader_common import CycleBuilder, LoaderPlanConfig, box_volumes, 
 
 @dataclass(frozen=True)
 class SinghCannonLoaderConfig(LoaderPlanConfig):
-    d1: float = 1.0
-    """Inner distance (m) of the dig region from the contour point closest to the truck."""
+    d1: float = 0.0
+    """Inner distance (m) of the dig region from the contour point closest to the truck. The
+    paper leaves it open; 0 suits sites where the truck stands well clear of the pile (``pile``:
+    7.5 m), a positive value keeps digs away from a truck parked close to it."""
     d2: float = 7.0
     """Outer distance (m) of the dig region."""
     widen: float = 1.5
@@ -61,7 +63,7 @@ class SinghCannonLoaderConfig(LoaderPlanConfig):
     """Depth (m) of the box behind the cutting edge counted as inside the bucket (ψ, ξ)."""
     ahead: float = 0.5
     """Depth (m) of the box in front of the cutting edge counted for side loading and concavity."""
-    max_distance: float = 20.0
+    max_distance: float = 12.0
     """Distance (m) from the truck at which the location score ζ reaches 0."""
 
 
