@@ -34,6 +34,9 @@ Refined planner (:mod:`.backhoe_model`)
     the machine, depth h(α), drag length where the predicted bucket is full). The cut level of a
     region's digs may not go below the band bottom (nor the floor).
 
+Without a design grade (``site.floor`` None) the lowest ground in the dig area serves as the
+floor, so the planner never digs a pit below the surrounding site.
+
 Execution model: the chosen dig is applied to the planner's copy of the grid with the referee's
 own :func:`~earthbench.referee.apply_cut`, so the predicted volume of every dig is the one the
 referee will measure. Each dig is followed by a dump into the truck. When nothing worth
@@ -502,8 +505,8 @@ class Session:
                 self.v_min = fills[level] * self.cap
                 self.regions, self.ptr = self.coarse_plan(self.base, self.v_min), 0
                 continue
-            if self.truck_route(self.base):  # the truck is not in reach here (only at the start)
-                route = self.truck_route(self.base)
+            if not self.truck_in_reach(self.base, (self.truck.x, self.truck.y)):
+                route = self.truck_route(self.base)  # only when the start left it out of reach
                 if route is None:
                     status = "truck cannot reach"
                     break
