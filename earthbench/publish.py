@@ -386,7 +386,8 @@ def html_table(rows: list[dict[str, Any]], caption: str = "", cls: str = "sortab
             tds.append(f'<td data-v="{e(k)}">{e(text)}</td>' if key is not None else f"<td>{e(text)}</td>")
         body.append("<tr>" + "".join(tds) + "</tr>")
     cap = f"<caption>{e(caption)}</caption>" if caption else ""
-    return f'<table class="{cls}">{cap}<thead><tr>{head}</tr></thead><tbody>\n' + "\n".join(body) + "\n</tbody></table>"
+    return (f'<div class="wrap"><table class="{cls}">{cap}<thead><tr>{head}</tr></thead><tbody>\n' + "\n".join(body)
+            + "\n</tbody></table></div>")
 
 
 RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner"), ("reason", "Reason"),
@@ -426,8 +427,8 @@ th[aria-sort=ascending]::after{content:" ▲"}th[aria-sort=descending]::after{co
 tbody tr:nth-child(even){background:#fafafa}
 .stamp{font-family:ui-monospace,monospace;font-size:.8rem;background:#f7f7f7;padding:.5rem;white-space:pre-wrap}
 .rule{font-style:italic}
-figure{margin:1rem 0}figure img{max-width:100%;border:1px solid #eee}
-details{margin:1rem 0}.runs{max-height:30rem;overflow:auto;display:block}
+figure{margin:1rem 0}figure img{max-width:min(100%,1000px);border:1px solid #eee}
+details{margin:1rem 0}.wrap{overflow-x:auto}details .wrap{max-height:30rem;overflow:auto}
 """
 
 _JS = """
