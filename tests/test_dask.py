@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import _thread
 import json
 import os
 import signal
@@ -147,6 +148,45 @@ def test_a_worker_killed_mid_case_still_stores_every_case_exactly_once(cluster, 
     _, child = killed[0]
     assert not child.is_running() or child.status() == psutil.STATUS_ZOMBIE
     client.wait_for_workers(2, timeout=30)  # the nanny restarted the worker
+
+
+def _case_processes(pids: dict[str, int]) -> list[psutil.Process]:
+    out = []
+    for pid in pids.values():
+        try:
+            out += [k for k in psutil.Process(pid).children() if "earthbench._child" in " ".join(k.cmdline())]
+        except psutil.Error:
+            pass
+    return out
+
+
+def test_ctrl_c_ends_the_cases_in_flight_on_the_workers_and_stores_nothing_of_them(cluster, tmp_path):
+    lc, client = cluster
+    load_plugin_file(FAULTY)
+    suite = nap_suite(2)
+    cases, _ = build_cases(suite, ["t-sleep"], plugins=[FAULTY])
+    pids = client.run(os.getpid)
+
+    def interrupt_once_a_case_runs():
+        for _ in range(600):
+            if _case_processes(pids):
+                _thread.interrupt_main()
+                return
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=interrupt_once_a_case_runs, daemon=True)
+    watcher.start()
+    with Store(tmp_path / "i.db") as store:
+        store.register_suite(suite)
+        report = run_cases(cases, store, DaskExecutor(client))
+    watcher.join(5)
+    assert report.interrupted and report.stored == 0
+    assert stored(tmp_path / "i.db") == {}
+    for _ in range(100):  # the worker ended the case's process group (SIGTERM, then SIGKILL)
+        if not _case_processes(pids):
+            break
+        time.sleep(0.1)
+    assert not _case_processes(pids)
 
 
 def test_a_case_that_keeps_killing_its_worker_is_stored_as_crashed(cluster, tmp_path):
