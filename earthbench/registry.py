@@ -68,6 +68,11 @@ class Registry(Generic[T]):
         self.failures.pop(name, None)
         return obj
 
+    def unregister(self, name: str) -> None:
+        """Forget ``name`` (a planner registered for one notebook session or test)."""
+        self._items.pop(name, None)
+        self._origin.pop(name, None)
+
     def get(self, name: str) -> T:
         self._load_entry_points()
         try:

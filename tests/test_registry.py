@@ -40,7 +40,18 @@ def test_a_broken_plugin_is_reported_and_does_not_hide_the_others(monkeypatch):
         reg.get("broken")
 
 
-def test_register_planner_decorator():
+@pytest.fixture
+def forget():
+    """Names to unregister after the test, so no test planner leaks into suite runs."""
+    names: list[str] = []
+    yield names
+    for n in names:
+        PLANNERS.unregister(n)
+
+
+def test_register_planner_decorator(forget):
+    forget.append("test-idle")
+
     @register_planner
     class Idle(Planner):
         """Does nothing."""
@@ -51,6 +62,8 @@ def test_register_planner_decorator():
             return Plan()
 
     assert PLANNERS.get("test-idle") is Idle
+    PLANNERS.unregister("test-idle")
+    assert "test-idle" not in PLANNERS
     with pytest.raises(PluginError, match="not a subclass"):
         registry.PLANNERS.register("x", object)
 
@@ -68,7 +81,8 @@ class FilePlanner(Planner):
 '''
 
 
-def test_load_one_plugin_file(tmp_path):
+def test_load_one_plugin_file(tmp_path, forget):
+    forget.append("test-file-planner")
     path = tmp_path / "myplanner.py"
     path.write_text(PLUGIN)
     assert load_plugin_file(path) == ["test-file-planner"]
