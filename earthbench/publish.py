@@ -87,6 +87,16 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
     return runs
 
 
+def suite_sizes(store: Store, names: Iterable[str]) -> dict[str, int]:
+    """Suite name → scenario count of its most recently registered version (as ``load_runs`` uses)."""
+    out = {}
+    for name in names:
+        ver = store.suite_version(name)
+        if ver is not None:
+            out[name] = store.db.execute("SELECT COUNT(*) FROM suite_scenarios WHERE suite_id=?", (ver["id"],)).fetchone()[0]
+    return out
+
+
 def load_runs_empty() -> pd.DataFrame:
     return pd.DataFrame(columns=["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "track", "planner",
                                  "planner_version", "config_hash", "reason", "success", "solver"])
@@ -142,7 +152,7 @@ def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
                 ("Planner", str(r["planner"]), None),
                 ("Version", str(r["planner_version"]), None),
                 ("Config", str(r["config_hash"])[:8], None),
-                ("Runs", str(r["runs"]), r["runs"]),
+                ("Runs", f"{r['runs']}/{r['of']}", r["runs"]),
                 ("Success", f"{100 * r['success_rate']:.0f}%", r["success_rate"]),
                 ("Volume ratio (mean ± SD)", vr, r["volume_ratio_mean"]),
                 ("Time per m³, s (median, IQR)", tpm, r["time_per_m3_median"]),
@@ -523,7 +533,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
-        summary = aggregate(runs)
+        summary = aggregate(runs, suite_sizes(store, runs["suite"].unique()))
         result.runs, result.summary = runs, summary
         sections = []
         scenarios: dict[str, str] = {}
@@ -575,7 +585,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
 def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     lines = ["# earthbench leaderboard", "",
              f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-             "`–` means no value (no valid run). Columns: success rate; volume ratio over valid runs; "
+             "`–` means no value (no valid run). Columns: runs stored / scenarios in the suite; success rate over the "
+             "suite's scenarios (a scenario without a run is a failure); volume ratio over valid runs; "
              "time per m³ over valid runs that loaded something, with its ratio to the scenario's lower bound; "
              "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
              "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).", ""]

@@ -2,10 +2,12 @@
 
 Input: the DataFrame of :func:`earthbench.store.load_runs` (one row per run). Definitions:
 
-* ``runs``: stored runs of the group; ``scenarios``: distinct scenario digests among them.
-* ``success_rate``: share of runs that are a success (valid and volume ratio ≥ the suite's
-  threshold). Runs that failed in any way (invalid, timeout, memory, error, crashed) count as
-  failures.
+* ``runs``: stored runs of the group; ``scenarios``: distinct scenario digests among them;
+  ``of``: the suite's scenario count when given (``sizes``), else ``scenarios``.
+* ``success_rate``: successes (valid and volume ratio ≥ the suite's threshold) over ``of``:
+  runs that failed in any way (invalid, timeout, memory, error, crashed) and scenarios the
+  planner has no run for count as failures, as in the performance profiles, so a planner run
+  on part of a suite is never ranked on that part alone.
 * ``volume_ratio_mean`` / ``_sd``: over *valid* runs (reason ``ok``), since an invalid plan is
   reported, never ranked; the SD is the sample SD (n − 1), NaN for a single run.
 * ``time_per_m3_median`` / ``_q1`` / ``_q3`` / ``_iqr`` and ``time_per_m3_ratio_median`` (to the
@@ -31,7 +33,7 @@ RANKING_RULE = ("ranked by success rate (higher first), then median time per m³
                 "then median solve time (lower first)")
 
 SUMMARY_COLUMNS = [
-    *GROUP, "runs", "scenarios", "successes", "success_rate", "valid_runs", "volume_ratio_mean", "volume_ratio_sd",
+    *GROUP, "runs", "of", "scenarios", "successes", "success_rate", "valid_runs", "volume_ratio_mean", "volume_ratio_sd",
     "time_per_m3_median", "time_per_m3_q1", "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median",
     "loaded_nothing", "solve_time_median", "solve_time_p90", "solve_cpu_median",
     *(f"n_{r}" for r in REASONS), "n_other", "cpu_models",
@@ -42,7 +44,7 @@ def _num(s: pd.Series) -> np.ndarray:
     return pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
 
 
-def _summarise(g: pd.DataFrame) -> dict[str, float]:
+def _summarise(g: pd.DataFrame, of: int | None = None) -> dict[str, float]:
     reason = g["reason"].astype(str).to_numpy()
     ok = reason == "ok"
     success = g["success"].fillna(False).astype(bool).to_numpy()
@@ -58,11 +60,14 @@ def _summarise(g: pd.DataFrame) -> dict[str, float]:
     q1, med, q3 = (np.percentile(tpm[finite], [25, 50, 75]) if finite.any() else (np.nan,) * 3)
     counts = {f"n_{r}": int((reason == r).sum()) for r in REASONS}
     models = g["cpu_model"].dropna().nunique() if "cpu_model" in g else 0
+    n_sc = int(g["scenario_digest"].nunique())
+    of = max(int(of), n_sc) if of else n_sc
     return {
         "runs": len(g),
-        "scenarios": g["scenario_digest"].nunique(),
+        "of": of,
+        "scenarios": n_sc,
         "successes": int(success.sum()),
-        "success_rate": float(success.mean()) if len(g) else np.nan,
+        "success_rate": float(success.sum() / of) if of else np.nan,
         "valid_runs": int(ok.sum()),
         "volume_ratio_mean": float(vr.mean()) if len(vr) else np.nan,
         "volume_ratio_sd": float(vr.std(ddof=1)) if len(vr) > 1 else np.nan,
@@ -81,13 +86,17 @@ def _summarise(g: pd.DataFrame) -> dict[str, float]:
     }
 
 
-def aggregate(runs: pd.DataFrame) -> pd.DataFrame:
+def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None) -> pd.DataFrame:
     """One row per (suite, track, planner, planner_version, config_hash), columns :data:`SUMMARY_COLUMNS`,
-    ranked within each (suite, track) by :func:`rank` and numbered in ``rank``."""
+    ranked within each (suite, track) by :func:`rank` and numbered in ``rank``.
+
+    ``sizes``: suite name → its number of scenarios (the denominator of the success rate).
+    """
     rows = []
+    sizes = sizes or {}
     if len(runs):
         for key, g in runs.groupby(GROUP, sort=True, dropna=False):
-            rows.append({**dict(zip(GROUP, key)), **_summarise(g)})
+            rows.append({**dict(zip(GROUP, key)), **_summarise(g, sizes.get(key[0]))})
     out = pd.DataFrame.from_records(rows, columns=SUMMARY_COLUMNS)
     return rank(out)
 

@@ -105,3 +105,18 @@ def test_ties_on_success_are_broken_by_time_per_m3():
     ])
     s = aggregate(runs)
     assert s["planner"].tolist() == ["quick", "slow", "none"]
+
+
+def test_scenarios_without_a_run_count_as_failures():
+    runs = pd.DataFrame([
+        _run("partial", "a", "ok", True, 1.0, 20.0, 1.0),
+        _run("full", "a", "ok", True, 1.0, 30.0, 1.0),
+        _run("full", "b", "ok", True, 1.0, 30.0, 1.0),
+        _run("full", "c", "ok", False, 0.5, 30.0, 1.0),
+        _run("full", "d", "ok", True, 1.0, 30.0, 1.0),
+    ])
+    s = aggregate(runs, {"s": 4}).set_index("planner")
+    assert s.loc["partial", "success_rate"] == 0.25 and s.loc["partial", "of"] == 4
+    assert s.loc["full", "success_rate"] == 0.75
+    assert aggregate(runs)["planner"].tolist() == ["partial", "full"]  # without sizes: over its own scenarios
+    assert aggregate(runs, {"s": 4})["planner"].tolist() == ["full", "partial"]
