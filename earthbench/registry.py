@@ -36,12 +36,14 @@ class Registry(Generic[T]):
         self.failures: dict[str, str] = {}
         self._loaded = False
 
-    def _load_entry_points(self) -> None:
+    def _load_entry_points(self, only: str | None = None) -> None:
+        """Load the group's entry points, or only those named ``only`` (cheap lookups by name)."""
         if self._loaded:
             return
-        self._loaded = True
+        if only is None:
+            self._loaded = True
         for ep in entry_points(group=self.group):
-            if ep.name in self._items:
+            if (only is not None and ep.name != only) or ep.name in self._items or ep.name in self.failures:
                 continue
             try:
                 obj = ep.load()
@@ -57,7 +59,7 @@ class Registry(Generic[T]):
             self._origin[ep.name] = f"entry point {ep.value}" + (f" ({dist.name} {dist.version})" if dist else "")
 
     def register(self, name: str, obj: T, *, origin: str = "", replace: bool = False) -> T:
-        self._load_entry_points()
+        self._load_entry_points(only=name)
         problem = self._check(obj) if self._check else None
         if problem:
             raise PluginError(f"cannot register {self.kind} {name!r}: {problem}")
@@ -74,12 +76,14 @@ class Registry(Generic[T]):
         self._origin.pop(name, None)
 
     def get(self, name: str) -> T:
-        self._load_entry_points()
+        if name not in self._items:
+            self._load_entry_points(only=name)
         try:
             return self._items[name]
         except KeyError:
             if name in self.failures:
                 raise PluginError(f"{self.kind} {name!r} failed to load: {self.failures[name]}") from None
+            self._load_entry_points()  # every name, for the list of known ones
             raise UnknownNameError(self.kind, name, self._items) from None
 
     def origin(self, name: str) -> str:
@@ -95,7 +99,8 @@ class Registry(Generic[T]):
             yield n, self._items[n]
 
     def __contains__(self, name: object) -> bool:
-        self._load_entry_points()
+        if isinstance(name, str):
+            self._load_entry_points(only=name)
         return name in self._items
 
 
