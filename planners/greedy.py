@@ -45,6 +45,8 @@ class GreedyConfig:
 
 
 class GreedyPlanner(Planner):
+    """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
+
     name = "greedy"
     version = "1.0"
     tracks = ("backhoe",)
