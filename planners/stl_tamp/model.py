@@ -347,6 +347,8 @@ class PhaseNLP:
         self.lbg, self.ubg = np.array(lbg), np.array(ubg)
         self.w, self.p, self.J = w, p, J
         self._vol_fn = ca.Function("vol", [w, p], [ca.vertcat(*[vol_model[i] for i in range(1, m1)])])
+        # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
+        self._pz_fn = ca.Function("pz", [w, p], [ca.vertcat(*[pz[i] for i in range(1, m1)])])
         self.build_time_s = time.perf_counter() - t0
         self._solvers: dict[tuple, Any] = {}
 
@@ -457,7 +459,8 @@ class PhaseNLP:
         """Model volumes and exact-vs-smooth robustness of a candidate (used for guesses and checks)."""
         vol = np.array(self._vol_fn(w, params)).reshape(-1)
         rt, rs = self._rho_fn(w, params)
-        return {"volumes": vol, "rho_task": float(rt), "rho_safe": float(rs)}
+        return {"volumes": vol, "rho_task": float(rt), "rho_safe": float(rs),
+                "contact_heights": np.array(self._pz_fn(w, params)).reshape(-1)}
 
     def tips(self, X: np.ndarray, floor: float) -> np.ndarray:
         return np.array(self._tip_fn(X[1:].T, X[0], floor)).T

@@ -49,6 +49,7 @@ volume, Fig. 7a); the truck's capacity still caps what is loaded. Run it with
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -107,6 +108,9 @@ class Config:
     eta_fill: float = 0.98
     min_model_volume: float = 0.03
     min_dig_volume: float = 0.02
+    trust_radius: float = 0.5
+    trust_angle: float = 0.5
+    trust_rounds: int = 2
     max_iter: int = 250
     max_cpu_time: float = 4.0
     mu_strategy: str = "adaptive"
@@ -247,7 +251,7 @@ class SeparatePlanner(Planner):
         trace = _Trace()
         st = SimState.start(scenario)
         box = site_box(scenario)
-        conv = Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth)
+        conv = self._converter(scenario)
         truck_cap = scenario.machines.truck.capacity
         target = scenario.task.target_volume if c.divisions == 0 else truck_cap
 
@@ -287,6 +291,15 @@ class SeparatePlanner(Planner):
             },
         )
 
+    def _converter(self, scenario: Scenario) -> Converter:
+        """stl-tamp's converter with its contact repair off: the digs stay at the rule's contacts
+        (a dig the real grid rejects is skipped, never moved)."""
+        c = self.config
+        try:
+            return Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=0.0)
+        except TypeError:  # a converter without contact repair
+            return Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth)
+
     # -- one local area -------------------------------------------------------------------------
     def _local(self, scenario: Scenario, st: SimState, conv: Converter, area: Area, digs: list[RuleDig],
                goal: tuple[float, float], target: float, joints: tuple[float, float],
@@ -314,13 +327,19 @@ class SeparatePlanner(Planner):
                             alpha=(c.alpha_u, c.alpha_t, 0.0, 0.0, c.alpha_term), goal=goal, floor=floor)
         eta = self._fixed_eta(nlp, s0, params, digs, area, truck, surf, floor)
         seeds = self._seeds(digs, eta, area, truck, surf)
+        # the arm's IK guess at the model's height of each contact after the earlier cuts (the
+        # rule often digs one spot several times: the fitted surface's height would leave the
+        # contact constraint violated by up to a metre and IPOPT in restoration)
+        pz = nlp.evaluate(build_guess(nlp, s0, seeds, floor), params)["contact_heights"]
+        seeds = [dataclasses.replace(sd, pz=float(h)) for sd, h in zip(seeds, pz)]
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
-        sol = nlp.solve(params, w0, box, fixed_tasks=fixed, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
-                        options={"mu_strategy": c.mu_strategy})
+        sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, c.w_local)),
                                "base": list(area.base), "status": sol.status, "iterations": sol.iterations,
+                               "rounds": rounds, "guess_time": float(nlp.node_times(*self._durations(nlp, w0, s0))[-1]),
+                               "planned_time": sol.t_final,
                                "solve_time_s": sol.solve_time_s, "success": sol.success,
                                "eta": np.round(eta, 3).tolist(), "model_volume": float(np.sum(sol.V)),
                                "rule": [{"high": d.high, "contact": d.contact, "heading": d.heading,
@@ -361,6 +380,64 @@ class SeparatePlanner(Planner):
             else:
                 eta[i] = min(1.0, c.eta_fill * nlp.shape.vmax / full)
         return eta
+
+    @staticmethod
+    def _durations(nlp: PhaseNLP, w: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ph = nlp.unpack(w, s0)[2]
+        return ph["dtm"], ph["dtw"]
+
+    def _solve(self, nlp: PhaseNLP, params: np.ndarray, w0: np.ndarray, s0: np.ndarray,
+               box: tuple[float, float, float, float], fixed: dict[str, np.ndarray]) -> tuple[Solution, list[dict[str, Any]]]:
+        """Eq. (25) with the tasks fixed, in trust-region rounds around the previous iterate.
+
+        Why the trust region: with η fixed at 1 the task disjunction (5) has a dead branch
+        (φ0 = ε_η − η < 0). From the IK guess — feasible to 1e-15 — IPOPT's first full step
+        swung the arm away from the truck; the load robustness then fell so low that the smooth
+        max's weight on it vanished and IPOPT reported the problem infeasible on every area of
+        our first scenario (also with mu_init 1e-2/1e-3, monotone μ, theta_max_fact 1e-2, or the
+        durations fixed). Bounding every node's state to ``trust_radius`` (m, rad) around the
+        previous iterate keeps the linearisation honest: the first area then solved in 38
+        iterations, 22 % faster than the guess. Each further round re-centres the box on the last
+        solution; rounds stop at the first failure or when the time gain is below 1 %.
+        """
+        c = self.config
+        S = nlp.solver(c.max_iter, c.max_cpu_time, {"mu_strategy": c.mu_strategy})
+        lb, ub = nlp.bounds(box, fixed)
+        Xl, Ul, phl, sll = nlp.unpack(lb, s0)
+        Xu, Uu, phu, slu = nlp.unpack(ub, s0)
+        rad = np.array([c.trust_radius, c.trust_radius, c.trust_angle, c.trust_angle, c.trust_angle, c.trust_angle,
+                        c.trust_radius, c.trust_radius, c.trust_angle])
+        best: Solution | None = None
+        centre = w0
+        log: list[dict[str, Any]] = []
+        for _ in range(max(c.trust_rounds, 1)):
+            Xc = nlp.unpack(centre, s0)[0]
+            lo = nlp.pack_w(np.maximum(Xl, Xc - rad), Ul, phl, sll)
+            hi = nlp.pack_w(np.minimum(Xu, Xc + rad), Uu, phu, slu)
+            t0 = time.perf_counter()
+            res = S(x0=np.clip(centre, lo, hi), p=params, lbx=lo, ubx=hi, lbg=nlp.lbg, ubg=nlp.ubg)
+            dt = time.perf_counter() - t0
+            st = S.stats()
+            w = np.array(res["x"]).reshape(-1)
+            gv = np.array(res["g"]).reshape(-1)
+            viol = float(np.max(np.concatenate([nlp.lbg - gv, gv - nlp.ubg, [0.0]])))
+            status = str(st.get("return_status", "unknown"))
+            ok = bool(st.get("success", False)) or (status == "Solved_To_Acceptable_Level" and viol < 1e-4)
+            X, U, ph, _ = nlp.unpack(w, s0)
+            sol = Solution(X, U, ph["dtm"], ph["dtw"], ph["eta"], ph["px"], ph["py"], ph["psi"], ph["V"],
+                           nlp.node_times(ph["dtm"], ph["dtw"]), ok, status, int(st.get("iter_count", -1)), dt,
+                           float(res["f"]), info={"max_violation": viol})
+            log.append({"status": status, "iterations": sol.iterations, "solve_time_s": dt, "time": sol.t_final})
+            if not ok:
+                break
+            gain = 1.0 if best is None else (best.t_final - sol.t_final) / max(best.t_final, 1e-9)
+            best, centre = sol, w
+            if gain < 0.01:
+                break
+        if best is None:
+            return sol, log
+        best.solve_time_s = sum(r["solve_time_s"] for r in log)
+        return best, log
 
     @staticmethod
     def _guess_solution(nlp: PhaseNLP, w0: np.ndarray, s0: np.ndarray) -> Solution:
