@@ -16,7 +16,10 @@ action:
   the full cut depth (less where the floor is closer); the referee's capacity cap then fills the
   bucket. The dig is skipped if its contact or drag end leaves the reach annulus of the real
   base pose, its footprint leaves the dig area, the truck is out of dump reach, or the cut
-  would take less than ``min_dig_volume``. The last dig's depth is bisected so that the loaded
+  would take less than ``min_dig_volume`` — unless a contact shifted by at most ``repair``
+  metres along/across the drag passes these checks (the best such is used and counted as
+  ``contact_repaired``: the fitted surface smooths earlier cuts, so the NLP sometimes aims at a
+  hole it cannot see). The last dig's depth is bisected so that the loaded
   volume meets the target instead of overshooting it.
 - Durations: a dig lasts the swing to its bearing plus the minimum stroke time, a dump the
   swing to the truck plus the minimum dump time (plus 1 µs each, never less).
@@ -122,13 +125,19 @@ def min_distance(a: list[tuple[float, float, float, float]] | Pose, b: list[tupl
 class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
-    def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, clearance_margin: float = 0.01):
+    def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
+                 clearance_margin: float = 0.01):
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
-        self.eta_on, self.min_dig_volume, self.depth = eta_on, min_dig_volume, depth
+        self.eta_on, self.min_dig_volume, self.depth, self.repair = eta_on, min_dig_volume, depth, repair
         self.clearance = self.exc_spec.clearance + clearance_margin
         self.floor = scenario.site.floor
+        self.skips: dict[str, int] = {}
+
+    def _skip(self, why: str) -> float:
+        self.skips[why] = self.skips.get(why, 0) + 1
+        return 0.0
 
     # -- moves ------------------------------------------------------------------------------------
     def move_excavator(self, st: SimState, v: np.ndarray, w: np.ndarray, dts: np.ndarray) -> bool:
@@ -140,6 +149,7 @@ class Converter:
         times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         path = _samples(nodes, times)
         if min_distance(path, st.truck) < self.clearance:
+            self._skip("move_blocked")
             return False
         st.actions.append(Move("excavator", tuple(path)))
         st.t = float(times[-1])
@@ -157,10 +167,10 @@ class Converter:
         t_moves = np.max(np.hypot(nt[:, 0] - nt[0, 0], nt[:, 1] - nt[0, 1])) > 1e-6 or abs(nt[-1, 2] - nt[0, 2]) > 1e-6
         pe, pt = _samples(ne, times), _samples(nt, times)
         if not t_moves:
-            return "excavator" if self.move_excavator(st, ve, we, dts) else "blocked"
+            return "excavator" if self.move_excavator(st, ve, we, dts) else self._blocked()
         if not e_moves:
             if min_distance(pt, st.exc) < self.clearance:
-                return "blocked"
+                return self._blocked()
             st.actions.append(Move("truck", tuple(pt)))
             st.truck = Pose(*nt[-1])
             st.t = max(st.t, float(times[-1]))  # the excavator waits for the truck before dumping
@@ -196,6 +206,10 @@ class Converter:
             st.exc, st.truck = end_exc, Pose(*nt[-1])
             st.t = float(pt2[-1][0])
             return "excavator-first"
+        return self._blocked()
+
+    def _blocked(self) -> str:
+        self._skip("move_blocked")
         return "blocked"
 
     # -- digs ---------------------------------------------------------------------------------------
@@ -232,16 +246,45 @@ class Converter:
             d = min(d, zc - self.floor - 1e-7)
         return d
 
+    def best_contact(self, st: SimState, contact: tuple[float, float], heading: float) -> tuple[tuple[float, float], float, float] | None:
+        """The NLP's contact, or — when the real grid says it is impossible or nearly empty (the
+        fitted surface smooths earlier cuts) — the best of a few shifted contacts within
+        ``repair`` metres along and across the drag. Returns (contact, depth, volume) or None."""
+        ux, uy = math.cos(heading), math.sin(heading)
+        cands = [(0.0, 0.0)]
+        if self.repair > 0:
+            steps = (-self.repair, -self.repair / 2, 0.0, self.repair / 2, self.repair)
+            cands += sorted(((a, c) for a in steps for c in steps if (a, c) != (0.0, 0.0)), key=lambda ac: math.hypot(*ac))
+        best = None
+        cap = self.exc_spec.bucket_capacity
+        for k, (a, c) in enumerate(cands):
+            pt = (contact[0] + a * ux - c * uy, contact[1] + a * uy + c * ux)
+            why = self.dig_ok(st, pt, heading)
+            if why is not None:
+                if k == 0:
+                    self._skip(f"nlp_contact_{why}")
+                continue
+            depth = self.max_depth(st, pt)
+            if depth <= 1e-3:
+                continue
+            vol = self.cut_volume(st, pt, heading, depth)
+            if best is None or vol > best[2] + 1e-9:
+                best = (pt, depth, vol)
+            if k == 0 and vol >= self.min_dig_volume:
+                return best  # the NLP's own contact works: keep it
+            if best[2] >= cap - 1e-9:
+                break
+        if best is not None and best[2] >= self.min_dig_volume:
+            self._skip("contact_repaired")
+            return best
+        return None
+
     def dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, remaining: float) -> float:
-        """Dig at ``contact`` and dump into the truck; returns the loaded volume (0: skipped)."""
-        if self.dig_ok(st, contact, heading) is not None:
-            return 0.0
-        depth = self.max_depth(st, contact)
-        if depth <= 1e-3:
-            return 0.0
-        vol = self.cut_volume(st, contact, heading, depth)
-        if vol < self.min_dig_volume:
-            return 0.0
+        """Dig at ``contact`` (or its repair) and dump into the truck; returns the loaded volume (0: skipped)."""
+        found = self.best_contact(st, contact, heading)
+        if found is None:
+            return self._skip("no_material")
+        contact, depth, vol = found
         if vol > remaining:  # the last bucket: bisect the depth to meet the target
             lo, hi = 0.0, depth
             for _ in range(50):
@@ -250,9 +293,8 @@ class Converter:
                     hi = mid
                 else:
                     lo = mid
-            depth = hi
-            if depth <= 1e-6:
-                return 0.0
+            # where the ground rises along the drag even a skim overshoots: take the thinnest cut
+            depth = max(hi, 1e-3)
         es = self.exc_spec
         dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)

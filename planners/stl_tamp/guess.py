@@ -159,12 +159,25 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
     return w0
 
 
-def fill_volumes(nlp: PhaseNLP, w0: np.ndarray, params: np.ndarray) -> np.ndarray:
-    """Set the guess's V_i to the model volumes of its contacts (clipped to V_max)."""
-    ev = nlp.evaluate(w0, params)
+def fill_volumes(nlp: PhaseNLP, w0: np.ndarray, params: np.ndarray, goals: list[float] | None = None) -> np.ndarray:
+    """Make the guess consistent with Eq. (20)–(21): η_i scaled so the model volume of each
+    active phase is its goal (default 95 % of V_max, η ≤ 1), then V_i set to the model volume."""
     sl = nlp._slices()
     w = w0.copy()
+    vmax = nlp.shape.vmax
+    for _ in range(2):  # later phases see earlier cuts: two passes settle the chain
+        ev = nlp.evaluate(w, params)
+        eta = w[sl["eta"]].copy()
+        for i in range(1, nlp.m1):
+            if eta[i] <= 0:
+                continue
+            per_eta = ev["volumes"][i - 1] / eta[i]
+            goal = 0.95 * vmax if goals is None else min(goals[i - 1], 0.95 * vmax)
+            if per_eta > 1e-6:
+                eta[i] = float(np.clip(goal / per_eta, 2 * nlp.shape.eps_eta, 1.0))
+        w[sl["eta"]] = eta
+    ev = nlp.evaluate(w, params)
     V = np.zeros(nlp.m1)
-    V[1:] = np.clip(ev["volumes"], 0.0, nlp.shape.vmax)
+    V[1:] = np.clip(ev["volumes"], 0.0, vmax)
     w[sl["V"]] = V
     return w

@@ -49,8 +49,9 @@ class Config:
     m_local: int = 5
     n_steps: int = 10
     contact_step: int = 4
+    dtm_max: float = 4.0
     m_global_max: int = 12
-    n_global: int = 6
+    n_global: int = 4
     area_buckets: float = 5.0
     area_vmax: float = 1.0
     dig_depth: float = 0.4
@@ -68,22 +69,27 @@ class Config:
     eta_init: float = 0.7
     eta_on: float = 0.25
     min_dig_volume: float = 0.02
+    repair: float = 0.5
     fill_estimate: float = 0.85
-    local_fit_spacing: float = 0.5
-    local_fit_half: float = 3.0
-    global_fit_spacing: float = 0.6
+    local_fit_spacing: float = 0.55
+    local_fit_half: float = 2.75
+    global_fit_spacing: float = 1.0
+    local_fit_solver: str = "cholesky"  # per-area refits: the same least squares, solved directly
     base_offset: float = 4.0
     truck_offset: float = 5.0
     global_layer: bool = True
-    max_iter: int = 250
+    max_iter: int = 150
     max_cpu_time: float = 4.0
-    global_max_iter: int = 300
+    global_max_iter: int = 150
     global_max_cpu_time: float = 10.0
     mu_strategy: str = "adaptive"
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks) or "raise"
     max_fallbacks: int = 6
     max_areas: int = 40
     volume_tol: float = 1e-4
+    min_local_target: float = 0.8  # in buckets
+    ipopt_tol: float = 1e-4
+    accept_feasible: float = 1e-3  # accept a capped solve whose iterate violates no constraint by more
 
 
 class StlTampPlanner(Planner):
@@ -102,7 +108,8 @@ class StlTampPlanner(Planner):
                      unit_length=e.max_drag_length, unit_depth=min(c.dig_depth, e.max_cut_depth), vmax=e.bucket_capacity,
                      work_time=e.min_stroke_time + e.min_dump_time, terrain_shape=(nt, nt),
                      terrain_spacing=c.local_fit_spacing, terrain_sigma=c.local_fit_spacing, sigmoid_k=c.sigmoid_k,
-                     widen=c.quad_widen, eps_eta=c.eps_eta, eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
+                     widen=c.quad_widen, eps_eta=c.eps_eta, eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta,
+                     dtm_max=c.dtm_max)
 
     def area_side(self, scenario: Scenario) -> float:
         e = scenario.machines.excavator
@@ -125,7 +132,7 @@ class StlTampPlanner(Planner):
         exc = scenario.machines.excavator
         box = site_box(scenario)
         side = self.area_side(scenario)
-        conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth)
+        conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair)
 
         # Algorithm 1, step 1: the surface function of the whole map
         t0 = time.perf_counter()
@@ -173,6 +180,7 @@ class StlTampPlanner(Planner):
                 "fit_time_s": trace.fit_time_s,
                 "build_time_s": trace.build_time_s,
                 "fallbacks": trace.fallbacks,
+                "skipped": dict(conv.skips),
                 "global": trace.global_,
                 "local": trace.locals_,
                 "plan_time_s": time.perf_counter() - t_start,
@@ -180,17 +188,21 @@ class StlTampPlanner(Planner):
         )
         return plan
 
+    def _ipopt_options(self) -> dict[str, Any]:
+        c = self.config
+        return {"mu_strategy": c.mu_strategy, "tol": c.ipopt_tol, "acceptable_tol": 1e-2, "acceptable_iter": 3}
+
     # -- global layer ------------------------------------------------------------------------------
     def _global(self, scenario: Scenario, st: SimState, surf, tour: list[Area], target: float, side: float,
                 box: tuple[float, float, float, float], trace: Trace) -> list[Area]:
         c, exc = self.config, scenario.machines.excavator
         need = int(math.ceil(target / c.area_vmax))
-        m_g = max(1, min(c.m_global_max, need + 2, len(tour)))
+        m_g = max(1, min(c.m_global_max, need + 1, len(tour)))
         cap = exc.bucket_capacity * c.fill_estimate
         shape = Shape(phases=m_g, steps=c.n_global, contact_step=c.n_global // 2, unit_width=side, unit_length=side,
                       unit_depth=c.dig_depth, vmax=c.area_vmax,
                       work_time=c.area_vmax / cap * (exc.min_stroke_time + exc.min_dump_time + 2.0),
-                      terrain_shape=surf.shape, terrain_spacing=surf.spacing, terrain_sigma=surf.sigma, quad=(4, 4),
+                      terrain_shape=surf.shape, terrain_spacing=surf.spacing, terrain_sigma=surf.sigma, quad=(3, 3),
                       dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
                       eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
         t0 = time.perf_counter()
@@ -202,9 +214,10 @@ class StlTampPlanner(Planner):
         s0 = st.s0
         params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=target,
                             alpha=(c.alpha_u, c.alpha_t, c.alpha_v / 10, c.alpha_eta, 0.0), goal=(s0[0], s0[1]), floor=floor)
-        w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
+        w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params, [a.estimate for a in tour[:m_g]])
         sol = nlp.solve(params, w0, box, max_iter=c.global_max_iter, max_cpu_time=c.global_max_cpu_time,
-                        options={"mu_strategy": c.mu_strategy})
+                        accept_feasible=c.accept_feasible,
+                        options=self._ipopt_options())
         trace.global_ = {"used": True, "phases": m_g, "status": sol.status, "iterations": sol.iterations,
                          "solve_time_s": sol.solve_time_s, "success": sol.success, "eta": np.round(sol.eta, 3).tolist(),
                          "volume": float(np.sum(sol.V)), "wall_s": time.perf_counter() - t0}
@@ -214,7 +227,7 @@ class StlTampPlanner(Planner):
         n = nlp.n
         out = []
         for i in range(1, nlp.m1):
-            if sol.eta[i] < c.eta_on:
+            if sol.eta[i] < c.eta_on and not (sol.eta[i] >= 2 * c.eps_eta and sol.V[i] >= 0.25 * c.area_vmax):
                 continue
             u = (math.cos(sol.psi[i]), math.sin(sol.psi[i]))
             kn = i * n + nlp.kc[i]
@@ -239,9 +252,11 @@ class StlTampPlanner(Planner):
         hw = c.local_fit_half
         cx, cy = area.centre
         surf = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                       shape=shape.terrain_shape, margin=0)
+                       shape=shape.terrain_shape, margin=0, solver=c.local_fit_solver)
         trace.fit_time_s += time.perf_counter() - t0
-        v_local = min(remaining, c.area_vmax)
+        # a small remainder is still planned as (at least) a bucket of work: the conversion then
+        # bisects the real dig's depth to take exactly what is missing
+        v_local = min(max(remaining, c.min_local_target * exc.bucket_capacity), c.area_vmax)
         # keep the truck where it is when it already serves this area's base
         d_now = math.hypot(st.truck.x - area.base[0], st.truck.y - area.base[1])
         reach_dt = exc.reach_max + trk.loading_radius - 0.4
@@ -255,8 +270,8 @@ class StlTampPlanner(Planner):
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         half = math.hypot(cx - area.px, cy - area.py) + 0.5
         cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
-        sol = nlp.solve(params, w0, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
-                        options={"mu_strategy": c.mu_strategy})
+        sol = nlp.solve(params, w0, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time, accept_feasible=c.accept_feasible,
+                        options=self._ipopt_options())
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": sol.iterations, "solve_time_s": sol.solve_time_s,
                                "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),
@@ -287,7 +302,8 @@ class StlTampPlanner(Planner):
             k0 = i * n
             if kc[i] > 0:
                 conv.move_excavator(st, U[k0:k0 + kc[i], 0], U[k0:k0 + kc[i], 1], dts[k0:k0 + kc[i]])
-            if sol.eta[i] >= self.config.eta_on and remaining - loaded > self.config.volume_tol:
+            dig = sol.eta[i] >= self.config.eta_on or (sol.eta[i] >= 2 * self.config.eps_eta and sol.V[i] >= self.config.min_dig_volume)
+            if dig and remaining - loaded > self.config.volume_tol:
                 loaded += conv.dig_and_dump(st, (float(sol.px[i]), float(sol.py[i])), float(sol.psi[i]), remaining - loaded)
         return loaded
 
