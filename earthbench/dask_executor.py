@@ -139,6 +139,17 @@ def host_slot(cores: int, stop: threading.Event | None = None) -> Iterator[tuple
             return
 
 
+def probe() -> dict[str, Any]:
+    """What a worker reports in the preflight of a run (run there by ``client.run``)."""
+    from importlib import metadata
+
+    try:
+        version = metadata.version("earthbench")
+    except metadata.PackageNotFoundError:
+        version = None
+    return {"earthbench": version, "cpus": len(os.sched_getaffinity(0))}
+
+
 def _cancelled(case: Case) -> CaseResult:
     return CaseResult(key=case.key, scenario_id=case.scenario.id, reason="cancelled", error="the run was interrupted")
 
@@ -220,7 +231,29 @@ class DaskExecutor:
         return [(addr, i) for addr, k in sorted(self.worker_slots().items()) for i in range(int(k))]
 
     def check(self) -> None:
-        """Refuse a cluster whose workers cannot run a case: explain how to start them."""
+        """Refuse a cluster whose workers cannot run a case: explain how to start them.
+
+        Every worker present must import this earthbench at the client's version, and (unless
+        ``resource`` is None) at least one must declare the resource. A cluster with no worker
+        yet (an adaptive dask-jobqueue cluster) passes: its cases wait for workers.
+        """
+        from importlib import metadata
+
+        try:
+            mine = metadata.version("earthbench")
+        except metadata.PackageNotFoundError:
+            mine = None
+        try:
+            reports = self.client.run(probe, on_error="return")
+        except Exception as exc:  # noqa: BLE001
+            raise DaskError(f"the Dask workers could not be asked for their earthbench version: {exc!r}") from None
+        for addr, rep in sorted(reports.items()):
+            if isinstance(rep, BaseException):
+                raise DaskError(f"Dask worker {addr} cannot run earthbench cases ({type(rep).__name__}: {rep}); "
+                                "install earthbench (and the planners' packages) on every worker") from None
+            if rep.get("earthbench") != mine:
+                raise DaskError(f"Dask worker {addr} has earthbench {rep.get('earthbench')}, the client {mine}; "
+                                "install the same version everywhere so every case is scored by the same referee")
         if self.resource is None:
             return
         have = self.worker_slots()
@@ -239,6 +272,7 @@ class DaskExecutor:
         self._stopped.clear()
         restrictions = {self.resource: 1} if self.resource else None
         seen: set[tuple[str, str, str, str]] = set()
+        lost = 0
         todo = iter(cases)
         ac = distributed.as_completed([], with_results=False)
 
@@ -267,10 +301,15 @@ class DaskExecutor:
                     nxt = next(todo, None) if self.jobs is not None else None
                     if nxt is not None:
                         submit(nxt)
+                if res is None and not self._stopped.is_set():
+                    lost += 1
                 if res is None or res.reason == "cancelled" or res.key in seen:
                     continue
                 seen.add(res.key)
                 yield res
+            if lost:
+                raise DaskError(f"{lost} case(s) were cancelled by the Dask cluster (scheduler restarted or connection lost?); "
+                                "nothing of them was stored: run the same command again to run them")
         finally:
             self.cancel()
 

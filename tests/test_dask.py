@@ -219,15 +219,35 @@ def test_a_task_that_raises_is_recorded_as_error(cluster):
     assert "RuntimeError: earthbench is not installed on this worker" in res.error
 
 
-def test_workers_without_slots_are_refused_with_a_recipe():
-    class FakeClient:
-        def scheduler_info(self, n_workers=5):
-            return {"workers": {"tcp://w1:1": {"resources": {}}, "tcp://w2:1": {}}}
+class FakeClient:
+    """Answers the executor's questions about two workers like a Client would."""
 
+    def __init__(self, resources=({}, {}), reports=None):
+        self.workers = {f"tcp://w{i}:1": {"resources": r} for i, r in enumerate(resources)}
+        self.reports = reports
+
+    def scheduler_info(self, n_workers=5):
+        return {"workers": self.workers}
+
+    def run(self, function, on_error="raise"):
+        return self.reports if self.reports is not None else {a: function() for a in self.workers}
+
+
+def test_workers_without_slots_are_refused_with_a_recipe():
     ex = DaskExecutor(FakeClient())
     with pytest.raises(DaskError, match='--resources "slots=K"'):
         ex.check()
     assert ex.slots == []
+    assert len(DaskExecutor(FakeClient(({"slots": 2}, {"slots": 1}))).slots) == 3
+
+
+def test_workers_that_cannot_import_earthbench_or_have_another_version_are_refused():
+    broken = FakeClient(reports={"tcp://w0:1": ModuleNotFoundError("No module named 'earthbench'")})
+    with pytest.raises(DaskError, match="tcp://w0:1 cannot run earthbench cases.*install earthbench"):
+        DaskExecutor(broken).check()
+    old = FakeClient(reports={"tcp://w0:1": {"earthbench": "0.0.1", "cpus": 2}})
+    with pytest.raises(DaskError, match="has earthbench 0.0.1"):
+        DaskExecutor(old).check()
 
 
 def test_an_unreachable_scheduler_is_a_clear_error():
