@@ -1,0 +1,148 @@
+"""The ``separate`` baseline: its digs sit where the rule of the paper's Fig. 5b puts them.
+
+The defining difference from ``stl-tamp`` is shown on one scenario with small real solves:
+every ``separate`` dig is at the rule's contact (the highest cell of its local area, L_drag
+beyond it, dragging toward the area's base), recomputed here on the grid the referee sees
+before that dig; ``stl-tamp``'s digs, chosen by its NLP, are not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from earthbench import Dig
+from earthbench.referee import apply_cut, cut_level, judge
+from earthbench.registry import PLANNERS
+from planners.stl_tamp import StlTampPlanner
+from planners.stl_tamp.separate import Config, SeparatePlanner, rule_digs
+from terrains.rbf import rbf
+
+from conftest import block_scenario
+
+
+def replay_grids(scenario, plan):
+    """(dig action, grid before it) for every dig, replayed with the referee's cut."""
+    z = np.array(scenario.terrain.z, dtype=float)
+    spec = scenario.machines.excavator
+    out = []
+    bucket = 0.0
+    for a in plan.actions:
+        if isinstance(a, Dig):
+            out.append((a, z.copy()))
+            level = cut_level(scenario.terrain, z, a.contact, a.depth)
+            if scenario.site.floor is not None:
+                level = max(level, scenario.site.floor)
+            bucket = apply_cut(scenario.terrain, z, a.contact, a.heading, spec.bucket_width, a.drag_length, level,
+                               spec.bucket_capacity)
+    assert bucket >= 0
+    return out
+
+
+def drag_end(dig: Dig) -> tuple[float, float]:
+    return (dig.contact[0] + math.cos(dig.heading) * dig.drag_length,
+            dig.contact[1] + math.sin(dig.heading) * dig.drag_length)
+
+
+def test_registered_with_paper_defaults():
+    assert PLANNERS.get("separate") is SeparatePlanner
+    c = Config()
+    assert (c.w_local, c.m_local, c.drag_length, c.dig_depth, c.n_steps, c.divisions) == (2.0, 5, 1.0, 0.4, 10, 0)
+    with pytest.raises(Exception):
+        SeparatePlanner(divisions=-1)
+
+
+def test_rule_picks_the_highest_point_and_drags_to_it():
+    sc = block_scenario(height=0.5)
+    z = np.array(sc.terrain.z)
+    xs, ys = sc.terrain.cell_centres()
+    i, j = int(np.searchsorted(xs, 4.3)), int(np.searchsorted(ys, 3.2))
+    z[j, i] = 0.9  # one high cell at (4.3, 3.2)
+    terrain = sc.terrain.with_z(z)
+    box, base = (3.0, 5.0, 2.0, 4.0), (4.0, 8.0)
+    digs = rule_digs(terrain, z, box, base, count=3, drag=1.0, width=0.7, depth=0.4, floor=0.0, capacity=0.28,
+                     reach=(2.2, 5.9))
+    first = digs[0]
+    assert first.high == pytest.approx((xs[i], ys[j]))
+    u = np.subtract(base, first.high) / math.dist(base, first.high)
+    assert first.contact == pytest.approx(tuple(np.asarray(first.high) - 1.0 * u))
+    assert first.heading == pytest.approx(math.atan2(u[1], u[0]))
+    assert 0 < first.volume <= 0.28 + 1e-12
+    # the input grid is untouched; later digs see the earlier cuts
+    assert z[j, i] == 0.9 and len(digs) == 3
+    assert all(0 <= d.volume <= 0.28 + 1e-12 for d in digs)
+    # nothing qualifies when the base is out of reach
+    assert rule_digs(terrain, z, box, (4.0, 40.0), count=1, drag=1.0, width=0.7, depth=0.4, floor=0.0, capacity=0.28,
+                     reach=(2.2, 5.9)) == []
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return rbf(0, 0.56, n_bases=14)
+
+
+@pytest.fixture(scope="module")
+def separate_plan(scenario):
+    return SeparatePlanner().plan(scenario)
+
+
+def test_separate_digs_sit_at_the_rule_positions(scenario, separate_plan):
+    plan = separate_plan
+    verdict = judge(scenario, plan)
+    assert verdict.valid, verdict.summary()
+    assert verdict.loaded_volume >= 0.9 * scenario.task.target_volume
+    digs = replay_grids(scenario, plan)
+    assert digs
+    areas = [r for r in plan.info["local"] if "box" in r]
+    assert areas and plan.info["areas"] == len(areas)
+    res = scenario.terrain.resolution
+    xs, ys = scenario.terrain.cell_centres()
+    for dig, z in digs:
+        end = drag_end(dig)
+        rec = next(r for r in areas if r["box"][0] - 1e-9 <= end[0] <= r["box"][1] + 1e-9
+                   and r["box"][2] - 1e-9 <= end[1] <= r["box"][3] + 1e-9)
+        box, base = tuple(rec["box"]), tuple(rec["base"])
+        rule = rule_digs(scenario.terrain, z, box, base, count=1, drag=1.0, width=0.7, depth=0.4, floor=0.0,
+                         capacity=0.28, reach=(2.2, 5.9))[0]
+        assert dig.contact == pytest.approx(rule.contact, abs=1e-9)
+        assert dig.heading == pytest.approx(rule.heading, abs=1e-9)
+        # independently of rule_digs: the drag ends on a cell centre, the highest of the area's
+        # interior (cells whose whole bucket footprint fits in the area from any bearing)
+        i, j = int(round((end[0] - scenario.terrain.origin[0]) / res - 0.5)), int(round((end[1] - scenario.terrain.origin[1]) / res - 0.5))
+        assert (xs[i], ys[j]) == pytest.approx(end, abs=1e-9)
+        pad = 1.0 + 0.35 + res
+        ix = (xs >= box[0] + pad) & (xs <= box[1] - pad)
+        iy = (ys >= box[2] + pad) & (ys <= box[3] - pad)
+        inner = [z[np.ix_(iy, ix)][k] for k in np.ndindex(int(iy.sum()), int(ix.sum()))
+                 if 2.2 <= math.dist(base, (xs[ix][k[1]], ys[iy][k[0]])) <= 5.9 - 1.0]
+        if inner:
+            assert z[j, i] >= max(inner) - 1e-12
+
+
+def test_divisions_mode_digs_that_many_areas(scenario):
+    plan = SeparatePlanner(divisions=1).plan(scenario)
+    assert plan.info["areas"] == 1 and plan.info["mode"] == "divisions=1"
+    assert 1 <= plan.info["digs"] <= 5
+    assert judge(scenario, plan).valid
+
+
+def test_stl_tamp_chooses_its_own_contacts(scenario, separate_plan):
+    plan = StlTampPlanner(global_layer=False).plan(scenario)
+    verdict = judge(scenario, plan)
+    assert verdict.valid, verdict.summary()
+    tiles = SeparatePlanner().areas(scenario)
+    offsets = []
+    for dig, z in replay_grids(scenario, plan):
+        end = drag_end(dig)
+        tile = min(tiles, key=lambda a: math.dist(a.centre, end))
+        box = (tile.centre[0] - 1, tile.centre[0] + 1, tile.centre[1] - 1, tile.centre[1] + 1)
+        rule = rule_digs(scenario.terrain, z, box, tile.base, count=1, drag=1.0, width=0.7, depth=0.4, floor=0.0,
+                         capacity=0.28, reach=(2.2, 5.9))
+        if rule:
+            offsets.append(math.dist(rule[0].contact, dig.contact))
+    assert offsets
+    assert max(offsets) > 0.05  # its NLP put the bucket elsewhere than the rule would
+    sep = {tuple(np.round(d.contact, 6)) for d, _ in replay_grids(scenario, separate_plan)}
+    assert sep != {tuple(np.round(d.contact, 6)) for d, _ in replay_grids(scenario, plan)}
