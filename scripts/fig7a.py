@@ -1,0 +1,82 @@
+"""Fig. 7a of the STL-TAMP paper from stored runs: loaded volume against total time, per method.
+
+Reads every run of ``stl-tamp`` and ``separate`` on ``paper-extensive`` (targets 4–7 m³) and on
+``paper-separate-sweep`` (the paper's division sweep, ``scripts/separate_sweep.py``) from one or
+more results databases, draws them with the leaderboard's own figure code
+(:func:`earthbench.publish.volume_time_figure`) and prints the numbers behind it: per method the
+runs, valid plans, mean loaded volume and makespan, median time per m³, the least-squares slope
+of makespan over volume, and — on the paper-extensive scenarios both planners solved — the
+median ratio of ``separate``'s time per m³ to ``stl-tamp``'s.
+
+    python scripts/fig7a.py --db earthbench.db --db separate-sweep.db --out fig7a.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pandas as pd
+
+from earthbench.publish import volume_time_figure
+from earthbench.store import load_runs
+
+SUITES = ("paper-extensive", "paper-separate-sweep")
+
+
+def label(row: pd.Series) -> str:
+    if row["planner"] == "separate":
+        div = json.loads(row["config"] or "{}").get("divisions", 0)
+        return "separate, divisions 5–12 (paper's sweep)" if div else "separate, stop at target"
+    return f"{row['planner']}, targets 4–7 m³"
+
+
+def collect(dbs: list[str]) -> pd.DataFrame:
+    frames = []
+    for db in dbs:
+        runs = load_runs(db)
+        frames.append(runs[runs["suite"].isin(SUITES) & runs["planner"].isin(["stl-tamp", "separate"])])
+    runs = pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"])
+    runs["solver"] = runs.apply(label, axis=1)
+    return runs
+
+
+def table(runs: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for solver, g in runs.groupby("solver"):
+        ok = g[g["reason"] == "ok"]
+        slope = float(np.polyfit(ok["loaded_volume"], ok["makespan_s"], 1)[0]) if len(ok) >= 2 else float("nan")
+        rows.append({"method": solver, "runs": len(g), "valid": int((g["reason"] == "ok").sum()),
+                     "volume mean m³": ok["loaded_volume"].mean(), "makespan mean s": ok["makespan_s"].mean(),
+                     "time/m³ median s": ok["time_per_m3"].median(), "slope s per m³": slope,
+                     "solve s median": g["solve_time_s"].median()})
+    return pd.DataFrame(rows)
+
+
+def paired_ratio(runs: pd.DataFrame) -> tuple[int, float]:
+    pe = runs[(runs["suite"] == "paper-extensive") & (runs["reason"] == "ok")]
+    a = pe[pe["planner"] == "separate"].set_index("scenario_digest")["time_per_m3"]
+    b = pe[pe["planner"] == "stl-tamp"].set_index("scenario_digest")["time_per_m3"]
+    both = a.index.intersection(b.index)
+    return len(both), float(np.median(a[both] / b[both])) if len(both) else float("nan")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--db", action="append", required=True, help="results database (repeatable)")
+    p.add_argument("--out", default="fig7a.png", help="figure file (default: fig7a.png)")
+    args = p.parse_args(argv)
+    runs = collect(args.db)
+    fig = volume_time_figure(runs, "STL-TAMP vs Separate (paper Fig. 7a), paper-extensive maps")
+    fig.savefig(args.out, dpi=130)
+    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.2f}".format):
+        print(table(runs).to_string(index=False))
+    n, r = paired_ratio(runs)
+    print(f"paired paper-extensive scenarios: {n}; median time-per-m³ ratio separate / stl-tamp: {r:.3f}")
+    print(f"figure: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
