@@ -189,6 +189,31 @@ def test_ctrl_c_ends_the_cases_in_flight_on_the_workers_and_stores_nothing_of_th
     assert not _case_processes(pids)
 
 
+def test_cases_cancelled_by_the_cluster_are_an_error_not_a_silent_gap(cluster, tmp_path):
+    lc, client = cluster
+    load_plugin_file(FAULTY)
+    suite = nap_suite(2)
+    cases, _ = build_cases(suite, ["t-nap"], plugins=[FAULTY])
+    pids = client.run(os.getpid)
+    ex = DaskExecutor(client)
+
+    def cancel_behind_its_back():
+        for _ in range(600):
+            if _case_processes(pids):
+                client.cancel(list(ex._futures))
+                return
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=cancel_behind_its_back, daemon=True)
+    watcher.start()
+    with Store(tmp_path / "x.db") as store:
+        store.register_suite(suite)
+        with pytest.raises(DaskError, match="cancelled by the Dask cluster.*run the same command again"):
+            run_cases(cases, store, ex)
+    watcher.join(5)
+    assert len(stored(tmp_path / "x.db")) < len(cases)
+
+
 def test_a_case_that_keeps_killing_its_worker_is_stored_as_crashed(cluster, tmp_path):
     lc, client = cluster
     load_plugin_file(DASK_PLANNERS)
