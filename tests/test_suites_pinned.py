@@ -24,6 +24,7 @@ PINNED = {
     "dem": ("5e856db285831e09db36da3d4bc7e9538095b4d270c183027760d14e1c684880", 20),
     "scale": ("15c8dca18688c5dc9235bdfc53d61affe0da5d83c613413346a6d7a843d58f63", 15),
     "standard": ("ee060f3ffea5a59bde3690940dabe22d47930d1fe85dc85a313d5a1d04d36b55", 110),
+    "paper-separate-sweep": ("2b7c6f2a2ff0652b89206f0b399c5a4e90d6b4262b6f603a5bd050cd26b6bfa8", 10),
 }
 
 
