@@ -21,10 +21,11 @@ enforce it:
 * a host-wide slot pool that chooses the cores: before it starts the case subprocess, the
   task locks (``fcntl.flock``) one lock file per core of a free group of ``budget.cores``
   cores from the worker's CPU affinity (the groups of :func:`~earthbench.runner.make_slots`).
-  The lock files live in ``$EARTHBENCH_SLOT_DIR`` (default ``<tmp>/earthbench-slots-<uid>``)
-  and are shared by every worker process of the machine, so two workers on one host never
-  pin cases to the same cores even if their ``slots`` add up to more than the host has (the
-  surplus case waits for a group to free). The kernel drops a dead worker's locks.
+  The lock files (``HOST-cpuN.lock``) live in ``$EARTHBENCH_SLOT_DIR`` (default
+  ``<tmp>/earthbench-slots-<uid>``) and are shared by every worker process of the machine, so
+  two workers on one host never pin cases to the same cores even if their ``slots`` add up to
+  more than the host has (the surplus case waits for a group to free). The kernel drops a dead
+  worker's locks.
 
 **Faults.** A worker lost mid-case (killed, out of memory, machine gone) kills its case
 subprocess with it (the child has ``PR_SET_PDEATHSIG``) and Dask runs the task again on another
@@ -46,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import socket
 import tempfile
 import threading
 import time
@@ -97,8 +99,14 @@ def slot_dir() -> str:
 def _lock_group(directory: str, group: Sequence[int]) -> list[int] | None:
     """Lock one file per core of ``group`` without waiting; the descriptors, or None if one is taken."""
     held: list[int] = []
+    host = socket.gethostname()  # a slot directory on a shared file system still locks per machine
     for c in group:
-        fd = os.open(os.path.join(directory, f"cpu{c}.lock"), os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fd = os.open(os.path.join(directory, f"{host}-cpu{c}.lock"), os.O_RDWR | os.O_CREAT, 0o600)
+        except OSError:
+            for h in held:
+                os.close(h)
+            raise
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
