@@ -432,6 +432,8 @@ class LoaderPlanConfig:
     max_penetration: float = 4.0
     max_tries: int = 40
     max_cycles: int = 60
+    dump_sector: float = math.radians(160.0)
+    """Dump poses lie within this sector around the bearing from the truck to the charge's end."""
 
 
 @dataclass
@@ -479,7 +481,10 @@ class CycleBuilder:
         if ch is None:
             return None
         dur = max(self.spec.min_charge_time, ch.penetration / (self.spec.penetration_speed * MARGIN)) + 1e-6
-        to_truck = search_routes(self.sc, ch.z, Pose(*ch.end), 0.0, self.rays, self.d_lo, 14.0, self.d_hi, self.d_target, self.opts, self.base)
+        # dump poses on the side of the truck the loader comes from leave room to back out again
+        bearing = math.atan2(ch.end[1] - self.sc.machines.truck_pose.y, ch.end[0] - self.sc.machines.truck_pose.x)
+        side = np.abs(np.angle(np.exp(1j * (np.arctan2(self.rays[:, 3], self.rays[:, 2]) - bearing)))) <= self.cfg.dump_sector / 2
+        to_truck = search_routes(self.sc, ch.z, Pose(*ch.end), 0.0, self.rays[side], self.d_lo, 14.0, self.d_hi, self.d_target, self.opts, self.base)
         if to_truck is None:
             return None
         ray = np.array([[ex, ey, -math.cos(eyaw), -math.sin(eyaw)]])
