@@ -348,6 +348,10 @@ def render_all(jobs: list[tuple[str, str, tuple[Any, ...]]], workers: int | None
 def _save(fig, base: Path) -> tuple[Path, Path, bytes]:
     """Write ``base.png`` and ``base.svg``; return the paths and the PNG bytes."""
     plt = _plt()
+    engine = fig.get_layout_engine()
+    if engine is not None:  # lay out once, not once per format (the same pixels, a fifth less time)
+        engine.execute(fig)
+        fig.set_layout_engine("none")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     png = buf.getvalue()
