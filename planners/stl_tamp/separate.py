@@ -181,15 +181,24 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
     if not ok.any():
         return []
     out: list[RuleDig] = []
+    usable = ok.copy()
     for _ in range(count):
-        heights = np.where(ok, z[np.ix_(iy, ix)], -np.inf)
-        j, i = np.unravel_index(int(np.argmax(heights)), heights.shape)
-        contact = (float(cxs[j, i]), float(cys[j, i]))
+        # the highest usable point; a contact that sits in a hole at the floor cannot cut (the
+        # cut level is the contact's height minus the depth), so the next highest is taken
+        while usable.any():
+            heights = np.where(usable, z[np.ix_(iy, ix)], -np.inf)
+            j, i = np.unravel_index(int(np.argmax(heights)), heights.shape)
+            contact = (float(cxs[j, i]), float(cys[j, i]))
+            d = depth
+            if floor is not None:
+                d = min(d, terrain.height_at(contact[0], contact[1], z) - floor - 1e-7)
+            if d > 1e-3:
+                break
+            usable[j, i] = False
+        else:
+            break
         heading = math.atan2(float(uy[j, i]), float(ux[j, i]))
-        level = cut_level(terrain, z, contact, depth)
-        if floor is not None:
-            level = max(level, floor)
-        vol = apply_cut(terrain, z, contact, heading, width, drag, level, capacity)
+        vol = apply_cut(terrain, z, contact, heading, width, drag, cut_level(terrain, z, contact, d), capacity)
         out.append(RuleDig((float(X[j, i]), float(Y[j, i])), contact, heading, vol))
     return out
 
@@ -227,15 +236,20 @@ class SeparatePlanner(Planner):
         """The local areas (W_local squares of the dig area holding material) in visiting order."""
         c, exc = self.config, scenario.machines.excavator
         zz = scenario.terrain.z if z is None else z
-        tiles = candidate_areas(scenario, zz, c.w_local, c.dig_depth, c.m_local * exc.bucket_capacity, c.base_offset,
-                                c.truck_offset)
+        tiles = candidate_areas(scenario, zz, self.side(scenario), c.dig_depth, c.m_local * exc.bucket_capacity,
+                                c.base_offset, c.truck_offset)
         start = scenario.machines.excavator_pose
         return nearest_order(tiles, (start.x, start.y))
+
+    def side(self, scenario: Scenario) -> float:
+        """W_local, or less where the dig area is narrower (paper-switch's 2.0 × 1.75 m area is one local area)."""
+        xmin, xmax, ymin, ymax = site_box(scenario)
+        return min(self.config.w_local, xmax - xmin, ymax - ymin)
 
     def rule(self, scenario: Scenario, z: np.ndarray, area: Area) -> list[RuleDig]:
         """The rule's m_l digs for ``area`` on grid ``z`` (see :func:`rule_digs`)."""
         c, exc = self.config, scenario.machines.excavator
-        return rule_digs(scenario.terrain, z, area_box(area, c.w_local), area.base, count=c.m_local,
+        return rule_digs(scenario.terrain, z, area_box(area, self.side(scenario)), area.base, count=c.m_local,
                          drag=min(c.drag_length, exc.max_drag_length), width=exc.bucket_width,
                          depth=min(c.dig_depth, exc.max_cut_depth), floor=scenario.site.floor,
                          capacity=exc.bucket_capacity,
@@ -260,9 +274,11 @@ class SeparatePlanner(Planner):
         joints = (0.3, -1.5)
         n_areas = 0
         limit = c.max_areas if c.divisions == 0 else min(c.divisions, c.max_areas)
+        pass_loaded = 0.0
         while n_areas < limit and target - st.loaded > c.volume_tol and truck_cap - st.loaded > c.volume_tol:
-            if not queue:  # every area dug once: go round again on the lowered grid
-                queue = [a for a in self.areas(scenario, st.z)]
+            if not queue:  # every area dug once: go round again on the lowered grid, if the last round loaded
+                queue = [a for a in self.areas(scenario, st.z)] if pass_loaded > c.volume_tol else []
+                pass_loaded = 0.0
                 if not queue:
                     break
             area = queue.pop(0)
@@ -271,7 +287,9 @@ class SeparatePlanner(Planner):
                 trace.areas.append({"area": list(area.centre), "skipped": "no material the rule can reach"})
                 continue
             goal = queue[0].base if queue else area.base
+            before = st.loaded
             joints = self._local(scenario, st, conv, area, digs, goal, target, joints, box, trace)
+            pass_loaded += st.loaded - before
             n_areas += 1
         makespan = max((a.t_end for a in st.actions), default=0.0)
         return Plan(
@@ -336,7 +354,7 @@ class SeparatePlanner(Planner):
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
         sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
-        rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, c.w_local)),
+        rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, self.side(scenario))),
                                "base": list(area.base), "status": sol.status, "iterations": sol.iterations,
                                "rounds": rounds, "guess_time": float(nlp.node_times(*self._durations(nlp, w0, s0))[-1]),
                                "planned_time": sol.t_final,
