@@ -88,7 +88,7 @@ def test_suite_filter_and_unknown_suite(db, tmp_path):
 
 
 def test_cli_leaderboard(db, tmp_path, capsys):
-    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "lb"), "--no-terrain"]) == 0
+    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "lb"), "--no-terrain", "--jobs", "1"]) == 0
     assert "24 run(s), 1 table(s)" in capsys.readouterr().err
     assert len(list((tmp_path / "lb" / "figures").iterdir())) == 4
 
@@ -133,6 +133,20 @@ def test_cli_compare_in_one_store(db, capsys, tmp_path):
     assert t.loc["volume_ratio", "median_diff"] < 0
     assert t.loc["volume_ratio", "p_value"] == pytest.approx(2 / 64)
     assert t.loc["volume_ratio", "verdict"] == "B worse"
+
+
+def test_cli_compare_two_stores(tmp_path, capsys):
+    suite = suite_of(2)
+    before = fill_store(tmp_path / "before.db", suite, [Behaviour(ref("mine", "1"), keep=0.5)])
+    after = fill_store(tmp_path / "after.db", suite, [Behaviour(ref("mine", "2"))])
+    assert main(["compare", str(before), str(after), "--metric", "volume_ratio", "--metric", "digs"]) == 0
+    out = capsys.readouterr().out
+    assert "A: mine 1" in out and "B: mine 2" in out and "4 shared scenario(s)" in out
+    line = next(x for x in out.splitlines() if x.startswith("volume_ratio"))
+    assert "0.125" in line and "no significant difference" in line  # 4 pairs, all B > A: exact p = 2 / 2**4
+    assert "success: A 0%, B 100%" in out and "McNemar p = 0.125" in out
+    assert main(["compare", str(before), str(after), "--metric", "volume_ratio", "--alpha", "0.2"]) == 0
+    assert "B better" in next(x for x in capsys.readouterr().out.splitlines() if x.startswith("volume_ratio"))
 
 
 def test_cli_compare_errors(db, capsys):
