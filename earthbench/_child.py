@@ -18,6 +18,7 @@ planner's reach.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import json
 import os
 import resource
@@ -33,17 +34,35 @@ def _cpu() -> float:
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def load_planner_class(source: str, name: str) -> type:
-    """``module:qualname`` → import it; a ``.py`` path → load it as a plugin file, then look up ``name``."""
+def load_planner_class(source: str, name: str, plugins: list[str] | tuple[str, ...] = ()) -> type:
+    """Import exactly the planner's code, without loading every registered plugin.
+
+    ``module:qualname`` is imported; a ``.py`` path is executed as a module and searched for
+    the Planner subclass called ``name``; ``registry`` loads ``plugins`` and looks ``name`` up.
+    (Loading the whole registry would import every installed planner's dependencies into
+    every case, seconds of start-up that have nothing to do with the planner under test.)
+    """
+    from earthbench.planner import Planner
     from earthbench.registry import PLANNERS, load_plugin_file
 
     if source.endswith(".py"):
-        load_plugin_file(source)
-        return PLANNERS.get(name)
+        mod_name = f"earthbench_plugin_{os.path.splitext(os.path.basename(source))[0]}"
+        spec = importlib.util.spec_from_file_location(mod_name, source)
+        if spec is None or spec.loader is None:
+            raise ImportError(f"{source} is not an importable Python file")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        spec.loader.exec_module(module)
+        for obj in vars(module).values():
+            if isinstance(obj, type) and issubclass(obj, Planner) and obj.__module__ == mod_name and obj.name == name:
+                return obj
+        return PLANNERS.get(name)  # registered by a decorator under another class name
     if source == "registry":
+        for plugin in plugins:
+            load_plugin_file(plugin)
         return PLANNERS.get(name)
-    module, _, qual = source.partition(":")
-    obj: Any = importlib.import_module(module)
+    module_name, _, qual = source.partition(":")
+    obj: Any = importlib.import_module(module_name)
     for part in qual.split("."):
         obj = getattr(obj, part)
     return obj
@@ -60,12 +79,9 @@ def main(case_file: str, fd: int) -> None:
         with open(case_file) as f:
             doc = json.load(f)
         from earthbench.plan import Plan
-        from earthbench.registry import load_plugin_file
         from earthbench.world import Scenario
 
-        for plugin in doc.get("plugins", []):
-            load_plugin_file(plugin)
-        cls = load_planner_class(doc["source"], doc["name"])
+        cls = load_planner_class(doc["source"], doc["name"], doc.get("plugins", ()))
         scenario = Scenario.from_dict(doc["scenario"])
         overrides = doc.get("overrides", {})
         del doc
