@@ -324,6 +324,8 @@ class SeparatePlanner(Planner):
                box: tuple[float, float, float, float], trace: _Trace) -> tuple[float, float]:
         c, exc, trk = self.config, scenario.machines.excavator, scenario.machines.truck
         t_wall = time.perf_counter()
+        # fewer rule digs than phases (the area ran out of usable contacts): idle phases, η = 0
+        digs = list(digs) + [dataclasses.replace(digs[-1], volume=0.0)] * (c.m_local - len(digs))
         stl = StlTampPlanner(self._stl_config())
         shape = stl.local_shape(scenario)
         nlp, hit = get_nlp(shape, scenario, box)
