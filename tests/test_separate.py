@@ -121,10 +121,14 @@ def test_separate_digs_sit_at_the_rule_positions(scenario, separate_plan):
             assert z[j, i] >= max(inner) - 1e-12
 
 
-def test_divisions_mode_digs_that_many_areas(scenario):
-    plan = SeparatePlanner(divisions=1).plan(scenario)
+def test_divisions_mode_digs_that_many_areas_and_idles_missing_digs(scenario):
+    planner = SeparatePlanner(divisions=1)
+    full = planner.rule
+    planner.rule = lambda sc, z, area: full(sc, z, area)[:2]  # an area with only two usable contacts
+    plan = planner.plan(scenario)
     assert plan.info["areas"] == 1 and plan.info["mode"] == "divisions=1"
-    assert 1 <= plan.info["digs"] <= 5
+    assert 1 <= plan.info["digs"] <= 2
+    assert plan.info["local"][0]["eta"][2:] == [0.0, 0.0, 0.0]
     assert judge(scenario, plan).valid
 
 
