@@ -178,6 +178,7 @@ class Stamp:
     first: str
     last: str
     generated: str
+    n_models: int = 1
 
     def lines(self) -> list[str]:
         commits = ", ".join(self.commits[:3]) + (f" and {len(self.commits) - 3} more" if len(self.commits) > 3 else "")
@@ -185,7 +186,7 @@ class Stamp:
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
             f"project commit: {commits or 'unknown'}",
-            f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if len(self.cpus) > 1 else ""),
+            f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
         ]
 
@@ -202,7 +203,8 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str) -> Stamp:
     started, finished = uniq("started_at"), uniq("finished_at")
     thr = runs["threshold"].dropna()
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
-                 cpus, started[0] if started else "", finished[-1] if finished else "", generated)
+                 cpus, started[0] if started else "", finished[-1] if finished else "", generated,
+                 max(1, len(uniq("cpu_model"))))
 
 
 # -- figures ---------------------------------------------------------------------------------------
