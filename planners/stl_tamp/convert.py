@@ -279,6 +279,42 @@ class Converter:
             return best
         return None
 
+    def _bisect(self, st: SimState, contact: tuple[float, float], heading: float, depth: float, remaining: float) -> tuple[float, float]:
+        lo, hi = 0.0, depth
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if self.cut_volume(st, contact, heading, mid) >= remaining:
+                hi = mid
+            else:
+                lo = mid
+        hi = max(hi, 1e-3)  # where the ground rises along the drag even a skim overshoots
+        return hi, self.cut_volume(st, contact, heading, hi)
+
+    def exact_last_cut(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
+                       remaining: float) -> tuple[tuple[float, float], float]:
+        """Contact and depth whose cut is closest to ``remaining`` (not below it when possible):
+        the NLP's contact first, then the repair neighbourhood when a skim there overshoots."""
+        d, v = self._bisect(st, contact, heading, depth, remaining)
+        best = (abs(v - remaining), contact, d)
+        if v <= remaining * 1.002 or self.repair <= 0:
+            return contact, d
+        ux, uy = math.cos(heading), math.sin(heading)
+        steps = (-self.repair, -self.repair / 2, 0.0, self.repair / 2, self.repair)
+        for a in steps:
+            for c in steps:
+                pt = (contact[0] + a * ux - c * uy, contact[1] + a * uy + c * ux)
+                if self.dig_ok(st, pt, heading) is not None:
+                    continue
+                dmax = self.max_depth(st, pt)
+                if dmax <= 1e-3 or self.cut_volume(st, pt, heading, dmax) < remaining:
+                    continue
+                d2, v2 = self._bisect(st, pt, heading, dmax, remaining)
+                if abs(v2 - remaining) < best[0]:
+                    best = (abs(v2 - remaining), pt, d2)
+                if best[0] <= remaining * 0.002:
+                    return best[1], best[2]
+        return best[1], best[2]
+
     def dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, remaining: float) -> float:
         """Dig at ``contact`` (or its repair) and dump into the truck; returns the loaded volume (0: skipped)."""
         found = self.best_contact(st, contact, heading)
@@ -286,15 +322,7 @@ class Converter:
             return self._skip("no_material")
         contact, depth, vol = found
         if vol > remaining:  # the last bucket: bisect the depth to meet the target
-            lo, hi = 0.0, depth
-            for _ in range(50):
-                mid = 0.5 * (lo + hi)
-                if self.cut_volume(st, contact, heading, mid) >= remaining:
-                    hi = mid
-                else:
-                    lo = mid
-            # where the ground rises along the drag even a skim overshoots: take the thinnest cut
-            depth = max(hi, 1e-3)
+            contact, depth = self.exact_last_cut(st, contact, heading, depth, remaining)
         es = self.exc_spec
         dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)

@@ -454,6 +454,40 @@ class PhaseNLP:
         return self._solution(w, params, ok, status, int(st.get("iter_count", -1)), dt, float(res["f"]),
                               {"max_violation": viol})
 
+    def reseed(self, sol: Solution, w0: np.ndarray, params: np.ndarray, eta_on: float, eta: float = 0.6) -> np.ndarray | None:
+        """A restart for a solve that stopped short of its volume with idle phases.
+
+        The disjunction (5) has a trap: once a phase's η has fallen to ε its load spec no longer
+        binds, its arm drifts away from the truck, and raising η again would violate
+        ``ρ^{φ1 ∧ φ_D}`` — IPOPT then reports a local optimum that misses the target volume.
+        The restart takes the solution and gives the idle phases back their initial-guess arm
+        motion and ``η = eta``. Returns None when there is nothing to reseed.
+        """
+        vt = float(params[self.K + 2 + NX])
+        if float(np.sum(sol.V)) >= vt - 2 * self.shape.eps_v:
+            return None
+        idle = [i for i in range(1, self.m1) if sol.eta[i] < eta_on]
+        if not idle:
+            return None
+        sl = self._slices()
+        w = sol.info["w"].copy()
+        X0 = w0[sl["X"]].reshape(self.N, NX)
+        X = w[sl["X"]].reshape(self.N, NX)
+        U0 = w0[sl["U"]].reshape(self.N, NU)
+        U = w[sl["U"]].reshape(self.N, NU)
+        e = w[sl["eta"]]
+        for i in idle:
+            ks = slice(i * self.n - 1 if i > 0 else 0, (i + 1) * self.n)
+            X[ks, 3:6] = X0[ks, 3:6]
+            U[i * self.n:(i + 1) * self.n, 2:5] = U0[i * self.n:(i + 1) * self.n, 2:5]
+            e[i] = eta
+        w[sl["X"]] = X.reshape(-1)
+        w[sl["U"]] = U.reshape(-1)
+        w[sl["eta"]] = e
+        for key in ("px", "py", "psi"):
+            w[sl[key]][idle] = w0[sl[key]][idle]
+        return w
+
     def _solution(self, w: np.ndarray, params: np.ndarray, ok: bool, status: str, iters: int, dt: float, cost: float,
                   info: dict[str, Any]) -> Solution:
         s0 = params[self.K + 2:self.K + 2 + NX]

@@ -88,6 +88,7 @@ class Config:
     max_areas: int = 40
     volume_tol: float = 1e-4
     min_local_target: float = 0.8  # in buckets
+    reseed: bool = True
     ipopt_tol: float = 1e-4
     accept_feasible: float = 1e-3  # accept a capped solve whose iterate violates no constraint by more
 
@@ -272,8 +273,17 @@ class StlTampPlanner(Planner):
         cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
         sol = nlp.solve(params, w0, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time, accept_feasible=c.accept_feasible,
                         options=self._ipopt_options())
+        n_iter, t_solve = sol.iterations, sol.solve_time_s
+        if sol.success and c.reseed:
+            w1 = nlp.reseed(sol, w0, params, c.eta_on)
+            if w1 is not None:  # one bounded restart out of the disjunction trap (see PhaseNLP.reseed)
+                sol2 = nlp.solve(params, w1, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
+                                 accept_feasible=c.accept_feasible, options=self._ipopt_options())
+                n_iter, t_solve = n_iter + sol2.iterations, t_solve + sol2.solve_time_s
+                if sol2.success and float(np.sum(sol2.V)) > float(np.sum(sol.V)):
+                    sol = sol2
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
-                               "status": sol.status, "iterations": sol.iterations, "solve_time_s": sol.solve_time_s,
+                               "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
                                "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),
                                "model_volume": float(np.sum(sol.V))}
         if not sol.success:
