@@ -18,8 +18,11 @@ rank dig candidates; the rest lives here:
   reverse lengths/curvatures and target rays is solved in closed form at once (numpy), sorted
   by duration, and the fastest few are checked for the traversable step, the truck clearance
   and the map bounds with the referee's own functions.
+- :func:`search_dubins` — the return leg may also back out (straight and one arc) and then
+  follow a forward Dubins path (arc, straight, arc) into the entry; the faster of the two
+  feasible returns is used. The leg to the truck is always two arcs (the paper's constraint).
 - :class:`CycleBuilder` — turns a ranked list of candidates into charge, reverse out, two arcs
-  to the truck, dump, return; the first candidate whose approach, charge and route to the truck
+  to the truck, dump, return; the first candidate whose charge, route to the truck and approach
   are all feasible wins.
 
 All moves are sampled finely enough (≤ 0.25 m and ≤ 0.08 rad per step) that the referee's
@@ -488,11 +491,14 @@ class CycleBuilder:
         if to_truck is None:
             return None
         ray = np.array([[ex, ey, -math.cos(eyaw), -math.sin(eyaw)]])
-        approach = search_routes(self.sc, self.z, self.pose, self.t, ray, 0.0, 12.0, 0.0, 0.0, self.opts, self.base)
-        if approach is None:
-            approach = search_dubins(self.sc, self.z, self.pose, self.t, entry, self.opts, self.base)
-        if approach is None:
+        routes = [
+            search_routes(self.sc, self.z, self.pose, self.t, ray, 0.0, 12.0, 0.0, 0.0, self.opts, self.base),
+            search_dubins(self.sc, self.z, self.pose, self.t, entry, self.opts, self.base),
+        ]
+        routes = [r for r in routes if r is not None]
+        if not routes:
             return None
+        approach = min(routes, key=lambda r: r.duration)  # the two-arc return, or a faster Dubins one
         t1 = float(approach.t[-1])
         entry = (ex, ey, float(approach.p[-1, 2]))
         charge = Charge("loader", t1, t1 + dur, entry, ch.penetration)
