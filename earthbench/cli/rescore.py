@@ -16,7 +16,7 @@ from .run import default_db
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("rescore", help="re-run the referee on stored plans", description=__doc__,
+    p = sub.add_parser("rescore", help="re-run the referee on stored plans", description=__doc__.replace("``", "`"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database")
     p.add_argument("--suite", help="only this suite")

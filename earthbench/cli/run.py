@@ -4,6 +4,12 @@ Cases already in the database are skipped, so the same command resumes a killed 
 ``--rerun`` runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored.
 """
 
+HELP = """Run every (planner, scenario) case of a suite, each in a fresh process pinned to its own
+2-core slot under the suite's wall and memory budget, and store each result as it finishes.
+
+Cases already in the database are skipped, so the same command resumes a killed run;
+--rerun runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored."""
+
 from __future__ import annotations
 
 import argparse
@@ -27,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "run",
         help="run a suite and store the results (resumes: stored cases are skipped)",
-        description=__doc__,
+        description=HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("suite", help="suite name (see `earthbench suites`) or path of a suite TOML file")
