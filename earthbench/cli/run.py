@@ -4,7 +4,6 @@ Cases already in the database are skipped, so the same command resumes a killed 
 ``--rerun`` runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored.
 """
 
-
 from __future__ import annotations
 
 import argparse
@@ -19,12 +18,12 @@ from ..store import DEFAULT_DB, Store, summary_rows
 from ..suite import load_suite, parse_seed_range
 from ._common import add_plugin_arg, load_plugins
 
-
 HELP = """Run every (planner, scenario) case of a suite, each in a fresh process pinned to its own
 2-core slot under the suite's wall and memory budget, and store each result as it finishes.
 
 Cases already in the database are skipped, so the same command resumes a killed run;
 --rerun runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored."""
+
 
 def default_db() -> str:
     return os.environ.get("EARTHBENCH_DB", DEFAULT_DB)
