@@ -133,7 +133,7 @@ def _short_tb() -> str:
 BOOTSTRAP = """
 import os, sys, resource
 cores = [int(c) for c in sys.argv[3].split(",") if c]
-if cores:
+if cores and hasattr(os, "sched_setaffinity"):  # Linux; elsewhere only the thread caps apply
     os.sched_setaffinity(0, cores)
 mem = int(sys.argv[4])
 if mem > 0:

@@ -608,7 +608,9 @@ def make_slots(cores_per_case: int, jobs: int | None = None, allowed: Iterable[i
 
     With fewer cores than a case asks for, one slot gets all of them.
     """
-    cpus = sorted(allowed if allowed is not None else os.sched_getaffinity(0))
+    if allowed is None:
+        allowed = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else range(os.cpu_count() or 1)
+    cpus = sorted(allowed)
     n = max(1, len(cpus) // max(1, cores_per_case))
     if jobs is not None:
         n = max(1, min(n, jobs))
