@@ -58,7 +58,9 @@ def cluster(tmp_path_factory):
     """Two worker processes with one slot each; a lost task is tried on at most two workers."""
     slots = tmp_path_factory.mktemp("slots")
     env = {"EARTHBENCH_SLOT_DIR": str(slots), "EARTHBENCH_TEST_NAP": "1.0"}
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+    # a restarted worker may take long to come back on a loaded machine: keep its nanny meanwhile
+    config = {"distributed.scheduler.allowed-failures": 1, "distributed.deploy.lost-worker-timeout": "300s"}
+    with dask.config.set(config):
         with distributed.LocalCluster(
             n_workers=2, threads_per_worker=1, processes=True, resources={"slots": 1},
             dashboard_address=":0", env=env,
@@ -147,7 +149,7 @@ def test_a_worker_killed_mid_case_still_stores_every_case_exactly_once(cluster, 
     # the case process of the killed worker died with it
     _, child = killed[0]
     assert not child.is_running() or child.status() == psutil.STATUS_ZOMBIE
-    client.wait_for_workers(2, timeout=30)  # the nanny restarted the worker
+    client.wait_for_workers(2, timeout=120)  # the nanny restarted the worker
 
 
 def _case_processes(pids: dict[str, int]) -> list[psutil.Process]:
@@ -225,7 +227,7 @@ def test_a_case_that_keeps_killing_its_worker_is_stored_as_crashed(cluster, tmp_
     assert report.counts == {"crashed": 1} and report.stored == 1
     rows = {r["planner"]: r for r in stored(tmp_path / "c.db").values()}
     assert rows["t-kill-worker"]["reason"] == "crashed" and "died" in rows["t-kill-worker"]["error"]
-    client.wait_for_workers(2, timeout=30)
+    client.wait_for_workers(2, timeout=120)
 
 
 def test_a_task_that_raises_is_recorded_as_error(cluster):
