@@ -447,7 +447,11 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
 
 
 def summary_rows(store: Store, suite: str, planners: Iterable[str] | None = None) -> list[dict[str, Any]]:
-    """Per (planner, version, config) counts and central values over a suite's scenarios."""
+    """Per (planner, version, config) counts and central values over a suite's scenarios.
+
+    ``success`` is the fraction of the suite's scenarios solved (a scenario without a run
+    counts as a failure, as in the leaderboard); ``runs``/``of`` show the coverage.
+    """
     import statistics
 
     ver, members = _suite_view(store, suite)
@@ -471,7 +475,7 @@ def summary_rows(store: Store, suite: str, planners: Iterable[str] | None = None
         success = sum(1 for r in ok if r["volume_ratio"] is not None and r["volume_ratio"] >= ver["threshold"])
         out.append({
             "planner": name, "version": version, "config_hash": chash, "runs": len(rows), "of": len(members),
-            "success": success / len(rows), "counts": counts,
+            "success": success / len(members), "counts": counts,  # a missing run counts as a failure
             "volume_ratio_mean": statistics.fmean(vr) if vr else None,
             "volume_ratio_sd": statistics.stdev(vr) if len(vr) > 1 else None,
             "time_per_m3_median": statistics.median(tpm) if tpm else None,
