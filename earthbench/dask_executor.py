@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import os
 import socket
 import tempfile
@@ -283,9 +284,11 @@ class DaskExecutor:
         lost = 0
         todo = iter(cases)
         ac = distributed.as_completed([], with_results=False)
+        serial = itertools.count()
 
         def submit(case: Case) -> None:
-            key = f"earthbench-{case.planner.name}-{case.scenario.digest[:12]}-{self.run_id}"
+            p = case.planner  # a readable task key (the dashboard shows it), unique within the run
+            key = f"earthbench-{p.name}-{case.scenario.digest[:12]}-{p.config_hash[:8]}-{self.run_id}-{next(serial)}"
             fut = self.client.submit(
                 run_on_worker, case, self.run_id, self.startup_s,
                 key=key, pure=False, resources=restrictions, retries=0,
