@@ -88,6 +88,9 @@ class SinghCannonBackhoeConfig:
     """Spacing (m) of the candidate stations when the excavator must move."""
     stations_tried: int = 10
     """Best-scored stations checked with the refined planner before relaxing V_min."""
+    station_buckets: float = 8.0
+    """Material in reach counts in a station's score up to the larger of 1.5 × what is still
+    needed and this many buckets."""
     travel_value: float = 0.035
     """m³ of reachable material worth one second of travel when choosing a station."""
     depleted_weight: float = 0.25
@@ -130,7 +133,7 @@ class SinghCannonBackhoe(Planner):
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.0"
+    version = "1.1"
     tracks = ("backhoe",)
     Config = SinghCannonBackhoeConfig
 
@@ -393,11 +396,35 @@ class Session:
             self.truck = end
         return path[-1][0]
 
-    def bring_truck(self, route: list[tuple[float, float]], t0: float) -> None:
-        t = max(t0, self.truck_ready)
+    def truck_path(self, route: list[tuple[float, float]], t0: float) -> list[tuple[float, float, float, float]]:
+        """Samples of the truck driving through ``route`` from its current pose, starting at ``t0``."""
+        pose, t = self.truck, t0
+        samples = [(t0, pose.x, pose.y, pose.yaw)]
         for p in route:
-            t = self.drive("truck", p, t)
-        self.truck_ready = t
+            seg = turn_drive_turn(pose, p, t, self.truck_spec.travel_speed, self.truck_spec.yaw_rate)
+            samples.extend(seg[1:])
+            pose, t = Pose(seg[-1][1], seg[-1][2], seg[-1][3]), seg[-1][0]
+        return samples
+
+    def apart(self, a: list, b: list) -> bool:
+        """Whether two sample paths stay the clearance apart at every instant (checked every 0.05 s
+        and at every sample; each machine waits at its path's ends)."""
+        A, B = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        t0, t1 = min(A[0, 0], B[0, 0]), max(A[-1, 0], B[-1, 0])
+        ts = np.unique(np.concatenate([A[:, 0], B[:, 0], np.arange(t0, t1, 0.05), [t1]]))
+        dx = np.interp(ts, A[:, 0], A[:, 1]) - np.interp(ts, B[:, 0], B[:, 1])
+        dy = np.interp(ts, A[:, 0], A[:, 2]) - np.interp(ts, B[:, 0], B[:, 2])
+        return bool(np.hypot(dx, dy).min() >= self.spec.clearance + 0.05)
+
+    def add_truck_path(self, samples: list) -> None:
+        if len(samples) < 2:
+            return
+        self.actions.append(Move("truck", tuple(samples)))
+        self.truck = Pose(samples[-1][1], samples[-1][2], samples[-1][3])
+        self.truck_ready = samples[-1][0]
+
+    def bring_truck(self, route: list[tuple[float, float]], t0: float) -> None:
+        self.add_truck_path(self.truck_path(route, max(t0, self.truck_ready)))
 
     # -- relocation ---------------------------------------------------------------------------------
     def stations(self) -> tuple[np.ndarray, np.ndarray]:
@@ -428,7 +455,7 @@ class Session:
     def relocate(self, v_min: float) -> bool:
         e = self.spec
         st, reach = self.stations()
-        need = max(1.5 * (self.sc.task.target_volume - self.loaded), 4 * self.cap)
+        need = max(1.5 * (self.sc.task.target_volume - self.loaded), self.cfg.station_buckets * self.cap)
         dx, dy = st[:, 0] - self.base.x, st[:, 1] - self.base.y
         dist = np.hypot(dx, dy)
         bearing = np.arctan2(dy, dx)
@@ -460,12 +487,20 @@ class Session:
             route = self.truck_route(pose)
             if route is None:
                 continue
-            t_end = self.drive("excavator", goal, self.t)
-            self.events.append({"event": "move", "t": self.t, "to": list(goal), "regions": len(regions)})
-            self.t = t_end
+            # the truck drives at the same time when the two stay the clearance apart throughout,
+            # else once the excavator has arrived (its route keeps clear of the new station)
+            t0 = max(self.t, self.truck_ready)
+            epath = turn_drive_turn(self.base, goal, t0, e.travel_speed, e.yaw_rate)
+            tpath = self.truck_path(route, t0) if route else []
+            if tpath and not self.apart(epath, tpath):
+                tpath = self.truck_path(route, epath[-1][0])
+            if len(epath) > 1:
+                self.actions.append(Move("excavator", tuple(epath)))
+                self.base = Pose(epath[-1][1], epath[-1][2], epath[-1][3])  # ``turn`` is relative
+            self.events.append({"event": "move", "t": t0, "to": list(goal), "regions": len(regions)})
+            self.t = epath[-1][0]
             self.station += 1
-            if route:
-                self.bring_truck(route, self.t)
+            self.add_truck_path(tpath)
             self.regions, self.ptr = regions, idx
             return True
         return False
@@ -474,9 +509,6 @@ class Session:
     def run(self) -> Plan:
         sc = self.sc
         target = sc.task.target_volume
-        route = self.truck_route(self.base)
-        if route:
-            self.bring_truck(route, 0.0)
         fills = (self.cfg.fill_min,) + tuple(f for f in self.cfg.relax_fills if f < self.cfg.fill_min)
         level = 0
         self.v_min = fills[0] * self.cap
