@@ -17,7 +17,9 @@ above the base level**: the floor (design grade), or without a floor the initial
 under the loader's starting pose. Every point of the axle's path (moves, and a charge after
 its cut) is densified to half a cell and the cell containing it must not stand more than
 ``max_step`` above the base level — so the loader drives on the floor and onto the pile only
-where its bucket has cut it down; points off the map are taken as level ground.
+where its bucket has cut it down; points off the map are taken as level ground. The raised
+bucket ahead of the axle is not checked against the pile during moves (it is carried above
+the material), only the axle's path.
 A loader dump needs the truck still, the cutting edge within ``dump_reach`` of the truck's
 loading circle, the truck's centre within 45° of the loader's heading, and ``min_dump_time``.
 Loader–truck clearance is checked like the excavator's.
