@@ -11,10 +11,23 @@ import time
 from pathlib import Path
 
 
+import pytest
+
 from earthbench.cli import main
 from earthbench.store import load_runs
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
+
+
+@pytest.fixture(autouse=True)
+def _forget_test_planners():
+    """Planners a test loads must not leak into later tests' default planner lists."""
+    from earthbench.registry import PLANNERS
+
+    before = set(PLANNERS.names())
+    yield
+    for name in set(PLANNERS.names()) - before:
+        PLANNERS.unregister(name)
 SUITE = """
 name = "cli"
 track = "backhoe"

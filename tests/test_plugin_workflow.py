@@ -15,6 +15,17 @@ from earthbench.errors import EarthbenchError
 from earthbench.store import load_runs
 
 
+@pytest.fixture(autouse=True)
+def _forget_test_planners():
+    """Planners a test loads must not leak into later tests' default planner lists."""
+    from earthbench.registry import PLANNERS
+
+    before = set(PLANNERS.names())
+    yield
+    for name in set(PLANNERS.names()) - before:
+        PLANNERS.unregister(name)
+
+
 def test_new_planner_as_a_plugin_file(tmp_path, capsys):
     pkg = tmp_path / "pkg"
     assert main(["new-planner", "tutorial-demo", "--dir", str(pkg)]) == 0

@@ -17,6 +17,17 @@ from earthbench.suite import parse_suite
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 
 
+@pytest.fixture(autouse=True)
+def _forget_test_planners():
+    """Planners a test loads must not leak into later tests' default planner lists."""
+    from earthbench.registry import PLANNERS
+
+    before = set(PLANNERS.names())
+    yield
+    for name in set(PLANNERS.names()) - before:
+        PLANNERS.unregister(name)
+
+
 def tiny_suite(wall_s: float = 20.0, memory_mb: int = 1024, seeds: str = "0-0", name: str = "tiny"):
     return parse_suite(
         f"""
