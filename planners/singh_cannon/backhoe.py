@@ -20,12 +20,17 @@ Coarse planner (:meth:`Session.coarse_plan`)
     bottom; regions holding less than ``V_min`` are dropped. Regions are visited band by band
     (top first), lanes left to right, and the refined planner digs in the current region until
     it finds no feasible dig, then moves on. When no region is left, the excavator moves: the
-    planner scores stations on a grid by the material they reach (capped at what is still
-    needed) minus a travel cost, and drives (``earthbench.motion.turn_drive_turn``) to the best
-    station from which the refined planner finds a feasible dig; a new coarse plan is made there.
-    The truck follows when needed to a spot within dump reach, clear of the excavator by the
-    clearance along its whole path (detouring round the excavator if necessary), preferring
-    spots outside the dig area.
+    planner scores stations on a ``station_step`` grid by the material they reach (an FFT
+    convolution of the excess above the floor with the reach annulus; material around stations
+    already exhausted counts ``depleted_weight``; counted up to max(1.5 × what is still needed,
+    ``station_buckets`` buckets)) minus ``travel_value`` per second of travel, and drives
+    (``earthbench.motion.turn_drive_turn``) to the best station, among those whose path keeps
+    the clearance from the truck, from which the refined planner finds a feasible dig; a new
+    coarse plan is made there. The truck follows when needed to a spot within dump reach, clear
+    of the excavator by the clearance along its whole path (detouring round the excavator if
+    necessary), preferring spots outside the dig area. Both drive at once only when a dense
+    check (every 0.05 s) keeps them the clearance apart; otherwise the truck waits until the
+    excavator has arrived. The excavator never drives while the truck is still on its way.
 
 Refined planner (:mod:`.backhoe_model`)
     ``n_d × n_alpha`` (20 × 10 = 200) candidates over the region's radial bounds and the approach
