@@ -12,9 +12,10 @@ from shapely.geometry import Polygon
 from earthbench import PLANNERS, judge
 from earthbench.plan import Move, Plan
 from earthbench.referee import apply_cut, cut_level, footprint
-from earthbench.world import Site, Task
+from earthbench.world import Site
 from metrics.run import evaluate
 from planners.singh_cannon.backhoe import SinghCannonBackhoe
+from planners.singh_cannon.backhoe_fig11 import fig11_scenario, lane_profiles
 from planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
 from terrains.bench import bench
 from terrains.dem import dem
@@ -22,10 +23,7 @@ from terrains.rbf import rbf
 
 
 def _fig11_scenario():
-    """A 14 m long bench face and a target the first station cannot supply with full buckets."""
-    sc = bench(0, 4.0, size=(14.0, 16.0), face_length=14.0, excavator=(10.0, 8.0, math.pi),
-               truck=(4.0, 5.0, math.pi / 2), truck_capacity=40.0)
-    return sc.replace(task=Task(30.0))
+    return fig11_scenario(0)
 
 
 def test_registered_under_its_name():
@@ -220,6 +218,13 @@ def test_fig11_digs_move_down_the_face_and_the_machine_moves_when_nothing_is_lef
             deep += 1
             assert seq[-1]["level"] < seq[0]["level"] - 0.1
     assert deep >= 5
+    # the side profiles of Fig. 11 along the busiest lane: each dig only lowers the profile, and
+    # the lowest point of the lane goes down from dig to dig
+    lane, rows = lane_profiles(sc, plan)
+    assert len(rows) >= 4
+    assert all(np.all(r["after"] <= r["before"] + 1e-9) for r in rows)
+    lows = [float(r["after"].min()) for r in rows]
+    assert lows == sorted(lows, reverse=True) and lows[-1] < lows[0] - 0.5
 
     # the machine moves when, and only when, nothing feasible is left in reach
     moves = [a for a in plan.actions if isinstance(a, Move) and a.machine == "excavator"]

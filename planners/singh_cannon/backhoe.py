@@ -52,14 +52,14 @@ before giving up.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
 from scipy.signal import fftconvolve
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.motion import travel_time, turn_drive_turn, wrap
+from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.referee import apply_cut, cut_level, footprint
