@@ -433,7 +433,8 @@ class LoaderPlanConfig:
     contour_level: float = 0.02
     contour_spacing: float = 0.1
     max_penetration: float = 4.0
-    max_tries: int = 40
+    max_tries: int = 80
+    """Candidates tried per bucket (those within 0.25 m of a failed one are skipped)."""
     max_cycles: int = 60
     dump_sector: float = math.radians(160.0)
     """Dump poses lie within this sector around the bearing from the truck to the charge's end."""
