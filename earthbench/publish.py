@@ -343,6 +343,11 @@ def render_all(jobs: list[tuple[str, str, tuple[Any, ...]]], workers: int | None
         return [_render(j) for j in jobs]
     from concurrent.futures import ProcessPoolExecutor
 
+    plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
+    warm = plt.figure()
+    warm.text(0.5, 0.5, "m³ τ ρ")
+    warm.canvas.draw()
+    plt.close(warm)
     with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork")) as pool:
         return list(pool.map(_render, jobs))
 
