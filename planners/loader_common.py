@@ -501,7 +501,14 @@ class CycleBuilder:
             return None
         approach = min(routes, key=lambda r: r.duration)  # the two-arc return, or a faster Dubins one
         t1 = float(approach.t[-1])
-        entry = (ex, ey, float(approach.p[-1, 2]))
+        yaw = float(approach.p[-1, 2])
+        if (math.cos(yaw), math.sin(yaw)) != (math.cos(eyaw), math.sin(eyaw)):
+            # the route's yaw differs from the simulated one by rounding (or 2π): cut again with
+            # exactly the charge the referee will replay, so the prediction stays exact
+            zz = np.array(self.z)
+            vol = charge_cut(self.sc.terrain, zz, self.spec, (ex, ey, yaw), ch.penetration, self.level, capacity)
+            ch = ChargeResult(ch.penetration, vol, zz, ch.end)
+        entry = (ex, ey, yaw)
         charge = Charge("loader", t1, t1 + dur, entry, ch.penetration)
         to_truck = to_truck.shifted(t1 + dur)
         t2 = float(to_truck.t[-1])
