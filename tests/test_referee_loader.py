@@ -323,3 +323,33 @@ def test_charge_round_trips_and_malformed_charges_are_rejected():
     with pytest.raises(PlanFormatError):
         Plan.from_dict(d)
     assert rules(judge(loader_scenario(), d)) == {"malformed"}
+
+
+# -- properties -------------------------------------------------------------------------------
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    radius=st.floats(3.5, 40.0),
+    sign=st.sampled_from([1.0, -1.0]),
+    length=st.floats(0.5, 6.0),
+    reverse=st.booleans(),
+    n=st.integers(2, 40),
+)
+def test_any_arc_at_or_above_the_minimum_radius_is_accepted_on_open_ground(radius, sign, length, reverse, n):
+    start = (7.0, 3.0, math.pi + 0.3)  # facing away from the truck; the pile is 7 m behind
+    sc = loader_scenario(start=Pose(*start))
+    move = arc(start, sign / radius, -length if reverse else length, 0.0, speed=1.0, n=n)
+    v = judge(sc, Plan((move,)))
+    assert v.valid, v.violations
+
+
+@settings(max_examples=40, deadline=None)
+@given(radius=st.floats(0.5, 3.45), sign=st.sampled_from([1.0, -1.0]), n=st.integers(1, 30))
+def test_any_arc_tighter_than_the_minimum_radius_is_flagged(radius, sign, n):
+    start = (7.0, 3.0, math.pi + 0.3)
+    sc = loader_scenario(start=Pose(*start))
+    move = arc(start, sign / radius, 1.0, 0.0, speed=0.2, n=n)
+    assert "turning_radius" in rules(judge(sc, Plan((move,))))
