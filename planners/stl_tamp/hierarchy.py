@@ -105,8 +105,13 @@ def truck_side(scenario: Scenario) -> tuple[float, float]:
 
 
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
-                    truck_offset: float) -> list[Area]:
-    """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres)."""
+                    truck_offset: float, truck_angle: float = 0.0) -> list[Area]:
+    """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
+
+    The base sits ``base_offset`` beyond the area's centre toward the truck's side; the truck
+    ``truck_offset`` from the base, turned by ``truck_angle`` from straight behind it toward the
+    excavator's starting side (π/2: beside the base, a quarter swing from the area instead of a
+    half swing; the excavator tours away from its start, so the truck stays out of its way)."""
     t = scenario.terrain
     xmin, xmax, ymin, ymax = site_box(scenario)
     ux, uy = truck_side(scenario)
@@ -119,6 +124,12 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
     oy = ymin + 0.5 * ((ymax - ymin) - nya * side)
     out = []
     psi = math.atan2(uy, ux)  # drag toward the base, i.e. toward the loading side
+    tx, ty = -uy, ux  # lateral axis, signed toward the excavator's start
+    ep = scenario.machines.excavator_pose
+    if (ep.x - 0.5 * (xmin + xmax)) * tx + (ep.y - 0.5 * (ymin + ymax)) * ty < 0:
+        tx, ty = -tx, -ty
+    dx_t = math.cos(truck_angle) * ux + math.sin(truck_angle) * tx
+    dy_t = math.cos(truck_angle) * uy + math.sin(truck_angle) * ty
     for a in range(nxa):
         for b in range(nya):
             x0, y0 = ox + a * side, oy + b * side
@@ -133,7 +144,7 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
             if est < 0.05:
                 continue
             base = (cx + ux * base_offset, cy + uy * base_offset)
-            truck = (base[0] + ux * truck_offset, base[1] + uy * truck_offset)
+            truck = (base[0] + dx_t * truck_offset, base[1] + dy_t * truck_offset)
             px, py = cx - ux * side / 2, cy - uy * side / 2
             out.append(Area(px, py, psi, base, truck, est, (cx, cy)))
     return out

@@ -77,6 +77,7 @@ class Config:
     local_fit_solver: str = "cholesky"  # per-area refits: the same least squares, solved directly
     base_offset: float = 4.0
     truck_offset: float = 5.0
+    truck_angle: float = math.pi / 2  # truck beside the base: a quarter swing per bucket (0: behind it, a half swing)
     global_layer: bool = True
     max_iter: int = 150
     max_cpu_time: float = 4.0
@@ -97,7 +98,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.1.0"
+    version = "0.2.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -140,7 +141,7 @@ class StlTampPlanner(Planner):
         surf_g = fit_rbf(scenario.terrain, spacing=c.global_fit_spacing)
         trace.fit_time_s += time.perf_counter() - t0
 
-        areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
+        areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
         tour = greedy_tour(areas, (st.exc.x, st.exc.y), target, exc.travel_speed, work_per_m3)
         if c.global_layer and tour:
@@ -160,7 +161,7 @@ class StlTampPlanner(Planner):
                 if regenerated >= 3:
                     break
                 regenerated += 1
-                fresh = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
+                fresh = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
                 queue = greedy_tour(fresh, (st.exc.x, st.exc.y), remaining, exc.travel_speed, work_per_m3)
                 if not queue:
                     break
