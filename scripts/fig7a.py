@@ -29,7 +29,7 @@ def label(row: pd.Series) -> str:
     if row["planner"] == "separate":
         div = json.loads(row["config"] or "{}").get("divisions", 0)
         return "separate, divisions 5–12 (paper's sweep)" if div else "separate, stop at target"
-    return f"{row['planner']}, targets 4–7 m³"
+    return f"{row['planner']} {row['planner_version']}, targets 4–7 m³"
 
 
 def collect(dbs: list[str]) -> pd.DataFrame:
