@@ -339,8 +339,8 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
     n=st.integers(2, 40),
 )
 def test_any_arc_at_or_above_the_minimum_radius_is_accepted_on_open_ground(radius, sign, length, reverse, n):
-    start = (7.0, 3.0, math.pi + 0.3)  # facing away from the truck; the pile is 7 m behind
-    sc = loader_scenario(start=Pose(*start))
+    start = (7.0, 3.0, math.pi + 0.3)  # facing away from the pile, 7 m behind
+    sc = loader_scenario(start=Pose(*start), truck=Pose(-30.0, -30.0, 0.0))  # the truck far out of the way
     move = arc(start, sign / radius, -length if reverse else length, 0.0, speed=1.0, n=n)
     v = judge(sc, Plan((move,)))
     assert v.valid, v.violations
