@@ -40,7 +40,7 @@ import shapely
 from shapely.geometry import LineString, Point, Polygon
 
 from .errors import PlanFormatError
-from .motion import wrap
+from .motion import swing_time, wrap
 from .plan import Charge, Dig, Dump, Move, Plan
 from .world import ExcavatorSpec, Heightmap, LoaderSpec, Pose, Scenario
 
@@ -480,9 +480,9 @@ class _Replay:
 
     # -- excavator actions ---------------------------------------------------------------------
     def _swing_time(self, base: Pose, target: tuple[float, float], spec: ExcavatorSpec) -> tuple[float, float]:
+        """The swing time (the planners' definition, :func:`earthbench.motion.swing_time`) and the bearing."""
         bearing = math.atan2(target[1] - base.y, target[0] - base.x)
-        swing = abs(wrap(bearing - (base.yaw + self.turn)))
-        return swing / spec.swing_rate, bearing
+        return swing_time(base, self.turn, target, spec), bearing
 
     def dig(self, n: int, a: Dig) -> None:
         spec = self.specs.get(a.machine)

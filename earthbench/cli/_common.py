@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..registry import PLANNERS, TERRAINS, load_plugin_file
+from ..registry import TERRAINS, load_plugin_file
 from ..world import Scenario
 
 
@@ -38,7 +38,3 @@ def add_plugin_arg(p: argparse.ArgumentParser) -> None:
 def load_plugins(args: argparse.Namespace) -> None:
     for path in getattr(args, "plugin", []) or []:
         load_plugin_file(path)
-
-
-def planner_names() -> list[str]:
-    return PLANNERS.names()
