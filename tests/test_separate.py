@@ -8,6 +8,7 @@ before that dig; ``stl-tamp``'s digs, chosen by its NLP, are not.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -88,8 +89,17 @@ def separate_plan(scenario):
     return SeparatePlanner().plan(scenario)
 
 
+def yield_at(scenario, z, high, base):
+    """What the referee's cut takes from a drag of 1 m ending at ``high``, toward ``base``."""
+    u = np.subtract(base, high) / math.dist(base, high)
+    contact = (high[0] - u[0], high[1] - u[1])
+    level = max(cut_level(scenario.terrain, z, contact, 0.4), 0.0)
+    return apply_cut(scenario.terrain, z.copy(), contact, math.atan2(u[1], u[0]), 0.7, 1.0, level, 0.28)
+
+
 def test_separate_digs_sit_at_the_rule_positions(scenario, separate_plan):
     plan = separate_plan
+    min_yield = Config().rule_min_fill * 0.28
     verdict = judge(scenario, plan)
     assert verdict.valid, verdict.summary()
     assert verdict.loaded_volume >= 0.9 * scenario.task.target_volume
@@ -105,20 +115,37 @@ def test_separate_digs_sit_at_the_rule_positions(scenario, separate_plan):
                    and r["box"][2] - 1e-9 <= end[1] <= r["box"][3] + 1e-9)
         box, base = tuple(rec["box"]), tuple(rec["base"])
         rule = rule_digs(scenario.terrain, z, box, base, count=1, drag=1.0, width=0.7, depth=0.4, floor=0.0,
-                         capacity=0.28, reach=(2.2, 5.9))[0]
+                         capacity=0.28, reach=(2.2, 5.9), min_yield=min_yield)[0]
         assert dig.contact == pytest.approx(rule.contact, abs=1e-9)
         assert dig.heading == pytest.approx(rule.heading, abs=1e-9)
         # independently of rule_digs: the drag ends on a cell centre, the highest of the area's
-        # interior (cells whose whole bucket footprint fits in the area from any bearing)
+        # interior (cells whose whole bucket footprint fits in the area from any bearing) but for
+        # cells whose own dig would take less than the rule's minimum yield
         i, j = int(round((end[0] - scenario.terrain.origin[0]) / res - 0.5)), int(round((end[1] - scenario.terrain.origin[1]) / res - 0.5))
         assert (xs[i], ys[j]) == pytest.approx(end, abs=1e-9)
         pad = 1.0 + 0.35 + res
-        ix = (xs >= box[0] + pad) & (xs <= box[1] - pad)
-        iy = (ys >= box[2] + pad) & (ys <= box[3] - pad)
-        inner = [z[np.ix_(iy, ix)][k] for k in np.ndindex(int(iy.sum()), int(ix.sum()))
-                 if 2.2 <= math.dist(base, (xs[ix][k[1]], ys[iy][k[0]])) <= 5.9 - 1.0]
-        if inner:
-            assert z[j, i] >= max(inner) - 1e-12
+        ix = np.nonzero((xs >= box[0] + pad) & (xs <= box[1] - pad))[0]
+        iy = np.nonzero((ys >= box[2] + pad) & (ys <= box[3] - pad))[0]
+        higher = [(b, a) for b in iy for a in ix if z[b, a] > z[j, i] + 1e-12
+                  and 2.2 <= math.dist(base, (xs[a], ys[b])) <= 5.9 - 1.0]
+        for b, a in higher:
+            assert yield_at(scenario, z, (xs[a], ys[b]), base) < min_yield + 1e-12
+
+
+def test_rule_passes_over_a_crest_the_bucket_never_reaches():
+    # ground rising toward the base (north): the highest cells, at the area's north edge, stay
+    # highest after a dig, because the bucket fills before its drag reaches them
+    sc = block_scenario()
+    _, ys = sc.terrain.cell_centres()
+    z = np.repeat((0.3 + 0.8 * np.clip(ys - 2.0, 0.0, 2.0))[:, None], sc.terrain.z.shape[1], axis=1)
+    sc = dataclasses.replace(sc, terrain=sc.terrain.with_z(z))
+    box, base = (3.0, 5.0, 2.0, 4.0), (4.0, 8.0)
+    kw = dict(count=5, drag=1.0, width=0.7, depth=0.4, floor=0.0, capacity=0.28, reach=(2.2, 5.9))
+    bare = rule_digs(sc.terrain, z, box, base, **kw)
+    assert len({d.contact for d in bare}) < len(bare)  # the bare rule repeats a contact
+    picky = rule_digs(sc.terrain, z, box, base, min_yield=0.07, **kw)
+    assert all(d.volume >= 0.07 for d in picky)
+    assert sum(d.volume for d in picky) > sum(d.volume for d in bare)
 
 
 def test_divisions_mode_digs_that_many_areas_and_idles_missing_digs(scenario):

@@ -20,6 +20,12 @@ The rule (Fig. 5b), per local area:
   base, so the drag runs toward the machine and ends at the highest point. The drag heading
   points from the contact at the nominal base (the contact constraint of Eq. (3)/(16) ties the
   bearing of the arm to the drag, so one base serves all five digs).
+- One addition to the paper's rule (``rule_min_fill``, default a quarter bucket; 0 gives the
+  bare rule): a highest point whose dig would take less than that is passed over for the next
+  highest. On a bench the crest is the highest point, but the bucket fills before its drag
+  reaches it, so the bare rule dug the same contact five times for less and less and reached
+  only 29–67 % of the target on ``bench`` seeds 0–1 (100 % with the addition); on
+  ``paper-extensive`` it also needs fewer areas (rbf30 seed 0, 7 m³: 7 instead of 11).
 - The task vector fixed in the NLP: the contacts ``(p_x, p_y)``, the drag headings ψ and η.
   η is 1 except where the model's full cut would overfill the bucket (Eq. (21),
   V_i ≤ V_max): there η = V_max / (model volume of a full cut) (DESIGN §8: η acts as a depth
@@ -108,6 +114,7 @@ class Config:
     eta_fill: float = 0.98
     min_model_volume: float = 0.03
     min_dig_volume: float = 0.02
+    rule_min_fill: float = 0.25  # pass over a highest point whose dig takes less than this many buckets (0: never)
     trust_radius: float = 0.5
     trust_angle: float = 0.5
     trust_rounds: int = 2
@@ -150,14 +157,17 @@ def area_box(area: Area, side: float) -> tuple[float, float, float, float]:
 
 def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float, float], base: tuple[float, float],
               *, count: int, drag: float, width: float, depth: float, floor: float | None, capacity: float,
-              reach: tuple[float, float]) -> list[RuleDig]:
+              reach: tuple[float, float], min_yield: float = 0.0) -> list[RuleDig]:
     """The rule's ``count`` digs in the area ``box`` served from ``base`` (Fig. 5b).
 
     Each dig: the highest cell centre ``h`` of the area (on the grid after the previous digs,
     replayed with the referee's cut on a copy of ``z``) among the cells whose bucket footprint —
     from the contact ``h − drag·u`` to ``h``, ``u`` the unit vector from ``h`` toward ``base`` —
     lies in the box and whose contact and drag end lie in the ``reach`` annulus (min, max) of
-    ``base``. Returns [] when no cell qualifies.
+    ``base``, and whose dig still takes at least ``min_yield`` m³. Without that last condition a
+    high point the bucket never reaches (it fills before the drag ends, as on a bench's crest)
+    stays the highest, and every later dig repeats the same contact for less and less.
+    Returns [] when no cell qualifies.
     """
     z = np.array(z, dtype=float, copy=True)
     xs, ys = terrain.cell_centres()
@@ -193,12 +203,15 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
             if floor is not None:
                 d = min(d, terrain.height_at(contact[0], contact[1], z) - floor - 1e-7)
             if d > 1e-3:
-                break
+                heading = math.atan2(float(uy[j, i]), float(ux[j, i]))
+                after = z.copy()
+                vol = apply_cut(terrain, after, contact, heading, width, drag, cut_level(terrain, z, contact, d), capacity)
+                if vol >= min_yield:
+                    z = after
+                    break
             usable[j, i] = False
         else:
             break
-        heading = math.atan2(float(uy[j, i]), float(ux[j, i]))
-        vol = apply_cut(terrain, z, contact, heading, width, drag, cut_level(terrain, z, contact, d), capacity)
         out.append(RuleDig((float(X[j, i]), float(Y[j, i])), contact, heading, vol))
     return out
 
@@ -220,7 +233,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.1.0"
+    version = "0.2.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -253,7 +266,8 @@ class SeparatePlanner(Planner):
                          drag=min(c.drag_length, exc.max_drag_length), width=exc.bucket_width,
                          depth=min(c.dig_depth, exc.max_cut_depth), floor=scenario.site.floor,
                          capacity=exc.bucket_capacity,
-                         reach=(exc.reach_min + c.reach_margin, exc.reach_max - c.reach_margin))
+                         reach=(exc.reach_min + c.reach_margin, exc.reach_max - c.reach_margin),
+                         min_yield=c.rule_min_fill * exc.bucket_capacity)
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:
