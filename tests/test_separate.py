@@ -42,9 +42,10 @@ def replay_grids(scenario, plan):
     return out
 
 
-def drag_end(dig: Dig) -> tuple[float, float]:
-    return (dig.contact[0] + math.cos(dig.heading) * dig.drag_length,
-            dig.contact[1] + math.sin(dig.heading) * dig.drag_length)
+def drag_end(dig: Dig, drag: float = 1.0) -> tuple[float, float]:
+    """Where a full drag of L_drag = 1 m from the dig's contact ends (the last bucket's drag may
+    be trimmed shorter to take just what the target lacks; the rule's point is still this one)."""
+    return (dig.contact[0] + math.cos(dig.heading) * drag, dig.contact[1] + math.sin(dig.heading) * drag)
 
 
 def test_registered_with_paper_defaults():

@@ -233,11 +233,13 @@ class Converter:
             return "dump_reach"
         return None
 
-    def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float) -> float:
+    def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
+                   drag: float | None = None) -> float:
         es = self.exc_spec
         z = st.z.copy()
         level = cut_level(self.sc.terrain, z, contact, depth)
-        return apply_cut(self.sc.terrain, z, contact, heading, es.bucket_width, es.max_drag_length, level, es.bucket_capacity)
+        drag = es.max_drag_length if drag is None else drag
+        return apply_cut(self.sc.terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
 
     def max_depth(self, st: SimState, contact: tuple[float, float]) -> float:
         d = min(self.depth, self.exc_spec.max_cut_depth)
@@ -290,6 +292,19 @@ class Converter:
         hi = max(hi, 1e-3)  # where the ground rises along the drag even a skim overshoots
         return hi, self.cut_volume(st, contact, heading, hi)
 
+    def _bisect_drag(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
+                     remaining: float) -> float:
+        """The shortest drag whose cut takes at least ``remaining`` (a shorter drag only takes less,
+        and it stays on the full drag's segment, so reach and footprint stay valid)."""
+        lo, hi = 0.0, self.exc_spec.max_drag_length
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            if self.cut_volume(st, contact, heading, depth, mid) >= remaining:
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
     def exact_last_cut(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
                        remaining: float) -> tuple[tuple[float, float], float]:
         """Contact and depth whose cut is closest to ``remaining`` (not below it when possible):
@@ -321,14 +336,17 @@ class Converter:
         if found is None:
             return self._skip("no_material")
         contact, depth, vol = found
-        if vol > remaining:  # the last bucket: bisect the depth to meet the target
-            contact, depth = self.exact_last_cut(st, contact, heading, depth, remaining)
         es = self.exc_spec
+        drag = es.max_drag_length
+        if vol > remaining:  # the last bucket: bisect the depth to meet the target, then the drag
+            contact, depth = self.exact_last_cut(st, contact, heading, depth, remaining)
+            if self.cut_volume(st, contact, heading, depth) > remaining * 1.002:  # even a skim overshoots
+                drag = self._bisect_drag(st, contact, heading, depth, remaining)
         dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
-        got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, es.max_drag_length, z_level, es.bucket_capacity)
+        got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)
         st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
-                              float(depth), float(es.max_drag_length)))
+                              float(depth), float(drag)))
         st.t += dig_t
         st.turn = math.atan2(contact[1] - st.exc.y, contact[0] - st.exc.x) - st.exc.yaw
         dump_t = swing_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + es.min_dump_time + EPS_T

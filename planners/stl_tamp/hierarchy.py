@@ -13,8 +13,9 @@
    an IK guess at spread-out contacts and the global base/truck poses, with a terminal cost
    toward the next area's base. Its phases become actions (``convert``), checked against the
    referee's rules on the real grid. The local target is what the target still lacks
-   (measured with the referee's cut), capped at the area's V_max, so model error in one area
-   is made up in the next; when the global areas run out, further areas come from the tour.
+   (measured with the referee's cut), capped at the area's V_max (at m_l buckets when the dig
+   area is a single local area), so model error in one area is made up in the next; when the
+   global areas run out, further areas come from the tour.
 """
 
 from __future__ import annotations

@@ -37,23 +37,12 @@ class TargetTooLargeError(EarthbenchError, ValueError):
 
 
 @dataclass(frozen=True)
-class Config:
-    """Settings; defaults are the paper's values where it gives them (section V).
-
-    Paper: m_l = 5 digs per local area, n = 10 motion steps, S_l = 5 bucket areas with
-    V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m. Not given in the paper (our choices):
-    the weights α, the ε constants, the sigmoid steepness k = 20 with the quadrature box
-    widened by 3/k (DESIGN §8 calibration), the STL sharpness β.
-    """
+class LocalNLPConfig:
+    """The local NLP's settings that ``stl-tamp`` and ``separate`` share (one model, two planners)."""
 
     m_local: int = 5
     n_steps: int = 10
     contact_step: int = 4
-    dtm_max: float = 4.0
-    m_global_max: int = 12
-    n_global: int = 4
-    area_buckets: float = 5.0
-    area_vmax: float = 1.0
     dig_depth: float = 0.4
     sigmoid_k: float = 20.0
     quad_widen: float = 0.15
@@ -63,9 +52,26 @@ class Config:
     beta: float = 30.0
     alpha_u: float = 0.01
     alpha_t: float = 1.0
+    alpha_term: float = 0.2
+
+
+@dataclass(frozen=True)
+class Config(LocalNLPConfig):
+    """Settings; defaults are the paper's values where it gives them (section V).
+
+    Paper: m_l = 5 digs per local area, n = 10 motion steps, S_l = 5 bucket areas with
+    V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m. Not given in the paper (our choices):
+    the weights α, the ε constants, the sigmoid steepness k = 20 with the quadrature box
+    widened by 3/k (DESIGN §8 calibration), the STL sharpness β.
+    """
+
+    dtm_max: float = 4.0
+    m_global_max: int = 12
+    n_global: int = 4
+    area_buckets: float = 5.0
+    area_vmax: float = 1.0
     alpha_v: float = 2.0e4
     alpha_eta: float = 2.0
-    alpha_term: float = 0.2
     eta_init: float = 0.7
     eta_on: float = 0.25
     min_dig_volume: float = 0.02
@@ -81,7 +87,7 @@ class Config:
     global_layer: bool = True
     max_iter: int = 150
     max_cpu_time: float = 4.0
-    global_max_iter: int = 150
+    global_max_iter: int = 1500  # 150 left 28 of 40 paper-extensive global solves unconverged; 1500: none (≤ 860 used)
     global_max_cpu_time: float = 10.0
     mu_strategy: str = "adaptive"
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks) or "raise"
@@ -90,6 +96,7 @@ class Config:
     volume_tol: float = 1e-4
     min_local_target: float = 0.8  # in buckets
     reseed: bool = True
+    retry: bool = True  # a failed local solve is solved once more (on from its last iterate, or from all digs)
     ipopt_tol: float = 1e-4
     accept_feasible: float = 1e-3  # accept a capped solve whose iterate violates no constraint by more
 
@@ -98,7 +105,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.2.0"
+    version = "0.3.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -114,8 +121,11 @@ class StlTampPlanner(Planner):
                      dtm_max=c.dtm_max)
 
     def area_side(self, scenario: Scenario) -> float:
+        """√S_l, or less where the dig area is narrower (paper-switch's 2.0 × 1.75 m area is one
+        local area: the contact box is the dig area itself, see :meth:`_local`)."""
         e = scenario.machines.excavator
-        return math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length)
+        xmin, xmax, ymin, ymax = site_box(scenario)
+        return min(math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length), xmax - xmin, ymax - ymin)
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:
@@ -136,19 +146,21 @@ class StlTampPlanner(Planner):
         side = self.area_side(scenario)
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair)
 
-        # Algorithm 1, step 1: the surface function of the whole map
-        t0 = time.perf_counter()
-        surf_g = fit_rbf(scenario.terrain, spacing=c.global_fit_spacing)
-        trace.fit_time_s += time.perf_counter() - t0
-
         areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
         tour = greedy_tour(areas, (st.exc.x, st.exc.y), target, exc.travel_speed, work_per_m3)
-        if c.global_layer and tour:
+        # V_max per area is the global layer's unit; a dig area that is one local area (Fig. 6's
+        # set-up) has nothing to split the target over: its local problem takes up to m_l buckets
+        vmax = c.area_vmax if len(areas) > 1 else max(c.area_vmax, c.m_local * exc.bucket_capacity)
+        if c.global_layer and len(tour) > 1:
+            # Algorithm 1, step 1: the surface function of the whole map
+            t0 = time.perf_counter()
+            surf_g = fit_rbf(scenario.terrain, spacing=c.global_fit_spacing)
+            trace.fit_time_s += time.perf_counter() - t0
             chosen = self._global(scenario, st, surf_g, tour, target, side, box, trace)
-        else:
+        else:  # nothing to choose between (paper-switch: the dig area is one local area)
             chosen = tour
-            trace.global_ = {"used": False}
+            trace.global_ = {"used": False, "areas": len(tour)}
         queue = list(chosen) + [a for a in tour if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
 
         joints = (0.3, -1.5)
@@ -167,7 +179,7 @@ class StlTampPlanner(Planner):
                     break
             area = queue.pop(0)
             nxt = queue[0].base if queue else area.base
-            got, model_v, joints = self._local(scenario, st, conv, area, nxt, remaining, joints, box, trace)
+            got, model_v, joints = self._local(scenario, st, conv, area, nxt, remaining, vmax, joints, box, trace)
             remaining -= got
             predicted_model_volume += model_v
             n_areas += 1
@@ -241,7 +253,7 @@ class StlTampPlanner(Planner):
 
     # -- local layer -------------------------------------------------------------------------------
     def _local(self, scenario: Scenario, st: SimState, conv: Converter, area: Area, goal: tuple[float, float],
-               remaining: float, joints: tuple[float, float], box: tuple[float, float, float, float],
+               remaining: float, vmax: float, joints: tuple[float, float], box: tuple[float, float, float, float],
                trace: Trace) -> tuple[float, float, tuple[float, float]]:
         c, exc, trk = self.config, scenario.machines.excavator, scenario.machines.truck
         t_wall = time.perf_counter()
@@ -258,7 +270,7 @@ class StlTampPlanner(Planner):
         trace.fit_time_s += time.perf_counter() - t0
         # a small remainder is still planned as (at least) a bucket of work: the conversion then
         # bisects the real dig's depth to take exactly what is missing
-        v_local = min(max(remaining, c.min_local_target * exc.bucket_capacity), c.area_vmax)
+        v_local = min(max(remaining, c.min_local_target * exc.bucket_capacity), vmax)
         # keep the truck where it is when it already serves this area's base
         d_now = math.hypot(st.truck.x - area.base[0], st.truck.y - area.base[1])
         reach_dt = exc.reach_max + trk.loading_radius - 0.4
@@ -275,8 +287,23 @@ class StlTampPlanner(Planner):
         sol = nlp.solve(params, w0, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time, accept_feasible=c.accept_feasible,
                         options=self._ipopt_options())
         n_iter, t_solve = sol.iterations, sol.solve_time_s
+        retry = None
+        start = w0
+        if not sol.success and c.retry:
+            # one more solve: on from the last iterate when IPOPT only ran out of iterations or
+            # time, else from another start (Fig. 6's: every phase seeded as a dig)
+            if sol.status.startswith("Maximum_"):
+                w1, retry = sol.info["w"], "continued"
+            else:
+                seeds = local_seeds(area, c.m_local, c.m_local, exc.bucket_width, exc.max_drag_length, surf, 1.0, truck)
+                w1, retry = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params), "every phase a dig"
+            sol2 = nlp.solve(params, w1, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
+                             accept_feasible=c.accept_feasible, options=self._ipopt_options())
+            n_iter, t_solve, retry = n_iter + sol2.iterations, t_solve + sol2.solve_time_s, f"{retry}: {sol2.status}"
+            if sol2.success:
+                sol, start = sol2, w1
         if sol.success and c.reseed:
-            w1 = nlp.reseed(sol, w0, params, c.eta_on)
+            w1 = nlp.reseed(sol, start, params, c.eta_on)
             if w1 is not None:  # one bounded restart out of the disjunction trap (see PhaseNLP.reseed)
                 sol2 = nlp.solve(params, w1, cbox, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
                                  accept_feasible=c.accept_feasible, options=self._ipopt_options())
@@ -287,6 +314,8 @@ class StlTampPlanner(Planner):
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
                                "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),
                                "model_volume": float(np.sum(sol.V))}
+        if retry is not None:
+            rec["retry"] = retry
         if not sol.success:
             if c.on_failure != "fallback" or trace.fallbacks >= c.max_fallbacks:
                 raise StlTampSolveError(

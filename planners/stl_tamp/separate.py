@@ -1,10 +1,9 @@
 """The ``separate`` baseline: tasks chosen by a rule, motions and times optimised.
 
 This is the comparison method of the STL-TAMP paper (Satoh, Takano, Oyama, section V-B and
-Fig. 5b, "Separate"): the *same* system model as ``stl-tamp`` — the one process-wide
-:class:`~planners.stl_tamp.model.PhaseNLP` of the local shape, fetched through
-:func:`~planners.stl_tamp.hierarchy.get_nlp`, so a process that runs both planners builds it
-once — but only the local optimisation of Eq. (25), with the task vector fixed through the
+Fig. 5b, "Separate"): the *same* system model as ``stl-tamp`` — its
+:class:`~planners.stl_tamp.model.PhaseNLP` of the local shape, built once per process through
+:func:`~planners.stl_tamp.hierarchy.get_nlp` — but only the local optimisation of Eq. (25), with the task vector fixed through the
 NLP's bounds (``PhaseNLP.solve(..., fixed_tasks=...)``). No global layer, no task choice.
 
 The rule (Fig. 5b), per local area:
@@ -75,37 +74,25 @@ from .guess import PhaseSeed, build_guess, fill_volumes
 from .hierarchy import Area, candidate_areas, get_nlp, site_box
 from .model import PhaseNLP, Solution
 from .planner import Config as StlTampConfig
+from .planner import LocalNLPConfig
 from .planner import StlTampPlanner
 
 
 @dataclass(frozen=True)
-class Config:
+class Config(LocalNLPConfig):
     """Settings of ``separate``; defaults are the paper's values where it gives them (V-B).
 
     Paper: W_local = 2 m, m_l = 5 digs per area, L_drag = 1.0 m, d_dig = 0.4 m, n = 10 motion
     steps, divisions 5–12 in its sweep. ``divisions = 0`` (default) digs as many areas as the
     target needs and stops at the target (see the module docstring). The model settings
-    (sigmoid steepness, ε, β, fit lattice, contact step) are ``stl-tamp``'s, so both planners
-    share one NLP; the weights α_u, α_t, α_term are ``stl-tamp``'s too (α_v, α_η act on fixed
-    quantities here and are 0).
+    and the weights α_u, α_t, α_term are ``stl-tamp``'s (:class:`~.planner.LocalNLPConfig`;
+    α_v, α_η act on fixed quantities here and are 0); the terrain fit's lattice is finer
+    (0.5 m over ±3 m instead of 0.55 m over ±2.75 m).
     """
 
     divisions: int = 0
     w_local: float = 2.0
-    m_local: int = 5
     drag_length: float = 1.0
-    dig_depth: float = 0.4
-    n_steps: int = 10
-    contact_step: int = 4
-    sigmoid_k: float = 20.0
-    quad_widen: float = 0.15
-    eps_eta: float = 0.05
-    eps_v: float = 0.01
-    eps_d: float = 0.01
-    beta: float = 30.0
-    alpha_u: float = 0.01
-    alpha_t: float = 1.0
-    alpha_term: float = 0.2
     local_fit_spacing: float = 0.5
     local_fit_half: float = 3.0
     base_offset: float = 4.0
@@ -240,10 +227,8 @@ class SeparatePlanner(Planner):
     def _stl_config(self) -> StlTampConfig:
         """The ``stl-tamp`` settings that fix the shared NLP's shape (same shape → same NLP)."""
         c = self.config
-        return StlTampConfig(m_local=c.m_local, n_steps=c.n_steps, contact_step=c.contact_step, dig_depth=c.dig_depth,
-                             sigmoid_k=c.sigmoid_k, quad_widen=c.quad_widen, eps_eta=c.eps_eta, eps_v=c.eps_v,
-                             eps_d=c.eps_d, beta=c.beta, local_fit_spacing=c.local_fit_spacing,
-                             local_fit_half=c.local_fit_half)
+        shared = {f.name: getattr(c, f.name) for f in dataclasses.fields(LocalNLPConfig)}
+        return StlTampConfig(**shared, local_fit_spacing=c.local_fit_spacing, local_fit_half=c.local_fit_half)
 
     def areas(self, scenario: Scenario, z: np.ndarray | None = None) -> list[Area]:
         """The local areas (W_local squares of the dig area holding material) in visiting order."""
