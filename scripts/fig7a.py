@@ -1,6 +1,7 @@
 """Fig. 7a of the STL-TAMP paper from stored runs: loaded volume against total time, per method.
 
-Reads every run of ``stl-tamp`` and ``separate`` on ``paper-extensive`` (targets 4–7 m³) and on
+Reads every run of ``stl-tamp`` and ``separate`` on the ``paper-extensive`` maps (targets 4–7 m³;
+that suite's runs or those of its family in ``standard``) and on
 ``paper-separate-sweep`` (the paper's division sweep, ``scripts/separate_sweep.py``) from one or
 more results databases, draws them with the leaderboard's own figure code
 (:func:`earthbench.publish.volume_time_figure`) and prints the numbers behind it: per method the
@@ -32,11 +33,17 @@ def label(row: pd.Series) -> str:
     return f"{row['planner']} {row['planner_version']}, targets 4–7 m³"
 
 
+def on_paper_extensive(runs: pd.DataFrame) -> pd.Series:
+    """Runs on the paper-extensive maps: of that suite, or of its family inside ``standard``."""
+    return (runs["suite"] == "paper-extensive") | runs["family"].fillna("").str.startswith("paper-extensive.")
+
+
 def collect(dbs: list[str]) -> pd.DataFrame:
     frames = []
     for db in dbs:
         runs = load_runs(db)
-        frames.append(runs[runs["suite"].isin(SUITES) & runs["planner"].isin(["stl-tamp", "separate"])])
+        keep = runs["suite"].isin(SUITES) | on_paper_extensive(runs)
+        frames.append(runs[keep & runs["planner"].isin(["stl-tamp", "separate"])])
     runs = pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"])
     runs["solver"] = runs.apply(label, axis=1)
     return runs
@@ -55,7 +62,7 @@ def table(runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def paired_ratio(runs: pd.DataFrame) -> tuple[int, float]:
-    pe = runs[(runs["suite"] == "paper-extensive") & (runs["reason"] == "ok")]
+    pe = runs[on_paper_extensive(runs) & (runs["reason"] == "ok")]
     a = pe[pe["planner"] == "separate"].set_index("scenario_digest")["time_per_m3"]
     b = pe[pe["planner"] == "stl-tamp"].set_index("scenario_digest")["time_per_m3"]
     both = a.index.intersection(b.index)

@@ -62,3 +62,36 @@ def straight_move(machine: str, start: Pose, goal: tuple[float, float], t0: floa
     """Drive straight (the machine already faces the goal or its reverse) at ``speed``."""
     d = math.hypot(goal[0] - start.x, goal[1] - start.y)
     return Move(machine, ((t0, start.x, start.y, start.yaw), (t0 + d / speed, goal[0], goal[1], start.yaw)))
+
+
+def tiny_suite_toml(name: str = "tiny", *, wall_s: float = 20.0, memory_mb: int = 1024, seeds: str = "0-0") -> str:
+    """A suite of tiny rbf maps (4 m × 3 m, 3 bases, 0.1 m cells, a one-bucket target) for harness
+    tests: every planner solves one in well under a second, so a test times the harness, not it."""
+    return f"""
+name = "{name}"
+track = "backhoe"
+[budget]
+wall_s = {wall_s}
+cores = 2
+memory_mb = {memory_mb}
+[[family]]
+name = "small"
+generator = "rbf"
+targets = [0.28]
+seeds = "{seeds}"
+[family.params]
+n_bases = 3
+size = [4.0, 3.0]
+resolution = 0.1
+"""
+
+
+@pytest.fixture
+def forget_test_planners():
+    """Planners a test loads must not leak into later tests' default planner lists."""
+    from earthbench.registry import PLANNERS
+
+    before = set(PLANNERS.names())
+    yield
+    for name in set(PLANNERS.names()) - before:
+        PLANNERS.unregister(name)

@@ -15,40 +15,17 @@ import pytest
 from earthbench.cli import main
 from earthbench.store import load_runs
 
+from conftest import tiny_suite_toml
+
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 
 
-@pytest.fixture(autouse=True)
-def _forget_test_planners():
-    """Planners a test loads must not leak into later tests' default planner lists."""
-    from earthbench.registry import PLANNERS
-
-    before = set(PLANNERS.names())
-    yield
-    for name in set(PLANNERS.names()) - before:
-        PLANNERS.unregister(name)
-SUITE = """
-name = "cli"
-track = "backhoe"
-[budget]
-wall_s = 20
-cores = 2
-memory_mb = 2048
-[[family]]
-name = "small"
-generator = "rbf"
-targets = [0.28]
-seeds = "0-{last}"
-[family.params]
-n_bases = 3
-size = [4.0, 3.0]
-resolution = 0.1
-"""
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
 def suite_file(tmp_path, n=6):
     f = tmp_path / "cli.toml"
-    f.write_text(SUITE.format(last=n - 1))
+    f.write_text(tiny_suite_toml("cli", seeds=f"0-{n - 1}"))
     return str(f)
 
 
@@ -123,7 +100,7 @@ def test_unknown_names_fail_with_suggestions(tmp_path, capsys):
     assert main(["run", "smoke", "--planner", "gredy", "--db", str(tmp_path / "x.db")]) == 2
     assert "Did you mean 'greedy'" in capsys.readouterr().err
     bad = tmp_path / "typo.toml"
-    bad.write_text(SUITE.format(last=0).replace("wall_s", "wall_sec"))
+    bad.write_text(tiny_suite_toml("cli").replace("wall_s", "wall_sec"))
     assert main(["run", str(bad), "--db", str(tmp_path / "x.db")]) == 2
     assert "unknown key 'wall_sec'" in capsys.readouterr().err
     notdb = tmp_path / "notes.txt"

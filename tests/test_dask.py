@@ -25,6 +25,8 @@ from earthbench.runner import LocalExecutor, build_cases, run_cases, run_suite  
 from earthbench.store import Store  # noqa: E402
 from earthbench.suite import load_suite, parse_suite  # noqa: E402
 
+from conftest import tiny_suite_toml  # noqa: E402
+
 PLUGINS = Path(__file__).parent / "plugins"
 FAULTY = str(PLUGINS / "faulty_planners.py")
 DASK_PLANNERS = str(PLUGINS / "dask_planners.py")
@@ -32,25 +34,7 @@ TIMES = {"solve_time_s", "solve_cpu_s"}
 
 
 def nap_suite(n: int):
-    return parse_suite(
-        f"""
-        name = "nap"
-        track = "backhoe"
-        [budget]
-        wall_s = 30
-        cores = 2
-        memory_mb = 2048
-        [[family]]
-        name = "small"
-        generator = "rbf"
-        targets = [0.28]
-        seeds = "0-{n - 1}"
-        [family.params]
-        n_bases = 3
-        size = [4.0, 3.0]
-        resolution = 0.1
-        """
-    )
+    return parse_suite(tiny_suite_toml("nap", wall_s=30, memory_mb=2048, seeds=f"0-{n - 1}"))
 
 
 @pytest.fixture(scope="module")

@@ -15,15 +15,7 @@ from earthbench.errors import EarthbenchError
 from earthbench.store import load_runs
 
 
-@pytest.fixture(autouse=True)
-def _forget_test_planners():
-    """Planners a test loads must not leak into later tests' default planner lists."""
-    from earthbench.registry import PLANNERS
-
-    before = set(PLANNERS.names())
-    yield
-    for name in set(PLANNERS.names()) - before:
-        PLANNERS.unregister(name)
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
 def test_new_planner_as_a_plugin_file(tmp_path, capsys):

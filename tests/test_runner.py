@@ -14,40 +14,16 @@ from earthbench.runner import LocalExecutor, build_cases, make_slots, run_case, 
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
+from conftest import tiny_suite_toml
+
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 
 
-@pytest.fixture(autouse=True)
-def _forget_test_planners():
-    """Planners a test loads must not leak into later tests' default planner lists."""
-    from earthbench.registry import PLANNERS
-
-    before = set(PLANNERS.names())
-    yield
-    for name in set(PLANNERS.names()) - before:
-        PLANNERS.unregister(name)
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
 def tiny_suite(wall_s: float = 20.0, memory_mb: int = 1024, seeds: str = "0-0", name: str = "tiny"):
-    return parse_suite(
-        f"""
-        name = "{name}"
-        track = "backhoe"
-        [budget]
-        wall_s = {wall_s}
-        cores = 2
-        memory_mb = {memory_mb}
-        [[family]]
-        name = "small"
-        generator = "rbf"
-        targets = [0.28]
-        seeds = "{seeds}"
-        [family.params]
-        n_bases = 3
-        size = [4.0, 3.0]
-        resolution = 0.1
-        """
-    )
+    return parse_suite(tiny_suite_toml(name, wall_s=wall_s, memory_mb=memory_mb, seeds=seeds))
 
 
 def run_all(suite, planners, db, **kw):

@@ -18,15 +18,7 @@ from earthbench.suite import load_suite
 PLUGIN = str(Path(__file__).parents[1] / "plugins" / "faulty_planners.py")
 
 
-@pytest.fixture(autouse=True)
-def _forget_test_planners():
-    """Planners a test loads must not leak into later tests' default planner lists."""
-    from earthbench.registry import PLANNERS
-
-    before = set(PLANNERS.names())
-    yield
-    for name in set(PLANNERS.names()) - before:
-        PLANNERS.unregister(name)
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
 @pytest.mark.parametrize("planner", ["t-fast", "greedy"])
