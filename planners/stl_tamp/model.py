@@ -86,6 +86,7 @@ class Shape:
     q_u_truck: tuple[float, ...] = (1.0, 10.0)
     eta_saturation: float = 0.1
     hold_truck: bool = True  # truck inputs fixed to 0 after phase 0 (see the class docstring)
+    symbolic: str = "SX"  # "SX": scalar graphs, fastest here; "MX": matrix graphs (tests/bench compares them)
 
 
 @dataclass
@@ -159,22 +160,26 @@ class PhaseNLP:
         K = sh.terrain_shape[0] * sh.terrain_shape[1]
         self.K = K
 
+        if sh.symbolic not in ("SX", "MX"):
+            raise ValueError(f"Shape.symbolic must be 'SX' or 'MX', got {sh.symbolic!r}")
+        sym = ca.SX.sym if sh.symbolic == "SX" else ca.MX.sym
+
         # -- parameters -------------------------------------------------------------------------
-        P_w = ca.SX.sym("terrain_w", K)
-        P_o = ca.SX.sym("terrain_o", 2)
-        P_s0 = ca.SX.sym("s0", NX)
-        P_vt = ca.SX.sym("v_target")
-        P_a = ca.SX.sym("alpha", 5)  # α_u, α_t, α_v, α_η, α_term
-        P_goal = ca.SX.sym("goal", 2)
-        P_floor = ca.SX.sym("floor")
+        P_w = sym("terrain_w", K)
+        P_o = sym("terrain_o", 2)
+        P_s0 = sym("s0", NX)
+        P_vt = sym("v_target")
+        P_a = sym("alpha", 5)  # α_u, α_t, α_v, α_η, α_term
+        P_goal = sym("goal", 2)
+        P_floor = sym("floor")
         self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
         p = ca.vertcat(P_w, P_o, P_s0, P_vt, P_a, P_goal, P_floor)
 
         # -- variables --------------------------------------------------------------------------
-        Xv = ca.SX.sym("X", NX, N)  # nodes 1..N (node 0 is the parameter s0)
-        Uv = ca.SX.sym("U", NU, N)
-        ph = {k: ca.SX.sym(k, m1) for k in ("dtm", "dtw", "eta", "px", "py", "psi", "V")}
-        slack = ca.SX.sym("slack", 2)
+        Xv = sym("X", NX, N)  # nodes 1..N (node 0 is the parameter s0)
+        Uv = sym("U", NU, N)
+        ph = {k: sym(k, m1) for k in ("dtm", "dtw", "eta", "px", "py", "psi", "V")}
+        slack = sym("slack", 2)
         self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in ph] + [("slack", 2)]
         w = ca.vertcat(ca.vec(Xv), ca.vec(Uv), *ph.values(), slack)
         self.nw = w.shape[0]
@@ -418,27 +423,31 @@ class PhaseNLP:
         return lb, ub
 
     # -- solve ------------------------------------------------------------------------------------------
-    def solver(self, max_iter: int, max_cpu_time: float, options: dict[str, Any] | None = None) -> Any:
-        key = (max_iter, max_cpu_time, tuple(sorted((options or {}).items())))
+    def solver(self, max_iter: int, max_cpu_time: float, options: dict[str, Any] | None = None,
+               casadi_options: dict[str, Any] | None = None) -> Any:
+        """The IPOPT solver for these caps and options (built once). ``casadi_options`` go to
+        ``nlpsol`` itself, e.g. ``{"expand": True}`` or ``{"jit": True, ...}``."""
+        key = (max_iter, max_cpu_time, repr(sorted((options or {}).items())), repr(sorted((casadi_options or {}).items())))
         if key not in self._solvers:
             ipopt = {"max_iter": max_iter, "max_cpu_time": max_cpu_time, "print_level": 0, "tol": 1e-6,
                      "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
                      "linear_solver": "mumps", "hessian_approximation": "exact", "sb": "yes"}
             ipopt.update(options or {})
             nlp = {"x": self.w, "p": self.p, "f": self.J, "g": self.g}
-            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
+                                                                      **(casadi_options or {})})
         return self._solvers[key]
 
     def solve(self, params: np.ndarray, w0: np.ndarray, box: tuple[float, float, float, float], *,
               fixed_tasks: dict[str, np.ndarray] | None = None, max_dig_phases: int | None = None,
               max_iter: int = 300, max_cpu_time: float = 10.0, options: dict[str, Any] | None = None,
-              accept_feasible: float = 0.0) -> Solution:
+              accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None) -> Solution:
         """Solve from ``w0``. ``success`` is IPOPT's own success, or an acceptable-level stop with
         violation < 1e-4, or — when ``accept_feasible`` > 0 — an iteration/CPU cap whose last
         iterate violates no constraint by more than ``accept_feasible`` (status says which)."""
         lb, ub = self.bounds(box, fixed_tasks, max_dig_phases)
         w0 = np.clip(w0, lb, ub)
-        S = self.solver(max_iter, max_cpu_time, options)
+        S = self.solver(max_iter, max_cpu_time, options, casadi_options)
         t0 = time.perf_counter()
         res = S(x0=w0, p=params, lbx=lb, ubx=ub, lbg=self.lbg, ubg=self.ubg)
         dt = time.perf_counter() - t0
