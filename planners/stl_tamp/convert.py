@@ -9,7 +9,9 @@ action:
 - Moves: the base and truck paths are the NLP's controls, clipped to 99.9 % of the limits and
   re-integrated with the same mid-step heading rule (so each pair of samples is an exact
   unicycle chord: no lateral slip, speed and yaw rate within the limits), starting exactly where
-  the machine is. Moves whose displacement is below 1 µm are dropped.
+  the machine is, then retimed to drive each chord as fast as the limits allow
+  (:func:`fastest_steps`; the NLP's move steps also carry its arm motion, which the dig's own
+  swing time pays for). Moves whose displacement is below 1 µm are dropped.
 - Collisions: the excavator–truck centre distance is checked in continuous time (both paths
   are piecewise linear between samples) before a move is accepted.
 - Digs: a phase with ``η ≥ eta_on`` becomes a dig at the NLP's contact and drag heading, at
@@ -89,6 +91,19 @@ def integrate(start: Pose, v: np.ndarray, w: np.ndarray, dts: np.ndarray, vmax: 
     return out
 
 
+def fastest_steps(nodes: np.ndarray, dts: np.ndarray, vmax: float, wmax: float, margin: float = 0.999) -> np.ndarray:
+    """Step durations that drive the same nodes as fast as the limits allow.
+
+    The NLP's step durations also pay for joint motion it models inside the move steps, which
+    the plan's dig and dump durations pay for again (``swing_time``). A node pair is a unicycle
+    chord, so any duration keeps it slip-free; the shortest one puts the chord's speed or its yaw
+    rate at ``margin`` × the limit. Never longer than the NLP's own ``dts``."""
+    chord = np.hypot(np.diff(nodes[:, 0]), np.diff(nodes[:, 1]))
+    turn = np.abs(np.diff(nodes[:, 2]))
+    fastest = np.maximum(chord / (vmax * margin), turn / (wmax * margin))
+    return np.minimum(dts, np.maximum(fastest, 1e-4))
+
+
 def _samples(nodes: np.ndarray, times: np.ndarray) -> list[tuple[float, float, float, float]]:
     return [(float(t), float(x), float(y), float(yaw)) for t, (x, y, yaw) in zip(times, nodes)]
 
@@ -126,7 +141,8 @@ class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
     def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
-                 clearance_margin: float = 0.01):
+                 clearance_margin: float = 0.01, retime: bool = True):
+        self.retime = retime  # moves as fast as the limits allow (fastest_steps), else at the NLP's pace
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
@@ -143,9 +159,12 @@ class Converter:
     def move_excavator(self, st: SimState, v: np.ndarray, w: np.ndarray, dts: np.ndarray) -> bool:
         if len(dts) == 0:
             return True
-        nodes = integrate(st.exc, v, w, dts, self.exc_spec.travel_speed, self.exc_spec.yaw_rate)
+        es = self.exc_spec
+        nodes = integrate(st.exc, v, w, dts, es.travel_speed, es.yaw_rate)
         if np.max(np.hypot(nodes[:, 0] - nodes[0, 0], nodes[:, 1] - nodes[0, 1])) < 1e-6 and abs(nodes[-1, 2] - nodes[0, 2]) < 1e-6:
             return True
+        if self.retime:
+            dts = fastest_steps(nodes, np.asarray(dts, float), es.travel_speed, es.yaw_rate)
         times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         path = _samples(nodes, times)
         if min_distance(path, st.truck) < self.clearance:
@@ -162,6 +181,9 @@ class Converter:
         ts = self.truck_spec
         ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
         nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
+        if self.retime:  # the slower machine sets each shared step's duration
+            dts = np.maximum(fastest_steps(ne, np.asarray(dts, float), es.travel_speed, es.yaw_rate),
+                             fastest_steps(nt, np.asarray(dts, float), ts.travel_speed, ts.yaw_rate))
         times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
         t_moves = np.max(np.hypot(nt[:, 0] - nt[0, 0], nt[:, 1] - nt[0, 1])) > 1e-6 or abs(nt[-1, 2] - nt[0, 2]) > 1e-6

@@ -76,6 +76,7 @@ class Config(LocalNLPConfig):
     eta_on: float = 0.25
     min_dig_volume: float = 0.02
     repair: float = 0.5
+    retime_moves: bool = True  # drive the NLP's paths as fast as the limits allow (convert.fastest_steps)
     fill_estimate: float = 0.85
     local_fit_spacing: float = 0.55
     local_fit_half: float = 2.75
@@ -105,7 +106,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.3.0"
+    version = "0.4.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -144,7 +145,8 @@ class StlTampPlanner(Planner):
         exc = scenario.machines.excavator
         box = site_box(scenario)
         side = self.area_side(scenario)
-        conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair)
+        conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
+                         retime=c.retime_moves)
 
         areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)

@@ -101,6 +101,7 @@ class Config(LocalNLPConfig):
     eta_fill: float = 0.98
     min_model_volume: float = 0.03
     min_dig_volume: float = 0.02
+    retime_moves: bool = True  # as stl-tamp: the same conversion of the NLP's paths
     rule_min_fill: float = 0.25  # pass over a highest point whose dig takes less than this many buckets (0: never)
     trust_radius: float = 0.5
     trust_angle: float = 0.5
@@ -220,7 +221,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.2.0"
+    version = "0.3.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -312,10 +313,8 @@ class SeparatePlanner(Planner):
         """stl-tamp's converter with its contact repair off: the digs stay at the rule's contacts
         (a dig the real grid rejects is skipped, never moved)."""
         c = self.config
-        try:
-            return Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=0.0)
-        except TypeError:  # a converter without contact repair
-            return Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth)
+        return Converter(scenario, eta_on=0.5, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=0.0,
+                         retime=c.retime_moves)
 
     # -- one local area -------------------------------------------------------------------------
     def _local(self, scenario: Scenario, st: SimState, conv: Converter, area: Area, digs: list[RuleDig],
