@@ -7,10 +7,14 @@ import math
 import numpy as np
 import pytest
 
+from hypothesis import given, settings
+from hypothesis import strategies as hst
+
+from earthbench import Move, Plan
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
 from planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
-from planners.stl_tamp.convert import SimState, min_distance
+from planners.stl_tamp.convert import SimState, fastest_steps, integrate, min_distance
 from planners.stl_tamp.guess import build_guess, fill_volumes
 from planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
 from planners.stl_tamp.model import inverse_kinematics, tip_position
@@ -18,6 +22,8 @@ from terrains.rbf import rbf
 from terrains.surface import fit_rbf
 
 import casadi as ca
+
+from conftest import block_scenario
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +176,25 @@ def test_config_is_a_frozen_dataclass_with_paper_defaults():
     assert (c.m_local, c.n_steps, c.area_vmax, c.area_buckets) == (5, 10, 1.0, 5.0)
     with pytest.raises(Exception):
         c.m_local = 3  # type: ignore[misc]
+
+
+step = hst.tuples(hst.floats(-1.0, 1.0), hst.floats(-1.0, 1.0), hst.floats(0.02, 3.0))
+
+
+@settings(max_examples=60, deadline=None)
+@given(hst.lists(step, min_size=1, max_size=8))
+def test_retimed_moves_keep_the_path_within_the_limits(steps):
+    """The converter's retiming: the same nodes, never slower, and the referee finds no move
+    rule broken (speed, yaw rate, sideways slip) however the NLP had paced them."""
+    sc = block_scenario()
+    spec = sc.machines.excavator
+    v = np.array([a for a, _, _ in steps]) * spec.travel_speed
+    w = np.array([b for _, b, _ in steps]) * spec.yaw_rate
+    dts = np.array([d for _, _, d in steps])
+    nodes = integrate(sc.machines.excavator_pose, v, w, dts, spec.travel_speed, spec.yaw_rate)
+    fast = fastest_steps(nodes, dts, spec.travel_speed, spec.yaw_rate)
+    assert np.all(fast <= dts) and np.all(fast > 0)
+    times = np.concatenate([[0.0], np.cumsum(fast)])
+    move = Move("excavator", tuple((float(t), float(x), float(y), float(yaw)) for t, (x, y, yaw) in zip(times, nodes)))
+    broken = {v.rule for v in judge(sc, Plan((move,))).violations}
+    assert not broken & {"speed", "yaw_rate", "heading", "discontinuous"}, broken
