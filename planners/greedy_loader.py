@@ -72,20 +72,10 @@ class GreedyLoader(Planner):
             h = n * pile_side(scenario.terrain, b.z, M, n, b.base)[:, None]
             order = np.argsort(np.hypot(M[:, 0] - truck.x, M[:, 1] - truck.y), kind="stable")
             capacity = min(spec.bucket_capacity, target - b.loaded + 0.02)
-            cycle, failed, tries = None, [], 0
-            for k in order:
-                if tries >= cfg.max_tries:
-                    break
-                if failed and np.min(np.hypot(*(np.array(failed) - M[k]).T)) < 0.25:
-                    continue
-                tries += 1
-                cycle = b.try_candidate(M[k], h[k], capacity)
-                if cycle is not None:
-                    cycle.candidate = {"edge_centre": [float(M[k, 0]), float(M[k, 1])]}
-                    break
-                failed.append(M[k])
+            cycle, k = b.first_feasible(M, h, order, capacity, [], cfg.max_tries)
             if cycle is None:
                 stop = "no feasible candidate"
                 break
+            cycle.candidate = {"edge_centre": [float(M[k, 0]), float(M[k, 1])]}
             b.commit(cycle)
         return b.plan({"stop": stop, "digs": [c.candidate for c in b.cycles]})

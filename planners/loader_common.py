@@ -515,6 +515,25 @@ class CycleBuilder:
         dump = Dump("loader", t2, t2 + self.spec.min_dump_time + 1e-6)
         return Cycle(approach, charge, ch, to_truck, dump)
 
+    def first_feasible(self, M: np.ndarray, h: np.ndarray, order: np.ndarray, capacity: float, failed: list[np.ndarray],
+                       max_tries: int) -> tuple[Cycle | None, int]:
+        """The first candidate of ``order`` whose cycle is feasible, and its index (-1 if none).
+
+        At most ``max_tries`` are tried; a candidate within 0.25 m of one that already failed
+        (``failed``, which grows) is passed over untried, as it would fail the same way."""
+        tries = 0
+        for k in order:
+            if tries >= max_tries:
+                break
+            if failed and np.min(np.hypot(*(np.array(failed) - M[k]).T)) < 0.25:
+                continue
+            tries += 1
+            cycle = self.try_candidate(M[k], h[k], capacity)
+            if cycle is not None:
+                return cycle, int(k)
+            failed.append(M[k])
+        return None, -1
+
     def commit(self, c: Cycle) -> None:
         if len(c.approach.t) > 1:
             self.actions.append(Move("loader", tuple(c.approach.samples)))

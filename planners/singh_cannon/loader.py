@@ -133,32 +133,20 @@ class SinghCannonLoader(Planner):
             dstar = np.hypot(M[:, 0] - pstar[0], M[:, 1] - pstar[1])
             capacity = min(spec.bucket_capacity, target - b.loaded + 0.02)
             d1, d2 = cfg.d1, cfg.d2
-            cycle = None
             failed: list[np.ndarray] = []
-            while cycle is None:
+            while True:  # the region d1–d2, widened until a candidate is feasible or nothing is left
                 region = (dstar >= d1) & (dstar <= d2)
                 order = np.nonzero(region)[0]
                 order = order[np.lexsort((-zeta[order], -score[order]))]
-                tries = 0
-                for k in order:
-                    if tries >= cfg.max_tries:
-                        break
-                    if failed and np.min(np.hypot(*(np.array(failed) - M[k]).T)) < 0.25:
-                        continue
-                    tries += 1
-                    cycle = b.try_candidate(M[k], h[k], capacity)
-                    if cycle is None:
-                        failed.append(M[k])
-                    else:
-                        cycle.candidate = {"xi": float(xi[k]), "psi": float(psi[k]), "zeta": float(zeta[k]), "score": float(score[k]), "edge_centre": [float(M[k, 0]), float(M[k, 1])]}
-                        break
-                if cycle is None:
-                    if d1 == 0.0 and d2 >= dstar.max():
-                        break
-                    d1, d2 = 0.0, d2 * cfg.widen
-                    widened += 1
+                cycle, k = b.first_feasible(M, h, order, capacity, failed, cfg.max_tries)
+                if cycle is not None or (d1 == 0.0 and d2 >= dstar.max()):
+                    break
+                d1, d2 = 0.0, d2 * cfg.widen
+                widened += 1
             if cycle is None:
                 stop = "no feasible candidate"
                 break
+            cycle.candidate = {"xi": float(xi[k]), "psi": float(psi[k]), "zeta": float(zeta[k]), "score": float(score[k]),
+                               "edge_centre": [float(M[k, 0]), float(M[k, 1])]}
             b.commit(cycle)
         return b.plan({"stop": stop, "region_widened": widened, "digs": [c.candidate for c in b.cycles]})
