@@ -76,15 +76,20 @@ class Config(LocalNLPConfig):
     eta_on: float = 0.25
     min_dig_volume: float = 0.02
     repair: float = 0.5
+    # where the machines stand for an area: the base base_offset beyond its centre toward the
+    # truck's side, the truck truck_offset from the base, turned truck_angle from straight behind
+    # it toward the excavator's start. 2.5 rad leaves a swing of about 37° between dig and dump:
+    # on seeds 0-4 of paper-extensive, bench and dem a median of 31.8 s/m³ against 35.2 (2.2 rad)
+    # and 39.1 (π/2, a quarter swing, until 0.4.0), all 40 plans valid.
+    base_offset: float = 4.0
+    truck_offset: float = 5.0
+    truck_angle: float = 2.5
     retime_moves: bool = True  # drive the NLP's paths as fast as the limits allow (convert.fastest_steps)
     fill_estimate: float = 0.85
     local_fit_spacing: float = 0.55
     local_fit_half: float = 2.75
     global_fit_spacing: float = 1.0
     local_fit_solver: str = "cholesky"  # per-area refits: the same least squares, solved directly
-    base_offset: float = 4.0
-    truck_offset: float = 5.0
-    truck_angle: float = math.pi / 2  # truck beside the base: a quarter swing per bucket (0: behind it, a half swing)
     global_layer: bool = True
     max_iter: int = 150
     max_cpu_time: float = 4.0
@@ -106,7 +111,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.4.0"
+    version = "0.5.0"
     tracks = ("backhoe",)
     Config = Config
 
