@@ -81,6 +81,13 @@ def site_box(scenario: Scenario) -> tuple[float, float, float, float]:
     return (min(xs), max(xs), min(ys), max(ys))
 
 
+def fitting_side(scenario: Scenario, side: float) -> float:
+    """``side``, or less where the dig area is narrower: a square local area must fit in it
+    (paper-switch's 2.0 × 1.75 m dig area is one local area)."""
+    xmin, xmax, ymin, ymax = site_box(scenario)
+    return min(side, xmax - xmin, ymax - ymin)
+
+
 def diggable_volume(scenario: Scenario) -> float:
     """Material above the floor (or above the lowest cell) inside the dig area (m³)."""
     t = scenario.terrain

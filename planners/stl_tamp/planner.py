@@ -23,6 +23,7 @@ from .hierarchy import (
     Trace,
     candidate_areas,
     diggable_volume,
+    fitting_side,
     get_nlp,
     greedy_tour,
     local_seeds,
@@ -130,8 +131,7 @@ class StlTampPlanner(Planner):
         """√S_l, or less where the dig area is narrower (paper-switch's 2.0 × 1.75 m area is one
         local area: the contact box is the dig area itself, see :meth:`_local`)."""
         e = scenario.machines.excavator
-        xmin, xmax, ymin, ymax = site_box(scenario)
-        return min(math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length), xmax - xmin, ymax - ymin)
+        return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:

@@ -71,7 +71,7 @@ from terrains.surface import fit_rbf
 
 from .convert import Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes
-from .hierarchy import Area, candidate_areas, get_nlp, site_box
+from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box
 from .model import PhaseNLP, Solution
 from .planner import Config as StlTampConfig
 from .planner import LocalNLPConfig
@@ -245,9 +245,8 @@ class SeparatePlanner(Planner):
         return nearest_order(tiles, (start.x, start.y))
 
     def side(self, scenario: Scenario) -> float:
-        """W_local, or less where the dig area is narrower (paper-switch's 2.0 × 1.75 m area is one local area)."""
-        xmin, xmax, ymin, ymax = site_box(scenario)
-        return min(self.config.w_local, xmax - xmin, ymax - ymin)
+        """W_local, or less where the dig area is narrower (:func:`~.hierarchy.fitting_side`)."""
+        return fitting_side(scenario, self.config.w_local)
 
     def rule(self, scenario: Scenario, z: np.ndarray, area: Area) -> list[RuleDig]:
         """The rule's m_l digs for ``area`` on grid ``z`` (see :func:`rule_digs`)."""
