@@ -14,7 +14,7 @@ from earthbench import Move, Plan
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
 from planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
-from planners.stl_tamp.convert import SimState, fastest_steps, integrate, min_distance
+from planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
 from planners.stl_tamp.guess import build_guess, fill_volumes
 from planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
 from planners.stl_tamp.model import inverse_kinematics, tip_position
@@ -201,3 +201,18 @@ def test_retimed_moves_keep_the_path_within_the_limits(steps):
     move = Move("excavator", tuple((float(t), float(x), float(y), float(yaw)) for t, (x, y, yaw) in zip(times, nodes)))
     broken = {v.rule for v in judge(sc, Plan((move,))).violations}
     assert not broken & {"speed", "yaw_rate", "heading", "discontinuous"}, broken
+
+
+def test_phase_zero_with_a_still_truck_keeps_the_excavators_path():
+    """move_both with a truck that stays: the excavator ends where the NLP's controls take it,
+    driven faster, not on a path integrated over the shortened steps."""
+    sc = block_scenario()
+    st = SimState.start(sc)
+    conv = Converter(sc, eta_on=0.25, min_dig_volume=0.02, depth=0.4)
+    spec = sc.machines.excavator
+    ve, we = np.full(4, 0.3 * spec.travel_speed), np.full(4, 0.2 * spec.yaw_rate)
+    dts = np.full(4, 2.0)
+    end = integrate(st.exc, ve, we, dts, spec.travel_speed, spec.yaw_rate)[-1]
+    assert conv.move_both(st, ve, we, np.zeros(4), np.zeros(4), dts) == "excavator"
+    assert (st.exc.x, st.exc.y, st.exc.yaw) == pytest.approx(tuple(end), abs=1e-9)
+    assert st.t < dts.sum()  # and faster than the NLP's pace

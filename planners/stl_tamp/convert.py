@@ -181,15 +181,16 @@ class Converter:
         ts = self.truck_spec
         ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
         nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
-        if self.retime:  # the slower machine sets each shared step's duration
-            dts = np.maximum(fastest_steps(ne, np.asarray(dts, float), es.travel_speed, es.yaw_rate),
-                             fastest_steps(nt, np.asarray(dts, float), ts.travel_speed, ts.yaw_rate))
-        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
         t_moves = np.max(np.hypot(nt[:, 0] - nt[0, 0], nt[:, 1] - nt[0, 1])) > 1e-6 or abs(nt[-1, 2] - nt[0, 2]) > 1e-6
-        pe, pt = _samples(ne, times), _samples(nt, times)
-        if not t_moves:
+        if not t_moves:  # the NLP's own durations: move_excavator integrates them again, then retimes
             return "excavator" if self.move_excavator(st, ve, we, dts) else self._blocked()
+        if self.retime:  # the slower machine sets each shared step's duration
+            step = np.asarray(dts, float)
+            dts = np.maximum(fastest_steps(ne, step, es.travel_speed, es.yaw_rate),
+                             fastest_steps(nt, step, ts.travel_speed, ts.yaw_rate))
+        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
+        pe, pt = _samples(ne, times), _samples(nt, times)
         if not e_moves:
             if min_distance(pt, st.exc) < self.clearance:
                 return self._blocked()
