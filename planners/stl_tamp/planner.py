@@ -94,7 +94,7 @@ class Config(LocalNLPConfig):
     global_layer: bool = True
     max_iter: int = 150
     max_cpu_time: float = 4.0
-    global_max_iter: int = 1500  # 150 left 28 of 40 paper-extensive global solves unconverged; 1500: none (≤ 860 used)
+    global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
     global_max_cpu_time: float = 10.0
     mu_strategy: str = "adaptive"
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks) or "raise"
