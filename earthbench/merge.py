@@ -210,7 +210,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
         raise MergeError("an input database is named twice")
     if out_path.is_dir():
         raise MergeError(f"the output {str(out_path)!r} is a directory, not a results database file")
-    inputs = [Store(p, create=False) for p in in_paths]
+    inputs = [Store(p, read_only=True) for p in in_paths]
     try:
         existing = Store(out_path, create=False) if out_path.exists() else None
         try:
@@ -267,7 +267,7 @@ def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[
         raise MergeError(f"{str(out_path)!r} already exists; export writes a new bundle (choose another name or remove it)")
     if not planners:
         raise MergeError("name the planner(s) to export with --planner")
-    with Store(db, create=False) as src:
+    with Store(db, read_only=True) as src:
         ver = src.suite_version(suite)
         if ver is None:
             known = [r[0] for r in src.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]

@@ -34,6 +34,7 @@ import zlib
 from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
+from urllib.parse import quote
 from typing import TYPE_CHECKING, Any
 
 from .errors import StoreError
@@ -124,14 +125,17 @@ def _json(obj: Any) -> str:
 class Store:
     """An open results database. Use as a context manager; writes happen in :meth:`record`."""
 
-    def __init__(self, path: str | Path = DEFAULT_DB, *, timeout: float = 10.0, create: bool = True):
+    def __init__(self, path: str | Path = DEFAULT_DB, *, timeout: float = 10.0, create: bool = True, read_only: bool = False):
+        """``read_only`` opens an existing store without ever writing to its file (an input to verify)."""
         self.path = Path(path)
-        if not create and not self.path.exists():
+        self.read_only = read_only
+        if (read_only or not create) and not self.path.exists():
             raise StoreError(f"no results database at {str(self.path)!r}; run `earthbench run SUITE --db {self.path}` first")
         if self.path.is_dir():
             raise StoreError(f"{str(self.path)!r} is a directory, not a results database file")
         try:
-            self.db = sqlite3.connect(str(self.path), timeout=timeout, isolation_level=None)
+            target = f"file:{quote(str(self.path.resolve()))}?mode=ro" if read_only else str(self.path)
+            self.db = sqlite3.connect(target, timeout=timeout, isolation_level=None, uri=read_only)
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open results database {str(self.path)!r}: {exc}") from None
         self.db.row_factory = sqlite3.Row
@@ -157,7 +161,7 @@ class Store:
         app = self.db.execute("PRAGMA application_id").fetchone()[0]
         version = self.db.execute("PRAGMA user_version").fetchone()[0]
         tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if app == 0 and not tables:
+        if app == 0 and not tables and not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("BEGIN IMMEDIATE")
             try:
@@ -179,7 +183,8 @@ class Store:
                 f"results database {str(self.path)!r} has schema version {version}, newer than this earthbench "
                 f"understands ({SCHEMA_VERSION}); upgrade earthbench to use it (it was left untouched)"
             )
-        self.db.execute("PRAGMA journal_mode=WAL")
+        if not self.read_only:
+            self.db.execute("PRAGMA journal_mode=WAL")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
