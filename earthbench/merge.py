@@ -158,28 +158,38 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
 def _new_store(path: Path) -> Iterator[Store]:
     """A store that appears at ``path`` only once it is complete: built beside it, then renamed.
 
-    A refusal or a failure half-way leaves no file behind (no empty database).
+    A refusal or a failure half-way leaves no file behind (no empty database). Nobody reads
+    the file before it is complete, so its per-run transactions skip the disk sync; one
+    synced checkpoint makes it durable before the rename.
     """
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         with Store(tmp) as st:
+            st.db.execute("PRAGMA synchronous=OFF")
             yield st
+            st.db.execute("PRAGMA synchronous=FULL")
+            st.db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         os.replace(tmp, path)
     finally:
         for p in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
             p.unlink(missing_ok=True)
 
 
-def _copy(src: Store, rows: Sequence[Any], out: Store, judgements: dict[int, Judgement] | None = None) -> int:
-    """Copy ``rows`` of ``src`` into ``out`` through :meth:`Store.record`; a run in ``judgements`` takes the re-judged figures."""
-    scenarios: dict[str, Any] = {}
+def _copy(src: Store, rows: Sequence[Any], out: Store, judgements: dict[int, Judgement] | None = None,
+          scenarios: dict[str, Any] | None = None) -> int:
+    """Copy ``rows`` of ``src`` into ``out`` through :meth:`Store.record`; a run in ``judgements`` takes the re-judged figures.
+
+    ``scenarios``: the stored scenarios already read (and checked) by digest.
+    """
+    scenarios = dict(scenarios or {})
+    out.copy_scenarios(src, dict.fromkeys(r["scenario_digest"] for r in rows))
     n = 0
     for row in rows:
         case, res = _case_and_result(src, row, scenarios)
         j = (judgements or {}).get(row["id"])
         if j is not None:
             res = replace(res, reason=j.reason, metrics=j.metrics, violations=j.violations, error=j.error)
-        if out.record(case, res):
+        if out.record(case, res, plan_blob=row["plan"] if res.plan_json is not None else None):
             n += 1
     return n
 
@@ -237,7 +247,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
                     report.suites += _register(out, _suites(src))
                     rows = src.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
                     changed = {f.run_id: a.judgements[f.run_id] for f in a.differ if f.run_id in a.judgements}
-                    n = _copy(src, rows, out, changed)
+                    n = _copy(src, rows, out, changed, a.scenarios)
                     report.per_input[str(src.path)] = n
                     report.runs += n
 

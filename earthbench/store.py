@@ -234,8 +234,11 @@ class Store:
         """The most recently registered version (id, digest, threshold, …) of a suite name."""
         return self.db.execute("SELECT * FROM suites WHERE name=? ORDER BY id DESC LIMIT 1", (name,)).fetchone()
 
-    def record(self, case: Case, result: CaseResult, *, replace: bool = False) -> bool:
-        """Store one finished case in one transaction. Returns False if it was already stored."""
+    def record(self, case: Case, result: CaseResult, *, replace: bool = False, plan_blob: bytes | None = None) -> bool:
+        """Store one finished case in one transaction. Returns False if it was already stored.
+
+        ``plan_blob``: ``result.plan_json`` as another store keeps it, copied without compressing it again (merge).
+        """
         if result.reason == "cancelled":
             raise ValueError("a cancelled case is never stored")
         sc = case.scenario
@@ -265,7 +268,7 @@ class Store:
                     **{c: (None if c not in m else (int(m[c]) if isinstance(m[c], bool) else m[c])) for c in METRIC_COLUMNS},
                     "metrics": _json(m) if result.metrics is not None else None,
                     "violations": _json(list(result.violations)),
-                    "plan": _compress(result.plan_json) if result.plan_json is not None else None,
+                    "plan": plan_blob if plan_blob is not None else _compress(result.plan_json) if result.plan_json is not None else None,
                     "error": result.error, "log_tail": result.log_tail, "exit_status": result.exit_status,
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
@@ -279,6 +282,21 @@ class Store:
                 if self.db.in_transaction:
                     self.db.execute("ROLLBACK")
                 raise
+        except sqlite3.OperationalError as exc:
+            raise StoreError(self._explain(exc)) from None
+
+    def copy_scenarios(self, src: Store, digests: Iterable[str]) -> None:
+        """Copy stored scenario documents from ``src`` as they are (no re-encoding), in one transaction.
+
+        For merging: the caller has checked that each document reproduces its digest.
+        """
+        rows = [r for d in digests
+                if (r := src.db.execute("SELECT digest, id, track, target_volume, doc FROM scenarios WHERE digest=?", (d,)).fetchone())]
+        try:
+            with self.db:
+                self.db.execute("BEGIN IMMEDIATE")
+                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
+                                    [tuple(r) for r in rows])
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 

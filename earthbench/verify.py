@@ -175,6 +175,7 @@ class Audit:
     broken: list[Finding] = field(default_factory=list)            #: cannot be verified at all (never mergeable)
     unjudged: Counter = field(default_factory=Counter)             #: runs without a plan, by reason (harness's word)
     judgements: dict[int, Judgement] = field(default_factory=dict)  #: by run id, every run re-judged
+    scenarios: dict[str, Scenario] = field(default_factory=dict)    #: by digest, every stored scenario that reproduces it
 
     def problems(self, *, rescore: bool = False) -> list[str]:
         """Every reason to refuse this store; with ``rescore``, differing figures are not one."""
@@ -226,6 +227,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
     suites = {(s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")}
     members = {(m[0], m[1]) for m in store.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
     scenarios = _scenarios(store, {r["scenario_digest"] for r in rows})
+    result.scenarios = {d: sc for d, sc in scenarios.items() if isinstance(sc, Scenario)}
     for r in rows:
         label = _label(r)
         suite = suites.get((r["suite"], r["suite_digest"]))
