@@ -4,7 +4,10 @@
 
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
   (:data:`metrics.aggregate.RANKING_RULE`), with a reproducibility stamp (project commits,
-  suite digest, CPU models and cores, run dates, generation date) and the figures;
+  suite digest, CPU models and cores, run dates, generation date), what each figure rests on
+  (referee figures re-judgeable from the stored plans; solve times from the machine named for
+  each planner, † on solve-time columns that mix machines; the latest ``earthbench verify``
+  spot re-timing of each planner version) and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;

@@ -270,3 +270,27 @@ def test_verify_reruns_a_sample_here_and_the_leaderboard_shows_it(tmp_path, caps
     md = (page.out / "README.md").read_text()
     assert "spot re-timing: greedy" in md and "referee figures agree 1/1" in md
     assert "solve times of greedy" in md
+
+
+# -- provenance in the leaderboard ------------------------------------------------------------------
+
+
+def test_leaderboard_names_the_machine_of_each_planners_solve_times(tmp_path):
+    from earthbench.publish import publish
+
+    suite = suite_of(1)
+    a = fill_store(tmp_path / "a.db", suite, [Behaviour(ref("greedy"))])
+    b = fill_store(tmp_path / "b.db", suite, [Behaviour(ref("half"), keep=0.5, cpu_model="Other CPU 9000")])
+    single = publish(a, tmp_path / "one", figures=False)
+    md = (single.out / "README.md").read_text()
+    assert "provenance: success, volume and time-per-m³ figures are the referee's" in md
+    assert "†" not in md and "solve times of greedy 1.0: " in md
+    merge(tmp_path / "all.db", [a, b])
+    both = publish(tmp_path / "all.db", tmp_path / "two", figures=False)
+    md = (both.out / "README.md").read_text()
+    assert "| Solve s (median) † |" in md and "solve-time columns mix machines" in md
+    assert "solve times of half 1.0: " in md and "Other CPU 9000" in md.split("solve times of half 1.0: ")[1].splitlines()[0]
+    page = (both.out / "index.html").read_text()
+    assert "solve times of greedy 1.0: " in page and "Solve s (median) †" in page
+    runs = load_runs(tmp_path / "all.db")  # every run keeps the environment stamp it came with
+    assert set(runs.groupby("planner").cpu_model.first()) == {runs[runs.planner == "greedy"].cpu_model.iloc[0], "Other CPU 9000"}
