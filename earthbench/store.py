@@ -134,7 +134,10 @@ class Store:
         if self.path.is_dir():
             raise StoreError(f"{str(self.path)!r} is a directory, not a results database file")
         try:
-            target = f"file:{quote(str(self.path.resolve()))}?mode=ro" if read_only else str(self.path)
+            # read-only; without a write-ahead log beside it (no writer, nothing to replay) the file is
+            # all there is, and `immutable` keeps SQLite from creating -wal/-shm files next to it
+            ro = "mode=ro" + ("" if Path(f"{self.path}-wal").exists() else "&immutable=1")
+            target = f"file:{quote(str(self.path.resolve()))}?{ro}" if read_only else str(self.path)
             self.db = sqlite3.connect(target, timeout=timeout, isolation_level=None, uri=read_only)
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open results database {str(self.path)!r}: {exc}") from None

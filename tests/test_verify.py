@@ -14,6 +14,8 @@ from contextlib import closing
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from earthbench.cli import main
 from earthbench.merge import MergeError, export, merge
@@ -143,7 +145,7 @@ def test_tampered_store_is_refused_untouched_and_nothing_written(clean, tmp_path
     if tamper not in (_tamper_suite_digest, _tamper_scenario):  # those name the suite or every run of the scenario
         assert f"run {_greedy_ok(src) if tamper is not _tamper_timeout_claims else ''}" in err
     assert not out.exists() and not list(tmp_path.glob(".out.db*"))
-    assert _sha(src) == before
+    assert _sha(src) == before and not Path(f"{src}-wal").exists() and not Path(f"{src}-shm").exists()
     # into an existing store: refused the same way, the store is unchanged
     existing = _copy(clean, tmp_path / "existing.db")
     _edit(existing, "DELETE FROM runs")
@@ -294,3 +296,23 @@ def test_leaderboard_names_the_machine_of_each_planners_solve_times(tmp_path):
     assert "solve times of greedy 1.0: " in page and "Solve s (median) †" in page
     runs = load_runs(tmp_path / "all.db")  # every run keeps the environment stamp it came with
     assert set(runs.groupby("planner").cpu_model.first()) == {runs[runs.planner == "greedy"].cpu_model.iloc[0], "Other CPU 9000"}
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(column=st.sampled_from(["volume_ratio", "loaded_volume", "makespan_s", "time_per_m3", "time_per_m3_ratio",
+                               "mean_bucket_fill", "travel_m"]),
+       factor=st.one_of(st.floats(0.0, 0.999999), st.floats(1.000001, 1e6)))
+def test_any_edit_beyond_round_off_is_caught(clean, column, factor):
+    """Scaling any stored figure by more than one part in a million is a difference, in the column or in the JSON."""
+    with Store(clean, read_only=True) as st_:
+        row = dict(st_.query(planner=["greedy"])[0])
+        sc = st_.scenario(row["scenario_digest"])
+        judged = rejudge(sc, st_.plan_json(row["id"]), row["threshold"])
+    assert differences(row, judged) == []
+    if not row[column]:
+        return
+    edited = dict(row, **{column: row[column] * factor})
+    assert any(d.startswith(f"column {column} ") for d in differences(edited, judged))
+    metrics = json.loads(row["metrics"])
+    metrics[column] = metrics[column] * factor
+    assert any(d.startswith(f"metric {column} ") for d in differences(dict(row, metrics=json.dumps(metrics)), judged))
