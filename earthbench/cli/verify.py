@@ -6,7 +6,8 @@ reruns N randomly chosen runs (``--seed``) under the harness here, with the same
 version and configuration (which must be installed), and reports per planner whether the
 referee figures agree (identical for a deterministic planner) and the ratio of solve times
 here to those stored. The result is kept in the store (table ``spot_checks``, unless
-``--no-record``) so that ``earthbench leaderboard`` shows it in the table's stamp.
+``--no-record``) so that ``earthbench leaderboard`` shows it in the table's stamp. Exits 1
+when a rerun's referee figures differ from the stored ones.
 """
 
 from __future__ import annotations
