@@ -18,10 +18,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from earthbench.cli import main
-from earthbench.merge import MergeError, export, merge
+from earthbench.merge import MergeError, merge
 from earthbench.store import Store, load_runs
 from earthbench.verify import Judgement, audit, differences, rejudge, same
-from earthbench.world import Scenario
 from leaderboard_fixtures import Behaviour, fill_store, ref, suite_of
 
 
