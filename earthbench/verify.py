@@ -144,7 +144,7 @@ def differences(row: Any, judged: Judgement) -> list[str]:
     except ValueError:
         violations = "unreadable"
     if not same(violations, list(judged.violations)):
-        n = len(violations) if isinstance(violations, list) else violations
+        n = len(violations) if isinstance(violations, list) else "unreadable"
         out.append(f"violations {n} stored (re-judged {len(judged.violations)}: "
                    f"{', '.join(sorted({v['rule'] for v in judged.violations})) or 'none'})")
     return out
@@ -245,7 +245,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
             if r["reason"] in JUDGED_REASONS:
                 result.broken.append(Finding(r["id"], label, f"stored {r['reason']} without a plan: its verdict cannot be verified"))
             elif r["success"] or r["metrics"] is not None or any(r[c] is not None for c in METRIC_COLUMNS) \
-                    or json.loads(r["violations"] or "[]"):
+                    or (r["violations"] or "[]") != "[]":
                 result.broken.append(Finding(r["id"], label, f"stored {r['reason']} without a plan, yet it carries referee figures"))
             else:
                 result.unjudged[r["reason"]] += 1
