@@ -75,6 +75,7 @@ class MergeReport:
     agreed: int = 0                                            #: re-judged and equal to what was stored
     rescored: int = 0                                          #: re-judged, differed, merged with the new figures
     unjudged: Counter = field(default_factory=Counter)         #: runs without a plan, by reason (not re-checkable)
+    changes: list[str] = field(default_factory=list)           #: with rescore: each re-scored run and what differed
 
 
 def _suites(store: Store) -> list[_SuiteRecord]:
@@ -240,6 +241,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
             for a in audits:
                 report.agreed += a.agreed
                 report.rescored += len(a.differ)
+                report.changes += [f"{a.path}: {f}" for f in a.differ]
                 report.unjudged.update(a.unjudged)
 
             def fill(out: Store) -> None:

@@ -160,7 +160,9 @@ def test_rescore_replaces_differing_figures_and_counts_them(clean, tmp_path, cap
     tamper(src)
     out = tmp_path / "out.db"
     assert main(["merge", "--rescore", str(out), str(src)]) == 0
-    assert "5 agree with the stored figures, 1 re-scored" in capsys.readouterr().out
+    cap = capsys.readouterr()
+    assert "5 agree with the stored figures, 1 re-scored" in cap.out
+    assert f"re-scored {src}: run {_greedy_ok(src)} (" in cap.err
     with Store(out, create=False) as st:  # everything in the output is what the referee says
         a = audit(st)
     assert a.problems() == [] and a.agreed == 6

@@ -14,6 +14,7 @@ which cannot be re-checked. Solve times come from the machine that ran each case
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -30,6 +31,10 @@ def run(args: argparse.Namespace) -> int:
     from ..merge import merge
 
     report = merge(args.out, args.inputs, rescore=args.rescore)
+    for line in report.changes[:20]:
+        print(f"re-scored {line}", file=sys.stderr)
+    if len(report.changes) > 20:
+        print(f"re-scored … and {len(report.changes) - 20} more", file=sys.stderr)
     for path, n in report.per_input.items():
         print(f"{path}: {n} run(s)")
     judged = report.agreed + report.rescored
