@@ -163,6 +163,8 @@ def _new_store(path: Path) -> Iterator[Store]:
     the file before it is complete, so its per-run transactions skip the disk sync; one
     synced checkpoint makes it durable before the rename.
     """
+    if not path.parent.is_dir():
+        raise MergeError(f"the folder {str(path.parent)!r} for {str(path)!r} does not exist; create it first")
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         with Store(tmp) as st:

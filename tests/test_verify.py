@@ -234,6 +234,8 @@ def test_export_bad_input(tmp_path, capsys, clean):
     err = capsys.readouterr().err
     assert "did you mean 'greedy'" in err and "Traceback" not in err
     assert not (tmp_path / "y.db").exists()
+    assert main(["export", "--db", str(clean), "--suite", "pubtest", "--planner", "greedy", str(tmp_path / "no" / "y.db")]) == 2
+    assert "does not exist; create it first" in capsys.readouterr().err
 
 
 # -- spot re-timing -------------------------------------------------------------------------------
