@@ -22,7 +22,7 @@ PINNED = {
     "paper-extensive": ("7bcd71d54536530206b7fea12e231a6f55c8f0ab14406da31dfd52795f327caf", 40),
     "bench": ("7e0dffdf3e21c6384d1c8da2780a59918d75e64918212234d104925f6670f1a1", 20),
     "dem": ("5e856db285831e09db36da3d4bc7e9538095b4d270c183027760d14e1c684880", 20),
-    "scale": ("15c8dca18688c5dc9235bdfc53d61affe0da5d83c613413346a6d7a843d58f63", 15),
+    "scale": ("bba4c64802b31e045fa16718ded99996bd69f0cffc70bca0b93c9a88e828cbb0", 40),
     "standard": ("ee060f3ffea5a59bde3690940dabe22d47930d1fe85dc85a313d5a1d04d36b55", 110),
     "paper-separate-sweep": ("2b7c6f2a2ff0652b89206f0b399c5a4e90d6b4262b6f603a5bd050cd26b6bfa8", 10),
 }

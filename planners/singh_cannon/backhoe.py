@@ -56,7 +56,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from scipy.signal import fftconvolve
 from shapely.geometry import LineString, Point, Polygon
 
 from earthbench.motion import turn_drive_turn, wrap
@@ -450,6 +449,8 @@ class Session:
         off = np.arange(-k, k + 1) * step
         dist = np.hypot(off[None, :], off[:, None])
         kernel = ((dist >= e.reach_min + 0.3) & (dist <= e.reach_max - 0.2)).astype(float)
+        from scipy.signal import fftconvolve  # here, not at import: scipy.signal costs ~1 s of every case's start-up
+
         reach = np.clip(fftconvolve(blocks, kernel, mode="full"), 0.0, None)
         x0, y0 = self.terrain.origin
         gx = x0 + (np.arange(nx2 + 2 * k) - k + 0.5) * step
