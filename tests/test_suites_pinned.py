@@ -71,6 +71,24 @@ def test_scale_targets_grow_with_area(suites):
     assert per_area == {round(4.0 / 72.0, 9)}
 
 
+def test_scale_is_a_ladder_of_four_sizes_up_to_96_by_48_m(suites):
+    by_size: dict[tuple[float, float], list] = {}
+    for sc in suites["scale"].scenarios:
+        by_size.setdefault((sc.terrain.extent[1], sc.terrain.extent[3]), []).append(sc)
+    assert sorted(by_size) == [(12.0, 6.0), (24.0, 12.0), (48.0, 24.0), (96.0, 48.0)]
+    capacity = {12.0: 10.0, 24.0: 20.0, 48.0: 80.0, 96.0: 320.0}
+    for (lx, ly), scs in by_size.items():
+        assert sorted(sc.meta["seed"] for sc in scs) == list(range(10))
+        for sc in scs:
+            assert sc.terrain.z.shape == (round(ly / 0.05), round(lx / 0.05))
+            assert sc.meta["n_bases"] == round(30 * lx * ly / 72)
+            assert sc.machines.truck.capacity == capacity[lx]
+            # the paper's poses as offsets from the map's corners: the same drive onto every map
+            m = sc.machines
+            assert (m.excavator_pose.x, m.excavator_pose.y, m.truck_pose.x, m.truck_pose.y) == (lx + 1.0, ly + 1.2, 2.0, ly + 7.0)
+            assert sc.budget.wall_s == 600.0
+
+
 def test_standard_is_the_union_and_shares_digests(suites):
     parts = ("paper-switch", "paper-extensive", "bench", "dem")
     union = sorted(sc.digest for p in parts for sc in suites[p].scenarios)
