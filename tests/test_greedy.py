@@ -86,7 +86,7 @@ def test_station_volumes_are_the_direct_sum_over_the_annulus(bases, seed):
 def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
     g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
     g.base = g.base.__class__(6.0, 3.0, 0.0)  # a station in the middle of the map
-    p, h, _, _, level = g.candidates()
+    p, h, _, level, _ = g.candidates()
     before = g.z.copy()
     for k in range(0, len(p), max(len(p) // 40, 1)):
         contact, e = (float(p[k, 0]), float(p[k, 1])), g.exc
