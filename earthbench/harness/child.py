@@ -1,6 +1,6 @@
 """The inside of one case subprocess: load the planner, time its call, send back the plan.
 
-Started by :func:`earthbench.runner.run_case` through a tiny bootstrap that pins the CPU
+Started by :func:`earthbench.harness.run_case` through a tiny bootstrap that pins the CPU
 affinity and sets the memory limit *before* this module (and so numpy) is imported. It talks
 to the harness over an inherited pipe, one JSON object per line:
 
@@ -145,7 +145,7 @@ try:
         os._exit(70)
 except (OSError, AttributeError):
     pass
-from earthbench._child import main
+from earthbench.harness.child import main
 main(sys.argv[1], int(sys.argv[2]))
 """
 """Run as ``python -c BOOTSTRAP CASE_FILE FD CORES MEMORY_BYTES PARENT_PID``."""
