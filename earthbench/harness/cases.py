@@ -115,6 +115,8 @@ class CaseResult:
     started_at: str = ""
     finished_at: str = ""
     environment: dict[str, Any] = field(default_factory=dict)
+    #: What the case itself reported (its own timings): information only, never stored or trusted.
+    detail: dict[str, Any] = field(default_factory=dict, compare=False)
 
     @property
     def success(self) -> bool:

@@ -1,18 +1,30 @@
-"""The inside of one case subprocess: load the planner, time its call, send back the plan.
+"""The inside of one case: a warden process and, under it, the planner's process.
 
-Started by :func:`earthbench.harness.run_case` through a tiny bootstrap that pins the CPU
-affinity and sets the memory limit *before* this module (and so numpy) is imported. It talks
-to the harness over an inherited pipe, one JSON object per line:
+:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``. The bootstrap is plain
+Python that imports nothing of earthbench, numpy or the plugin; it becomes the case's
+*warden*:
 
-* ``{"event": "started", "t": <CLOCK_MONOTONIC>, "cpu": <process CPU s>}`` just before the
-  planner is constructed: the wall budget runs from here, so imports and reading the
-  scenario never count against the planner;
-* ``{"event": "done", "outcome": "plan" | "error" | "memory", ...}`` with the harness-side
-  timings (``solve_time_s`` wall, ``solve_cpu_s`` process CPU incl. reaped children) that are
-  measured even when the planner raises.
+* it makes itself a child subreaper (``prctl(PR_SET_CHILD_SUBREAPER)``), so every descendant
+  of the case, also one that left the session (``setsid``) or was double-forked, is
+  re-parented to it rather than to init; with ``PR_SET_PDEATHSIG`` it hears of the
+  harness's death;
+* it pins the slot's cores and forks the *planner process*, which sets ``RLIMIT_AS`` and then
+  runs :func:`main` (the only place plugin code runs);
+* it reaps every descendant until the planner process has exited, then kills (SIGKILL) and
+  reaps whatever is left; SIGTERM (from the harness at a deadline, or as the harness dies)
+  ends the case the same way;
+* finally it writes one report on a pipe only it holds (the planner process closes it before
+  any plugin code runs): the planner process's exit status, and the kernel's accounting of
+  every reaped descendant (``getrusage(RUSAGE_CHILDREN)``: CPU seconds and peak resident
+  memory), so CPU and memory figures cover the case's own process tree and nothing else.
 
-The child never judges its own plan: the referee runs in the harness process, out of the
-planner's reach.
+The planner process talks to the harness over another inherited pipe, one JSON object per
+line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has read the
+scenario that the harness writes to its stdin in answer, ``{"event": "done", "outcome":
+"plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The harness
+validates every message and owns every time: it starts the wall budget when it hands over the
+scenario and stops it when the result arrives; ``detail`` (the child's own timings) is kept
+for information only. The child never judges its own plan.
 """
 
 from __future__ import annotations
@@ -34,16 +46,16 @@ def _cpu() -> float:
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def load_planner_class(source: str, name: str, plugins: list[str] | tuple[str, ...] = ()) -> type:
+def load_planner_class(source: str, name: str) -> type:
     """Import exactly the planner's code, without loading every registered plugin.
 
     ``module:qualname`` is imported; a ``.py`` path is executed as a module and searched for
-    the Planner subclass called ``name``; ``registry`` loads ``plugins`` and looks ``name`` up.
-    (Loading the whole registry would import every installed planner's dependencies into
-    every case, seconds of start-up that have nothing to do with the planner under test.)
+    the Planner subclass called ``name``. (Loading the whole registry would import every
+    installed planner's dependencies into every case, seconds of start-up that have nothing
+    to do with the planner under test.)
     """
     from earthbench.planner import Planner
-    from earthbench.registry import PLANNERS, load_plugin_file
+    from earthbench.registry import PLANNERS
 
     if source.endswith(".py"):
         mod_name = f"earthbench_plugin_{os.path.splitext(os.path.basename(source))[0]}"
@@ -57,10 +69,6 @@ def load_planner_class(source: str, name: str, plugins: list[str] | tuple[str, .
             if isinstance(obj, type) and issubclass(obj, Planner) and obj.__module__ == mod_name and obj.name == name:
                 return obj
         return PLANNERS.get(name)  # registered by a decorator under another class name
-    if source == "registry":
-        for plugin in plugins:
-            load_plugin_file(plugin)
-        return PLANNERS.get(name)
     module_name, _, qual = source.partition(":")
     obj: Any = importlib.import_module(module_name)
     for part in qual.split("."):
@@ -69,6 +77,7 @@ def load_planner_class(source: str, name: str, plugins: list[str] | tuple[str, .
 
 
 def main(case_file: str, fd: int) -> None:
+    """Load the planner, say ``ready``, read the scenario from stdin, plan, send the result."""
     out = os.fdopen(fd, "w", buffering=1)
 
     def send(msg: dict[str, Any]) -> None:
@@ -81,8 +90,7 @@ def main(case_file: str, fd: int) -> None:
         from earthbench.plan import Plan
         from earthbench.world import Scenario
 
-        cls = load_planner_class(doc["source"], doc["name"], doc.get("plugins", ()))
-        scenario = Scenario.from_dict(doc["scenario"])
+        cls = load_planner_class(doc["source"], doc["name"])
         overrides = doc.get("overrides", {})
         del doc
     except BaseException as exc:  # noqa: BLE001 - everything the planner's import can do is reported
@@ -90,10 +98,11 @@ def main(case_file: str, fd: int) -> None:
         send({"event": "done", "outcome": outcome, "error": "could not load the planner:\n" + traceback.format_exc()})
         return
 
-    send({"event": "started", "t": time.monotonic(), "cpu": _cpu()})
+    send({"event": "ready"})
     outcome, error, plan = "plan", "", None
     t0, c0 = time.perf_counter(), _cpu()
     try:
+        scenario = Scenario.from_dict(json.load(sys.stdin))
         planner = cls(**overrides)
         plan = planner.plan(scenario)
     except MemoryError:
@@ -104,7 +113,7 @@ def main(case_file: str, fd: int) -> None:
         outcome, error = "error", _tb(exc)
     finally:
         wall, cpu = time.perf_counter() - t0, _cpu() - c0
-    msg: dict[str, Any] = {"event": "done", "solve_time_s": wall, "solve_cpu_s": cpu}
+    msg: dict[str, Any] = {"event": "done", "detail": {"solve_time_s": wall, "solve_cpu_s": cpu}}
     if outcome == "plan":
         if not isinstance(plan, Plan):
             outcome = "error"
@@ -115,7 +124,10 @@ def main(case_file: str, fd: int) -> None:
             except Exception as exc:  # noqa: BLE001
                 outcome, error = "error", "the plan could not be written as JSON:\n" + _tb(exc)
     msg.update(outcome=outcome, error=error)
-    send(msg)
+    try:
+        send(msg)
+    except (TypeError, ValueError) as exc:  # e.g. a to_json() that returned something JSON cannot write
+        send({"event": "done", "outcome": "error", "error": "the plan could not be written as JSON:\n" + _tb(exc)})
     out.close()
 
 
@@ -130,25 +142,78 @@ def _short_tb() -> str:
         return ""
 
 
-BOOTSTRAP = """
-import os, sys, resource
-cores = [int(c) for c in sys.argv[3].split(",") if c]
-if cores and hasattr(os, "sched_setaffinity"):  # Linux; elsewhere only the thread caps apply
-    os.sched_setaffinity(0, cores)
-mem = int(sys.argv[4])
-if mem > 0:
-    resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+BOOTSTRAP = r"""
+import ctypes, json, os, resource, signal, sys
+case_file, msg_fd, report_fd, cores, mem, harness = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5]), int(sys.argv[6])
 try:
-    import ctypes
-    ctypes.CDLL(None).prctl(1, 9)  # PR_SET_PDEATHSIG = SIGKILL: never outlive the harness
-    if os.getppid() != int(sys.argv[5]):
-        os._exit(70)
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
 except (OSError, AttributeError):
-    pass
-from earthbench.harness.child import main
-main(sys.argv[1], int(sys.argv[2]))
-"""
-"""Run as ``python -c BOOTSTRAP CASE_FILE FD CORES MEMORY_BYTES PARENT_PID``."""
+    prctl = None
+if prctl is not None:
+    prctl(36, 1)  # PR_SET_CHILD_SUBREAPER: orphans of the case come to the warden, not to init
+    prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG: the harness died -> end the case
+if os.getppid() != harness:
+    os._exit(70)
+cpus = [int(c) for c in cores.split(",") if c]
+if cpus and hasattr(os, "sched_setaffinity"):  # Linux; elsewhere only the thread caps apply
+    os.sched_setaffinity(0, cpus)
+warden = os.getpid()
+planner = os.fork()
+if planner == 0:
+    os.close(report_fd)
+    if prctl is not None:
+        prctl(1, int(signal.SIGKILL))
+    if os.getppid() != warden:
+        os._exit(70)
+    if mem > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+    from earthbench.harness.child import main
+    main(case_file, msg_fd)
+    sys.exit(0)
+os.close(msg_fd)
+devnull = os.open(os.devnull, os.O_RDONLY)
+os.dup2(devnull, 0)
+ending = False
 
-if __name__ == "__main__":  # pragma: no cover - for debugging a case file by hand
-    main(sys.argv[1], sys.stdout.fileno())
+def kill_children():
+    me = str(warden)
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open("/proc/" + name + "/stat", "rb") as f:
+                    ppid = f.read().rsplit(b")", 1)[1].split()[1]
+            except (OSError, IndexError):
+                continue
+            if ppid == me.encode():
+                try:
+                    os.kill(int(name), signal.SIGKILL)
+                except OSError:
+                    pass
+
+def on_term(signum, frame):
+    global ending
+    ending = True
+    kill_children()
+
+signal.signal(signal.SIGTERM, on_term)
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+status, orphans = None, 0
+while True:
+    try:
+        pid, st = os.waitpid(-1, 0)
+    except ChildProcessError:
+        break
+    if pid == planner:
+        status = st
+        ending = True
+    else:
+        orphans += 1
+    if ending:
+        kill_children()
+ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+report = {"status": None if status is None else os.waitstatus_to_exitcode(status),
+          "cpu_s": ru.ru_utime + ru.ru_stime, "maxrss_kb": ru.ru_maxrss, "others": orphans}
+os.write(report_fd, (json.dumps(report) + "\n").encode())
+os._exit(0)
+"""
+"""Run as ``python -c BOOTSTRAP CASE_FILE MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID``."""
