@@ -71,6 +71,8 @@ LOG_TAIL = 4000
 #: of about 350,000 actions fits; a larger one is refused as ``error`` with its own message, so
 #: a case can neither exhaust the harness's memory nor hold it parsing for minutes.
 MAX_RESULT_BYTES = 64 * 2**20
+#: Seconds between samples of the case tree's memory while it runs.
+SAMPLE_S = 0.05
 #: The environment variable that tags every process of a case (for the last-resort sweep).
 CASE_TAG = "EARTHBENCH_CASE"
 THREAD_VARS = (
@@ -239,6 +241,7 @@ class _Supervisor:
         self.buf = bytearray()
         self.scanned = 0
         self.writer: threading.Thread | None = None
+        self.next_sample = 0.0
         try:
             self.warden: psutil.Process | None = psutil.Process(proc.pid)
         except psutil.Error:
@@ -259,7 +262,9 @@ class _Supervisor:
                 if now >= self.deadline:
                     o.timed_out = o.done is None
                     break
-                self._sample()
+                if now >= self.next_sample:
+                    self._sample()
+                    self.next_sample = now + SAMPLE_S
                 if not eof:
                     if sel.select(timeout=min(self.deadline - now, 0.25)):
                         eof = self._read()
@@ -282,14 +287,16 @@ class _Supervisor:
     # -- messages ------------------------------------------------------------------------------
     def _read(self) -> bool:
         """Read what the pipe holds; scan only the new bytes for line ends (linear in the size)."""
-        try:
-            chunk = os.read(self.msg_fd, 1 << 20)
-        except BlockingIOError:
-            return False
-        if not chunk:
-            if self.buf.strip() and not self.o.fault:
-                self.o.fault = "the case's last message is not terminated by a newline"
-            return True
+        chunk, eof = bytearray(), False
+        while len(chunk) < 1 << 24:  # drain what is there (up to 16 MB) before scanning it
+            try:
+                part = os.read(self.msg_fd, 1 << 20)
+            except BlockingIOError:
+                break
+            if not part:
+                eof = True
+                break
+            chunk += part
         self.buf += chunk
         while not self.o.fault:
             nl = self.buf.find(b"\n", self.scanned)
@@ -305,7 +312,9 @@ class _Supervisor:
                 self.o.fault = _too_large(len(line))
             elif line.strip():
                 self._handle(line)
-        return False
+        if eof and self.buf.strip() and not self.o.fault:
+            self.o.fault = "the case's last message is not terminated by a newline"
+        return eof
 
     def _handle(self, line: bytes) -> None:
         o = self.o
