@@ -118,6 +118,12 @@ class CaseResult:
     #: What the case itself reported (its own timings): information only, never stored or trusted.
     detail: dict[str, Any] = field(default_factory=dict, compare=False)
 
+    @classmethod
+    def failure(cls, case: Case, reason: str, error: str) -> CaseResult:
+        """The result of a case that failed outside its process (its executor, its worker)."""
+        now = utc_now()
+        return cls(key=case.key, scenario_id=case.scenario.id, reason=reason, error=error, started_at=now, finished_at=now)
+
     @property
     def success(self) -> bool:
         return bool(self.metrics and self.metrics.get("success"))

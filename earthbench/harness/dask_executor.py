@@ -58,7 +58,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from ..errors import EarthbenchError
-from .cases import Case, CaseResult, utc_now
+from .cases import Case, CaseResult
 from .sandbox import STARTUP_S, run_case
 from .slots import make_slots
 
@@ -177,11 +177,6 @@ def run_on_worker(case: Case, run_id: str, startup_s: float = STARTUP_S) -> Case
 
 
 # -- on the client -------------------------------------------------------------------------------
-
-
-def _failed(case: Case, reason: str, error: str) -> CaseResult:
-    now = utc_now()
-    return CaseResult(key=case.key, scenario_id=case.scenario.id, reason=reason, error=error, started_at=now, finished_at=now)
 
 
 class DaskExecutor:
@@ -328,17 +323,20 @@ class DaskExecutor:
         status = fut.status
         if status == "finished":
             try:
-                return fut.result()
+                res = fut.result()
             except Exception as exc:  # noqa: BLE001 - a result that cannot be fetched is the task's failure
-                return _failed(case, "error", f"the Dask task's result could not be fetched: {exc!r}")
+                return CaseResult.failure(case, "error", f"the Dask task's result could not be fetched: {exc!r}")
+            if not isinstance(res, CaseResult) or res.key != case.key:
+                return CaseResult.failure(case, "error", f"the Dask task returned {type(res).__qualname__} for another case, not this case's result")
+            return res
         if status == "error":
             exc = fut.exception()
             if isinstance(exc, self._distributed.KilledWorker):
-                return _failed(case, "crashed", f"the Dask workers running this case died repeatedly ({exc}); "
+                return CaseResult.failure(case, "crashed", f"the Dask workers running this case died repeatedly ({exc}); "
                                                 "it was given up after distributed.scheduler.allowed-failures tries")
             tb = fut.traceback()
             text = "".join(traceback.format_exception(type(exc), exc, tb)) if tb is not None else repr(exc)
-            return _failed(case, "error", "the Dask task failed on its worker:\n" + text)
+            return CaseResult.failure(case, "error", "the Dask task failed on its worker:\n" + text)
         return None  # cancelled or lost: not stored, a rerun picks it up
 
     def cancel(self) -> None:

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import threading
+import traceback
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from typing import Protocol
 
 from .cases import Case, CaseResult
-from .sandbox import STARTUP_S, run_case
+from .sandbox import STARTUP_S, HarnessError, run_case
 from .slots import SlotPool, make_slots
 
 
@@ -38,7 +39,12 @@ class LocalExecutor:
 
         def task(case: Case) -> CaseResult:
             with slots.slot() as slot:
-                return run_case(case, slot, stop=self._stop, startup_s=self.startup_s)
+                try:
+                    return run_case(case, slot, stop=self._stop, startup_s=self.startup_s)
+                except HarnessError:
+                    raise  # this machine cannot run any case: stop the run, store nothing of it
+                except Exception:  # noqa: BLE001 - a harness fault on one case must not stop the suite
+                    return CaseResult.failure(case, "error", "the harness failed on this case:\n" + traceback.format_exc())
 
         pool = ThreadPoolExecutor(max_workers=len(self.slots), thread_name_prefix="earthbench-slot")
         pending: set[Future[CaseResult]] = set()
