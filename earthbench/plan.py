@@ -168,6 +168,8 @@ class Plan:
         if isinstance(source, Path):
             try:
                 source = source.read_text()
+            except FileNotFoundError:
+                raise PlanFormatError(f"plan file {str(source)!r} not found") from None
             except (OSError, UnicodeDecodeError) as exc:
                 raise PlanFormatError(f"cannot read plan file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
         try:

@@ -382,6 +382,8 @@ class Scenario:
         if isinstance(source, Path):
             try:
                 source = source.read_text()
+            except FileNotFoundError:
+                raise ScenarioError(f"scenario file {str(source)!r} not found") from None
             except (OSError, UnicodeDecodeError) as exc:
                 raise ScenarioError(f"cannot read scenario file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
         try:
@@ -430,7 +432,7 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
         if not math.isfinite(value):
             raise ScenarioError(f"scenario field {where} must be finite, got {value}")
         if cls is not Pose and (value < 0 or (value == 0 and key not in _MAY_BE_ZERO)):
-            raise ScenarioError(f"scenario field {where} must be {'≥' if key in _MAY_BE_ZERO else '>'} 0, got {value:g}")
+            raise ScenarioError(f"scenario field {where} must be {'≥ 0' if key in _MAY_BE_ZERO else 'positive'}, got {value:g}")
     return cls(**doc)
 
 

@@ -33,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
     # the argument is only ever a file: its content is judged as a plan, never followed as a path
     try:
         text = Path(args.plan).read_text()
+    except FileNotFoundError:
+        raise PlanFormatError(f"plan file {args.plan!r} not found") from None
     except UnicodeDecodeError:
         raise PlanFormatError(f"plan file {args.plan!r} is not UTF-8 text") from None
     except OSError as exc:
