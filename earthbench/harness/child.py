@@ -213,7 +213,10 @@ while True:
 ru = resource.getrusage(resource.RUSAGE_CHILDREN)
 report = {"status": None if status is None else os.waitstatus_to_exitcode(status),
           "cpu_s": ru.ru_utime + ru.ru_stime, "maxrss_kb": ru.ru_maxrss, "others": orphans}
-os.write(report_fd, (json.dumps(report) + "\n").encode())
+try:
+    os.write(report_fd, (json.dumps(report) + "\n").encode())
+except OSError:  # the harness is gone
+    pass
 os._exit(0)
 """
 """Run as ``python -c BOOTSTRAP CASE_FILE MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID``."""

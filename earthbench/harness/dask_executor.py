@@ -2,7 +2,7 @@
 
 :class:`DaskExecutor` implements the runner's :class:`~earthbench.harness.Executor` protocol.
 Each case is one Dask task that calls the very same :func:`~earthbench.harness.run_case` on a
-worker, so a case there gets what it gets locally: a fresh subprocess in its own process group,
+worker, so a case there gets what it gets locally: a fresh process tree in its own session under its warden,
 CPU affinity on a slot of ``budget.cores`` cores, BLAS/OpenMP thread caps, ``RLIMIT_AS`` and
 the wall budget. The referee and the environment stamp (:func:`~earthbench.harness.environment`:
 hostname, CPU model, cores, OS, Python, packages, commits) are computed on the worker too, so
@@ -28,7 +28,8 @@ enforce it:
   worker's locks.
 
 **Faults.** A worker lost mid-case (killed, out of memory, machine gone) kills its case
-subprocess with it (the child has ``PR_SET_PDEATHSIG``) and Dask runs the task again on another
+process tree with it (the case's warden has ``PR_SET_PDEATHSIG`` and ends every descendant; the
+case folder is removed by the next harness process on that machine) and Dask runs the task again on another
 worker; after ``distributed.scheduler.allowed-failures`` losses (default 3) the task fails
 with ``KilledWorker`` and the case is recorded as ``crashed``. A task that raises (e.g.
 earthbench cannot be imported on the worker) is recorded as ``error`` with the traceback.
