@@ -72,7 +72,7 @@ LOG_TAIL = 4000
 #: a case can neither exhaust the harness's memory nor hold it parsing for minutes.
 MAX_RESULT_BYTES = 64 * 2**20
 #: Seconds between samples of the case tree's memory while it runs.
-SAMPLE_S = 0.05
+SAMPLE_S = 0.25
 #: The environment variable that tags every process of a case (for the last-resort sweep).
 CASE_TAG = "EARTHBENCH_CASE"
 THREAD_VARS = (

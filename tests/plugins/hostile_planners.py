@@ -159,3 +159,17 @@ class Segfaults(Planner):
 
     def plan(self, scenario):
         os.kill(os.getpid(), signal.SIGSEGV)
+
+
+class BigResult(Planner):
+    """Sends a result of ``$EARTHBENCH_TEST_RESULT_MB`` MB (a JSON string plan) at once: the read-time probe."""
+
+    name = "h-big-result"
+
+    def plan(self, scenario):
+        import json
+
+        mb = float(os.environ.get("EARTHBENCH_TEST_RESULT_MB", "12"))
+        text = Plan(info={"pad": "x" * int(mb * 2**20)}).to_json()
+        os.write(_harness_pipe(), (json.dumps({"event": "done", "outcome": "plan", "plan": text}) + "\n").encode())
+        os._exit(0)
