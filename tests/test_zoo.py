@@ -94,3 +94,32 @@ def test_memory_figures_are_the_cases_own_not_the_harness(tmp_path):
     del ballast
     row = load_runs(tmp_path / "fat.db").iloc[0]
     assert row.reason == "crashed" and row.peak_rss_mb < 200
+
+
+def test_case_folders_of_a_killed_harness_are_cleared_by_the_next(tmp_path):
+    """A harness (or Dask worker) killed mid-case leaves its case folder; the next harness on the machine removes it."""
+    import subprocess
+    import sys
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f"earthbench-case-{dead.pid}-abc123"
+    stale.mkdir()
+    (stale / "case.json").write_text("{}")
+    mine = tmp_path / "earthbench-case-1-notours"  # pid 1 is alive: not ours to remove
+    mine.mkdir()
+    script = (
+        "import sys; sys.path.insert(0, sys.argv[1]); from conftest import tiny_suite_toml\n"
+        "from earthbench.harness import build_cases, run_case\n"
+        "from earthbench.registry import load_plugin_file\n"
+        "from earthbench.suite import parse_suite\n"
+        "load_plugin_file(sys.argv[2])\n"
+        "(case,), _ = build_cases(parse_suite(tiny_suite_toml('c')), ['t-fast'], plugins=[sys.argv[2]])\n"
+        "print(run_case(case).reason)\n"
+    )
+    env = {**__import__("os").environ, "TMPDIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent), PLUGINS[0]],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.strip() == "ok", out.stderr
+    assert not stale.exists() and mine.exists()
+    assert not list(tmp_path.glob(f"earthbench-case-{dead.pid}-*"))
