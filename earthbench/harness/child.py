@@ -13,8 +13,9 @@ Python that imports nothing of earthbench, numpy or the plugin; it becomes the c
 * it reaps every descendant until the planner process has exited, then kills (SIGKILL) and
   reaps whatever is left; SIGTERM (from the harness at a deadline, or as the harness dies)
   ends the case the same way;
-* finally it writes one report on a pipe only it holds (the planner process closes it before
-  any plugin code runs): the planner process's exit status, and the kernel's accounting of
+* it writes on a pipe only it holds (the planner process closes it before any plugin code
+  runs) the planner process's pid at once, and at the end one report: the planner process's
+  exit status, and the kernel's accounting of
   every reaped descendant (``getrusage(RUSAGE_CHILDREN)``: CPU seconds and peak resident
   memory), so CPU and memory figures cover the case's own process tree and nothing else.
 
@@ -171,9 +172,10 @@ if planner == 0:
     main(case_file, msg_fd)
     sys.exit(0)
 os.close(msg_fd)
+os.write(report_fd, (json.dumps({"planner": planner}) + "\n").encode())
 devnull = os.open(os.devnull, os.O_RDONLY)
 os.dup2(devnull, 0)
-ending = False
+ending, orphans, status = False, 0, None
 
 def kill_children():
     me = str(warden)
@@ -190,6 +192,23 @@ def kill_children():
                 except OSError:
                     pass
 
+def alive_children():  # any child left? (reaps those already dead; /proc is scanned only if one lives)
+    while True:
+        try:
+            pid, st = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return False
+        if not pid:
+            return True
+        reaped(pid, st)
+
+def reaped(pid, st):
+    global status, ending, orphans
+    if pid == planner:
+        status, ending = st, True
+    else:
+        orphans += 1
+
 def on_term(signum, frame):
     global ending
     ending = True
@@ -197,18 +216,13 @@ def on_term(signum, frame):
 
 signal.signal(signal.SIGTERM, on_term)
 signal.signal(signal.SIGINT, signal.SIG_IGN)
-status, orphans = None, 0
 while True:
     try:
         pid, st = os.waitpid(-1, 0)
     except ChildProcessError:
         break
-    if pid == planner:
-        status = st
-        ending = True
-    else:
-        orphans += 1
-    if ending:
+    reaped(pid, st)
+    if ending and alive_children():
         kill_children()
 ru = resource.getrusage(resource.RUSAGE_CHILDREN)
 report = {"status": None if status is None else os.waitstatus_to_exitcode(status),

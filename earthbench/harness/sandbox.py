@@ -73,6 +73,8 @@ LOG_TAIL = 4000
 MAX_RESULT_BYTES = 64 * 2**20
 #: Seconds between samples of the case tree's memory while it runs.
 SAMPLE_S = 0.25
+#: Seconds between samples of the whole tree (descendants of the planner too).
+TREE_SAMPLE_S = 1.0
 #: The environment variable that tags every process of a case (for the last-resort sweep).
 CASE_TAG = "EARTHBENCH_CASE"
 THREAD_VARS = (
@@ -242,6 +244,9 @@ class _Supervisor:
         self.scanned = 0
         self.writer: threading.Thread | None = None
         self.next_sample = 0.0
+        self.next_tree_sample = t_spawn + TREE_SAMPLE_S
+        self.planner: psutil.Process | None = None
+        self.report_buf = bytearray()
         try:
             self.warden: psutil.Process | None = psutil.Process(proc.pid)
         except psutil.Error:
@@ -263,7 +268,7 @@ class _Supervisor:
                     o.timed_out = o.done is None
                     break
                 if now >= self.next_sample:
-                    self._sample()
+                    self._sample(now)
                     self.next_sample = now + SAMPLE_S
                 if not eof:
                     if sel.select(timeout=min(self.deadline - now, 0.25)):
@@ -366,10 +371,26 @@ class _Supervisor:
         except psutil.Error:
             return []
 
+    def _planner(self) -> psutil.Process | None:
+        """The planner's process, by the pid its warden reported (no scan of the process table)."""
+        if self.planner is None:
+            self._read_report_pipe()
+            first = self.report_buf.split(b"\n", 1)[0]
+            try:
+                self.planner = psutil.Process(int(json.loads(first)["planner"]))
+            except (ValueError, KeyError, TypeError, psutil.Error):
+                return None
+        return self.planner
+
     def _tree_cpu(self) -> float:
-        """CPU seconds the case's processes have used so far (the warden's own excluded, as in its report)."""
+        """CPU seconds the case's processes have used so far (the warden's own excluded, as in its report).
+
+        The planner's process (with its reaped children) is read directly; only if its pid is
+        not known is the whole tree scanned.
+        """
+        planner = self._planner()
         total = 0.0
-        for p in self._tree():
+        for p in [planner] if planner is not None else self._tree():
             try:
                 t = p.cpu_times()
             except psutil.Error:
@@ -377,10 +398,17 @@ class _Supervisor:
             total += t.user + t.system + t.children_user + t.children_system
         return total
 
-    def _sample(self) -> None:
-        """Address space (what RLIMIT_AS caps) and resident memory of the case's tree, as we wait."""
+    def _sample(self, now: float) -> None:
+        """Address space (what RLIMIT_AS caps) and resident memory, as we wait: the planner's process
+        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table)."""
+        if now >= self.next_tree_sample:
+            procs = self._tree()
+            self.next_tree_sample = now + TREE_SAMPLE_S
+        else:
+            planner = self._planner()
+            procs = [planner] if planner is not None else []
         rss = 0.0
-        for p in self._tree():
+        for p in procs:
             try:
                 m = p.memory_info()
             except psutil.Error:
@@ -422,22 +450,27 @@ class _Supervisor:
             pass
         self._reaped(block=True)
 
-    def _read_report(self) -> None:
-        """The warden's report, if it wrote one; without it, sweep for processes tagged with this case."""
+    def _read_report_pipe(self) -> None:
         try:
             os.set_blocking(self.report_fd, False)
-            raw = os.read(self.report_fd, 1 << 16)
-        except OSError:
-            raw = b""
-        try:
-            rep = json.loads(raw)
+            while chunk := os.read(self.report_fd, 1 << 16):
+                self.report_buf += chunk
+        except OSError:  # nothing more yet (BlockingIOError) or the pipe is gone
+            pass
+
+    def _read_report(self) -> None:
+        """The warden's final report, if it wrote one; without it, sweep for processes tagged with this case."""
+        self._read_report_pipe()
+        for line in bytes(self.report_buf).splitlines()[1:2]:
+            try:
+                rep = json.loads(line)
+            except ValueError:
+                break
             if isinstance(rep, dict) and all(isinstance(rep.get(k), (int, float)) for k in ("cpu_s", "maxrss_kb")):
                 self.o.report = rep
                 if isinstance(rep.get("status"), int) and self.o.status == 0:
                     self.o.status = rep["status"]  # the planner process's own exit status
                 return
-        except ValueError:
-            pass
         _sweep(self.tag)
 
 
