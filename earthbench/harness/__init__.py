@@ -27,7 +27,10 @@ _EXPORTS = {
     "run_case": "sandbox", "score": "scoring", "SlotPool": "slots", "make_slots": "slots",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = [
+    "REASONS", "Case", "CaseResult", "Executor", "LocalExecutor", "PlannerRef", "RunReport", "SlotPool",
+    "build_cases", "environment", "make_slots", "run_case", "run_cases", "run_suite", "score",
+]
 
 if TYPE_CHECKING:  # pragma: no cover
     from .cases import REASONS, Case, CaseResult, PlannerRef
