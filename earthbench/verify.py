@@ -67,7 +67,7 @@ class Judgement:
 
 def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
     """The core scoring entry point (referee verdict and every metric), called from this one place."""
-    from .runner import score
+    from .harness import score
 
     return score(scenario, plan_json, threshold)
 
@@ -310,7 +310,7 @@ def machine_label(env: dict[str, Any] | Any) -> str:
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from .runner import PlannerRef
+    from .harness import PlannerRef
 
     ref = PlannerRef.resolve(row["planner"], config)
     if ref.version != row["planner_version"]:
@@ -329,7 +329,7 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .runner import Case, LocalExecutor, environment
+    from .harness import Case, LocalExecutor, environment
 
     if n < 1:
         raise VerifyError("--sample must be at least 1")
