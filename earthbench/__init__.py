@@ -1,7 +1,9 @@
 """earthbench: a benchmark suite for earthmoving planners.
 
 The data flows one way: suite → scenarios → planner → plan → referee → metrics → store →
-leaderboard. This package holds the core; planners, terrains and metrics are plugins.
+leaderboard. This package holds the core; planners, terrains and metrics register as plugins
+through entry points (docs/DESIGN.md §1–2). The core still imports the built-in ``metrics``
+package for scoring and aggregation, the one exception to its import rule.
 """
 
 from .errors import (

@@ -1,4 +1,4 @@
-"""Publishing: the store → ``leaderboard/`` (DESIGN §6).
+"""Publishing: the store → ``leaderboard/`` (docs/DESIGN.md §9).
 
 :func:`publish` writes, for every suite in the store (or the ones asked for):
 

@@ -1,6 +1,6 @@
 """The independent referee: replays a plan on a copy of the heightmap and judges it.
 
-The referee, not the planner, decides what happened (DESIGN §3). It replays actions in time
+The referee, not the planner, decides what happened (docs/DESIGN.md §5). It replays actions in time
 order, applies every dig to the grid with the flat-cut model of :func:`apply_cut`, transfers
 dumped material to the truck, and records every broken rule as a :class:`Violation` (action
 index, rule, magnitude). A plan with any violation is invalid: reported, never ranked.

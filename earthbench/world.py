@@ -1,6 +1,6 @@
 """The world model: terrain, site, machines, task, budget and the immutable Scenario.
 
-Conventions (DESIGN §2): SI units; x east, y north, z up; yaw counter-clockwise from +x;
+Conventions (docs/DESIGN.md §3): SI units; x east, y north, z up; yaw counter-clockwise from +x;
 time in seconds from 0; volumes are bank volumes in m³.
 
 The heightmap is cell-centred: cell ``z[j, i]`` covers ``[x0 + i·r, x0 + (i+1)·r) ×

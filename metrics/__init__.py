@@ -1,4 +1,4 @@
-"""Per-run metrics, lower bounds and (later) aggregation over suites.
+"""Per-run metrics and lower bounds, aggregation over suites (`aggregate`) and performance profiles (`profiles`).
 
 Metrics are measured by the referee and the harness, never taken from a planner's claims.
 Each metric plugin is a callable ``(scenario, plan, verdict) -> dict[str, float]`` registered

@@ -1,4 +1,4 @@
-"""Aggregates over the runs of a suite (DESIGN §4), one row per (suite, track, planner configuration).
+"""Aggregates over the runs of a suite (docs/DESIGN.md §7), one row per (suite, track, planner configuration).
 
 Input: the DataFrame of :func:`earthbench.store.load_runs` (one row per run). Definitions:
 

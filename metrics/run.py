@@ -1,4 +1,4 @@
-"""The metrics of one run (DESIGN §4).
+"""The metrics of one run (docs/DESIGN.md §7).
 
 ``time_per_m3_lower_bound`` — why it holds: every m³ loaded into the truck was dug and dumped.
 A bucket carries at most ``C`` m³, so loading ``V`` takes at least ``V / C`` digs and as many

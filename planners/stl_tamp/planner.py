@@ -63,7 +63,7 @@ class Config(LocalNLPConfig):
     Paper: m_l = 5 digs per local area, n = 10 motion steps, S_l = 5 bucket areas with
     V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m. Not given in the paper (our choices):
     the weights α, the ε constants, the sigmoid steepness k = 20 with the quadrature box
-    widened by 3/k (DESIGN §8 calibration), the STL sharpness β.
+    widened by 3/k (docs/DESIGN.md §11 calibration), the STL sharpness β.
     """
 
     dtm_max: float = 4.0
