@@ -35,9 +35,9 @@ import math
 import numpy as np
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, ExcavatorSpec, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
-from .common import check_scenario, round_heights
+from .common import assemble_scenario, rectangle, round_heights
 
 
 def _sample(rng: np.random.Generator, value: float | tuple[float, float]) -> float:
@@ -132,18 +132,15 @@ def bench(
     d_truck = math.hypot(truck[0] - ex, truck[1] - ey)
     if d_truck - TruckSpec().loading_radius > spec.reach_max:
         raise ScenarioError(f"bench: the truck stands {d_truck:.2f} m from the excavator, beyond dump reach; move it closer")
-    dig_area = ((x_lo, y_lo), (x_hi, y_lo), (x_hi, y_hi), (x_lo, y_hi))
-    sc = Scenario(
-        id=scenario_id or f"bench-s{seed}-v{target_volume:g}",
-        terrain=Heightmap((0.0, 0.0), resolution, round_heights(z)),
-        site=Site(dig_area=dig_area, floor=0.0),
-        machines=Machines(
-            truck=TruckSpec(capacity=truck_capacity),
-            truck_pose=Pose(*truck),
-            excavator_pose=Pose(*excavator),
-        ),
-        task=Task(target_volume),
-        budget=budget or Budget(),
+    return assemble_scenario(
+        scenario_id or f"bench-s{seed}-v{target_volume:g}",
+        Heightmap((0.0, 0.0), resolution, round_heights(z)),
+        dig_area=rectangle(x_lo, y_lo, x_hi, y_hi),
+        target_volume=target_volume,
+        excavator_pose=Pose(*excavator),
+        truck_pose=Pose(*truck),
+        truck_capacity=truck_capacity,
+        budget=budget,
         meta={
             "generator": "bench",
             "seed": seed,
@@ -153,4 +150,3 @@ def bench(
             "resolution": resolution,
         },
     )
-    return check_scenario(sc)

@@ -1,6 +1,7 @@
-"""Helpers every terrain generator shares: dig-area masks, volumes and the scenario checks.
+"""Helpers every terrain generator shares: scenario assembly, dig-area masks, volumes and checks.
 
-A generator calls :func:`check_scenario` on what it built, so a target the site cannot hold
+A generator builds its scenario with :func:`assemble_scenario`, which ends in
+:func:`check_scenario`, so a target the site cannot hold
 or machine poses the referee would reject fail at generation time with a
 :class:`~earthbench.errors.ScenarioError`, not later inside a planner run.
 """
@@ -8,17 +9,78 @@ or machine poses the referee would reject fail at generation time with a
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Heightmap, Scenario
+from earthbench.world import Budget, Heightmap, LoaderSpec, Machines, Pose, Scenario, Site, Task, TruckSpec
 
 #: A site must hold at least this multiple of its target above the floor (issue 4), so a
 #: planner has to choose where to dig rather than scrape up everything there is.
 MIN_VOLUME_FACTOR = 2.0
+
+
+Point = tuple[float, float]
+PoseLike = tuple[float, float, float]
+
+
+def rectangle(xmin: float, ymin: float, xmax: float, ymax: float) -> tuple[Point, ...]:
+    """The axis-aligned rectangle as a polygon, counter-clockwise from the lower-left corner."""
+    return ((xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax))
+
+
+def paper_poses(
+    xmin: float, xmax: float, ymax: float, excavator: PoseLike | None = None, truck: PoseLike | None = None
+) -> tuple[Pose, Pose]:
+    """(excavator, truck) poses, each the given one or the STL-TAMP paper's default offset from
+    the map's corners: the excavator 1.0 m east and 1.2 m north of the north-east corner facing
+    west, the truck 2.0 m east of the west edge and 7.0 m north of the map facing east. Offsets
+    rather than a scaling keep the drive to the map the same on larger maps."""
+    return (Pose(*(excavator or (xmax + 1.0, ymax + 1.2, math.pi))), Pose(*(truck or (xmin + 2.0, ymax + 7.0, 0.0))))
+
+
+def assemble_scenario(
+    scenario_id: str,
+    terrain: Heightmap,
+    *,
+    dig_area: Sequence[Point],
+    target_volume: float,
+    truck_pose: Pose,
+    truck_capacity: float,
+    excavator_pose: Pose | None = None,
+    loader_pose: Pose | None = None,
+    floor: float | None = 0.0,
+    budget: Budget | None = None,
+    meta: dict[str, Any],
+) -> Scenario:
+    """The checked scenario of a generator: a backhoe site when ``excavator_pose`` is given, a
+    wheel-loader site (default loader, no excavator) when ``loader_pose`` is; the default budget
+    unless one is given. Raises ScenarioError as :func:`check_scenario` does."""
+    if (excavator_pose is None) == (loader_pose is None):
+        raise ValueError("assemble_scenario needs exactly one of excavator_pose and loader_pose")
+    truck = TruckSpec(capacity=truck_capacity)
+    if loader_pose is None:
+        machines = Machines(truck=truck, truck_pose=truck_pose, excavator_pose=excavator_pose)
+    else:
+        machines = Machines(
+            truck=truck, truck_pose=truck_pose, excavator=None, excavator_pose=None, loader=LoaderSpec(), loader_pose=loader_pose
+        )
+    return check_scenario(
+        Scenario(
+            id=scenario_id,
+            terrain=terrain,
+            site=Site(dig_area=tuple(dig_area), floor=floor),
+            machines=machines,
+            task=Task(target_volume),
+            track="backhoe" if loader_pose is None else "wheel_loader",
+            budget=budget or Budget(),
+            meta=meta,
+        )
+    )
 
 
 def round_heights(z: np.ndarray) -> np.ndarray:

@@ -30,9 +30,9 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import check_scenario, round_heights
+from .common import assemble_scenario, paper_poses, rectangle, round_heights
 
 SAMPLE_DEM = "jacksboro_fault_dem.npz"
 _M_PER_DEGREE = 111_320.0
@@ -132,18 +132,16 @@ def dem(
     terrain, source = dem_crop(
         seed, size=(lx, ly), resolution=resolution, ground_scale=ground_scale, relief=relief, min_ground_relief=min_ground_relief
     )
-    sc = Scenario(
-        id=scenario_id or f"dem-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
-        terrain=terrain,
-        site=Site(dig_area=((0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)), floor=0.0),
-        machines=Machines(
-            truck=TruckSpec(capacity=truck_capacity),
-            excavator_pose=Pose(*(excavator or (lx + 1.0, ly + 1.2, math.pi))),
-            truck_pose=Pose(*(truck or (2.0, ly + 7.0, 0.0))),
-        ),
-        task=Task(target_volume),
-        budget=budget or Budget(),
+    exc, trk = paper_poses(0.0, lx, ly, excavator, truck)
+    return assemble_scenario(
+        scenario_id or f"dem-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
+        terrain,
+        dig_area=rectangle(0.0, 0.0, lx, ly),
+        target_volume=target_volume,
+        excavator_pose=exc,
+        truck_pose=trk,
+        truck_capacity=truck_capacity,
+        budget=budget,
         meta={"generator": "dem", "seed": seed, "size": [lx, ly], "resolution": resolution,
               "ground_scale": ground_scale, "relief": relief, **source},
     )
-    return check_scenario(sc)

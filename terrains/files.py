@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import check_scenario, round_heights
+from .common import assemble_scenario, paper_poses, rectangle, round_heights
 
 FORMATS = (".npy", ".npz", ".csv")
 _NPZ_KEYS = ("z", "elevation", "heights")
@@ -148,18 +148,16 @@ def heightmap_file(
     terrain = load_heightmap(path, resolution=resolution, origin=origin)
     terrain = terrain.with_z(round_heights(terrain.z))
     xmin, xmax, ymin, ymax = terrain.extent
-    area = tuple(dig_area) if dig_area is not None else ((xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax))
-    sc = Scenario(
-        id=scenario_id or f"file-{Path(path).stem}-v{target_volume:g}",
-        terrain=terrain,
-        site=Site(dig_area=area, floor=float(terrain.z.min()) if floor is None else floor),
-        machines=Machines(
-            truck=TruckSpec(capacity=truck_capacity),
-            excavator_pose=Pose(*(excavator or (xmax + 1.0, ymax + 1.2, math.pi))),
-            truck_pose=Pose(*(truck or (xmin + 2.0, ymax + 7.0, 0.0))),
-        ),
-        task=Task(target_volume),
-        budget=budget or Budget(),
+    exc, trk = paper_poses(xmin, xmax, ymax, excavator, truck)
+    return assemble_scenario(
+        scenario_id or f"file-{Path(path).stem}-v{target_volume:g}",
+        terrain,
+        dig_area=tuple(dig_area) if dig_area is not None else rectangle(xmin, ymin, xmax, ymax),
+        floor=float(terrain.z.min()) if floor is None else floor,
+        target_volume=target_volume,
+        excavator_pose=exc,
+        truck_pose=trk,
+        truck_capacity=truck_capacity,
+        budget=budget,
         meta={"generator": "file", "path": str(path)},
     )
-    return check_scenario(sc)

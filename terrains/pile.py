@@ -40,9 +40,9 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, Heightmap, LoaderSpec, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, Heightmap, Pose, Scenario
 
-from .common import check_scenario, round_heights
+from .common import assemble_scenario, rectangle, round_heights
 
 
 def _draw_features(rng: np.random.Generator, n: int, span: tuple[float, float], amplitude, width) -> list[tuple[float, float, float]]:
@@ -127,34 +127,24 @@ def pile(
     lx, ly = size
     loader_pose = Pose(*(loader or (0.6 * lx, face_y - 5.0, math.pi / 2)))
     truck_pose = Pose(*(truck or (0.25 * lx, face_y - 7.5, 0.0)))
-    spec = LoaderSpec()
-    sc = Scenario(
-        id=scenario_id or f"pile-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
-        terrain=terrain,
-        site=Site(dig_area=((0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)), floor=0.0),
-        machines=Machines(
-            truck=TruckSpec(capacity=truck_capacity),
-            truck_pose=truck_pose,
-            excavator=None,
-            excavator_pose=None,
-            loader=spec,
-            loader_pose=loader_pose,
-        ),
-        task=Task(target_volume),
-        track="wheel_loader",
-        budget=budget or Budget(),
+    sc = assemble_scenario(
+        scenario_id or f"pile-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
+        terrain,
+        dig_area=rectangle(0.0, 0.0, lx, ly),
+        target_volume=target_volume,
+        loader_pose=loader_pose,
+        truck_pose=truck_pose,
+        truck_capacity=truck_capacity,
+        budget=budget,
         meta={
             "generator": "pile", "seed": seed, "size": list(size), "resolution": resolution,
             "features": [list(f) for f in feats],
         },
     )
-    d = math.hypot(truck_pose.x - loader_pose.x, truck_pose.y - loader_pose.y)
-    if d < spec.clearance:
-        raise ScenarioError(f"scenario {sc.id!r}: loader and truck start {d:.3f} m apart, closer than the clearance {spec.clearance:g} m; move one of them")
     xs, ys = terrain.cell_centres()
     material = terrain.z > 0.0
     for name, p in (("loader", loader_pose), ("truck", truck_pose)):
         near = (xs[None, :] - p.x) ** 2 + (ys[:, None] - p.y) ** 2 < min_gap**2
         if np.any(material & near):
             raise ScenarioError(f"scenario {sc.id!r}: the {name} stands within {min_gap:g} m of material; move it away from the pile")
-    return check_scenario(sc)
+    return sc

@@ -19,14 +19,13 @@ peaks of 1.9–3.5 m. Either way the map holds far more than twice the paper's l
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from earthbench.errors import ScenarioError
-from earthbench.world import Budget, Heightmap, Machines, Pose, Scenario, Site, Task, TruckSpec
+from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import check_scenario, round_heights
+from .common import assemble_scenario, paper_poses, rectangle, round_heights
 
 
 def rbf_surface(
@@ -111,21 +110,21 @@ def rbf(
         seed, n_bases=n_bases, size=(lx, ly), resolution=resolution, amplitude=tuple(amplitude), width=tuple(width)
     )
     if local_area is None:
-        dig_area = ((0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly))
+        dig_area = rectangle(0.0, 0.0, lx, ly)
     else:
         dig_area = richest_window(terrain, (float(local_area[0]), float(local_area[1])))
-    exc = Pose(*(excavator or (lx + 1.0, ly + 1.2, math.pi)))
-    trk = Pose(*(truck or (2.0, ly + 7.0, 0.0)))
+    exc, trk = paper_poses(0.0, lx, ly, excavator, truck)
     meta = {"generator": "rbf", "seed": seed, "n_bases": n_bases, "size": [lx, ly], "resolution": resolution}
     if local_area is not None:
         meta["local_area"] = [float(local_area[0]), float(local_area[1])]
-    sc = Scenario(
-        id=scenario_id or f"rbf-n{n_bases}-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
-        terrain=terrain,
-        site=Site(dig_area=dig_area, floor=0.0),
-        machines=Machines(truck=TruckSpec(capacity=truck_capacity), excavator_pose=exc, truck_pose=trk),
-        task=Task(target_volume),
-        budget=budget or Budget(),
+    return assemble_scenario(
+        scenario_id or f"rbf-n{n_bases}-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
+        terrain,
+        dig_area=dig_area,
+        target_volume=target_volume,
+        excavator_pose=exc,
+        truck_pose=trk,
+        truck_capacity=truck_capacity,
+        budget=budget,
         meta=meta,
     )
-    return check_scenario(sc)
