@@ -19,7 +19,7 @@ from earthbench.store import Store, load_runs
 from earthbench.suite import load_suite, parse_suite
 from earthbench.world import Scenario
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 FAULTY = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 
@@ -172,7 +172,7 @@ def test_a_refused_leaderboard_writes_nothing(tmp_path, capsys):
 def test_published_csv_cells_never_run_as_formulas(tmp_path):
     from earthbench.publish import publish
 
-    from leaderboard_fixtures import Behaviour, fill_store, ref, suite_of
+    from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
     hostile = "=HYPERLINK(\"http://example.invalid\",\"x\")"
     db = fill_store(tmp_path / "r.db", suite_of(1), [Behaviour(ref("greedy")), Behaviour(ref(hostile), fail="error")])

@@ -15,7 +15,7 @@ import pytest
 from earthbench.cli import main
 from earthbench.store import load_runs
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 

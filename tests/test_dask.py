@@ -25,7 +25,7 @@ from earthbench.harness import LocalExecutor, build_cases, run_cases, run_suite 
 from earthbench.store import Store  # noqa: E402
 from earthbench.suite import load_suite, parse_suite  # noqa: E402
 
-from conftest import tiny_suite_toml  # noqa: E402
+from helpers import tiny_suite_toml  # noqa: E402
 
 PLUGINS = Path(__file__).parent / "plugins"
 FAULTY = str(PLUGINS / "faulty_planners.py")

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.publish import publish
-from leaderboard_fixtures import EVIL, fill_store, standard_behaviours, suite_of
+from helpers.leaderboard import EVIL, fill_store, standard_behaviours, suite_of
 
 websocket = pytest.importorskip("websocket", reason="websocket-client is not installed (pip install -e '.[test]')")
 

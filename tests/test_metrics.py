@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import block_scenario, dig_dump_plan
+from helpers import block_scenario, dig_dump_plan
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

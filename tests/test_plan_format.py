@@ -6,7 +6,7 @@ import json
 import math
 
 import pytest
-from conftest import block_scenario
+from helpers import block_scenario
 
 from earthbench import Plan, PlanFormatError, Scenario, ScenarioError, judge
 from terrains.rbf import rbf

@@ -15,7 +15,7 @@ from earthbench.compare import Selector, compare
 from earthbench.merge import MergeError, merge
 from earthbench.publish import md_escape, publish
 from earthbench.store import load_runs
-from leaderboard_fixtures import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
+from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 
 @pytest.fixture(scope="module")

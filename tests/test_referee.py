@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import block_scenario, dig_dump_plan, straight_move
+from helpers import block_scenario, dig_dump_plan, straight_move
 
 from earthbench import Dig, Dump, Move, Plan, Pose, judge
 from earthbench.referee import RULES

@@ -289,7 +289,7 @@ def test_loader_scenario_round_trips_through_json():
 
 
 def test_scenarios_without_a_loader_keep_their_json_form():
-    from tests.conftest import block_scenario
+    from helpers import block_scenario
 
     sc = block_scenario()
     doc = json.loads(sc.to_json())

@@ -14,7 +14,7 @@ from earthbench.harness import LocalExecutor, build_cases, make_slots, run_case,
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 

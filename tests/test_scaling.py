@@ -7,7 +7,7 @@ import pytest
 
 from earthbench.publish import publish, published_runs
 from earthbench.scaling import is_size_ladder, scale_summary
-from leaderboard_fixtures import EVIL, Behaviour, fill_store, ref, suite_of
+from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, suite_of
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from planners.stl_tamp import StlTampPlanner
 from planners.stl_tamp.separate import Config, SeparatePlanner, rule_digs
 from terrains.rbf import rbf
 
-from conftest import block_scenario
+from helpers import block_scenario
 
 
 def replay_grids(scenario, plan):

@@ -15,15 +15,18 @@ from earthbench.referee import apply_cut, cut_level, footprint
 from earthbench.world import Site
 from metrics.run import evaluate
 from planners.singh_cannon.backhoe import SinghCannonBackhoe
-from planners.singh_cannon.backhoe_fig11 import fig11_scenario, lane_profiles
 from planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
 from terrains.bench import bench
 from terrains.dem import dem
 from terrains.rbf import rbf
 
+from helpers import load_script
+
+fig11 = load_script("backhoe_fig11")
+
 
 def _fig11_scenario():
-    return fig11_scenario(0)
+    return fig11.fig11_scenario(0)
 
 
 def test_registered_under_its_name():
@@ -220,7 +223,7 @@ def test_fig11_digs_move_down_the_face_and_the_machine_moves_when_nothing_is_lef
     assert deep >= 5
     # the side profiles of Fig. 11 along the busiest lane: each dig only lowers the profile, and
     # the lowest point of the lane goes down from dig to dig
-    lane, rows = lane_profiles(sc, plan)
+    lane, rows = fig11.lane_profiles(sc, plan)
     assert len(rows) >= 4
     assert all(np.all(r["after"] <= r["before"] + 1e-9) for r in rows)
     lows = [float(r["after"].min()) for r in rows]

@@ -23,7 +23,7 @@ from terrains.surface import fit_rbf
 
 import casadi as ca
 
-from conftest import block_scenario
+from helpers import block_scenario
 
 
 @pytest.fixture(scope="module")

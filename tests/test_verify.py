@@ -1,7 +1,7 @@
 """Verifiable submissions: merge re-judges every plan, export bundles, spot re-timing.
 
 Stores are written through the store's own API with real greedy plans judged by the referee
-(``leaderboard_fixtures``), then tampered with in SQL the way a hand edit would.
+(``helpers.leaderboard``), then tampered with in SQL the way a hand edit would.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from earthbench.cli import main
 from earthbench.merge import MergeError, merge
 from earthbench.store import Store, load_runs
 from earthbench.verify import Judgement, audit, differences, rejudge, same
-from leaderboard_fixtures import Behaviour, fill_store, ref, suite_of
+from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 PLUGINS = [str(Path(__file__).parent / "plugins" / f) for f in ("faulty_planners.py", "hostile_planners.py")]
 
@@ -109,7 +109,7 @@ def test_case_folders_of_a_killed_harness_are_cleared_by_the_next(tmp_path):
     mine = tmp_path / "earthbench-case-1-notours"  # pid 1 is alive: not ours to remove
     mine.mkdir()
     script = (
-        "import sys; sys.path.insert(0, sys.argv[1]); from conftest import tiny_suite_toml\n"
+        "import sys; sys.path.insert(0, sys.argv[1]); from helpers import tiny_suite_toml\n"
         "from earthbench.harness import build_cases, run_case\n"
         "from earthbench.registry import load_plugin_file\n"
         "from earthbench.suite import parse_suite\n"

@@ -15,7 +15,7 @@ from earthbench.harness import build_cases, run_case
 from earthbench.registry import load_plugin_file
 from earthbench.suite import parse_suite
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parents[1] / "plugins" / "hostile_planners.py")
 

@@ -1,6 +1,6 @@
 """Side profiles along one lane of a bench, after the paper's Fig. 11.
 
-``python -m planners.singh_cannon.backhoe_fig11 OUT.png [SEED]`` plans a long bench (the
+``python scripts/backhoe_fig11.py OUT.png [SEED]`` plans a long bench (the
 scenario of the Fig. 11 test), then draws, for every dig of the busiest lane at the first
 station (a fixed swing angle), the terrain profile along the lane before and after the dig, the
 predicted bucket trajectory (dotted: entry at the contact, down to the cut level, drag toward
@@ -19,7 +19,7 @@ from earthbench.referee import apply_cut
 from earthbench.world import Scenario, Task
 from terrains.bench import bench
 
-from .backhoe import SinghCannonBackhoe
+from planners.singh_cannon.backhoe import SinghCannonBackhoe
 
 
 def fig11_scenario(seed: int = 0) -> Scenario:

@@ -17,7 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from earthbench.plan import Plan
-from earthbench.harness import Case, CaseResult, PlannerRef, environment, score
+from earthbench.harness import Case, CaseResult, PlannerRef, score
+# From its module: once any harness module has imported ``.environment``, the package attribute
+# ``environment`` is that submodule, not the function of the same name.
+from earthbench.harness.environment import environment
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite
 from planners.greedy import GreedyPlanner
@@ -47,7 +50,7 @@ n_bases = 14
 
 def ref(name: str, version: str = "1.0", config: dict[str, Any] | None = None) -> PlannerRef:
     config = config or {}
-    return PlannerRef(name=name, version=version, source="tests.leaderboard_fixtures:none", config=config,
+    return PlannerRef(name=name, version=version, source="tests.helpers.leaderboard:none", config=config,
                       config_hash=hashlib.sha256(json.dumps([name, version, config], sort_keys=True).encode()).hexdigest()[:16])
 
 

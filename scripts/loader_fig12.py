@@ -1,6 +1,6 @@
 """Fig. 12 of Singh and Cannon, reproduced: the pile's zero contour over the first eight digs.
 
-``python -m planners.singh_cannon.loader_fig12 OUT.png [--seed N] [--target V]`` plans the
+``python scripts/loader_fig12.py OUT.png [--seed N] [--target V]`` plans the
 ``singh-cannon-loader`` on ``pile(seed, target)`` (default: seed 3, enough target for eight
 buckets), replays the plan with the referee and draws, for each of the first eight charges, a
 top view of the zero contour just before it (grey), the bucket's cutting edge at the entry
