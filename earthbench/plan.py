@@ -105,9 +105,6 @@ class Plan:
     predicted: Prediction = Prediction()
     info: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
-    def for_machine(self, machine: str) -> list[Action]:
-        return [a for a in self.actions if a.machine == machine]
-
     @property
     def makespan(self) -> float:
         return max((a.t_end for a in self.actions), default=0.0)

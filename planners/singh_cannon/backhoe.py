@@ -397,20 +397,6 @@ class Session:
                 return [best[1], p]
         return None
 
-    def drive(self, machine: str, goal: tuple[float, float], t0: float) -> float:
-        pose = self.base if machine == "excavator" else self.truck
-        spec = self.spec if machine == "excavator" else self.truck_spec
-        path = turn_drive_turn(pose, goal, t0, spec.travel_speed, spec.yaw_rate)
-        if len(path) < 2:
-            return t0
-        self.actions.append(Move(machine, tuple(path)))
-        end = Pose(path[-1][1], path[-1][2], path[-1][3])
-        if machine == "excavator":
-            self.base = end  # the upper body turns with the base: ``turn`` is relative
-        else:
-            self.truck = end
-        return path[-1][0]
-
     def truck_path(self, route: list[tuple[float, float]], t0: float) -> list[tuple[float, float, float, float]]:
         """Samples of the truck driving through ``route`` from its current pose, starting at ``t0``."""
         pose, t = self.truck, t0
