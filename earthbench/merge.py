@@ -40,7 +40,7 @@ from typing import Any
 
 from .errors import StoreError
 from .harness.cases import Case, CaseResult, PlannerRef
-from .store import Store, _decompress
+from .store import Store, decompress
 from .verify import Judgement, audit
 
 
@@ -147,7 +147,7 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
     res = CaseResult(
         key=case.key, scenario_id=row["scenario_id"], reason=row["reason"], solve_time_s=row["solve_time_s"],
         solve_cpu_s=row["solve_cpu_s"], startup_s=row["startup_s"], peak_rss_mb=row["peak_rss_mb"], metrics=metrics,
-        violations=tuple(json.loads(row["violations"] or "[]")), plan_json=_decompress(row["plan"]),
+        violations=tuple(json.loads(row["violations"] or "[]")), plan_json=decompress(row["plan"]),
         error=row["error"] or "", log_tail=row["log_tail"] or "", exit_status=row["exit_status"],
         cores=tuple(int(c) for c in (row["cores"] or "").split(",") if c.strip()), started_at=row["started_at"] or "",
         finished_at=row["finished_at"] or "", environment=env,

@@ -110,7 +110,8 @@ def _compress(text: str) -> bytes:
     return zlib.compress(text.encode(), 6)
 
 
-def _decompress(blob: bytes | None) -> str | None:
+def decompress(blob: bytes | None) -> str | None:
+    """The text of a ``plan`` or ``scenarios`` blob as stored (zlib-compressed JSON), or None."""
     return None if blob is None else zlib.decompress(blob).decode()
 
 
@@ -377,13 +378,13 @@ class Store:
 
     def plan_json(self, run_id: int) -> str | None:
         row = self.db.execute("SELECT plan FROM runs WHERE id=?", (run_id,)).fetchone()
-        return _decompress(row[0]) if row else None
+        return decompress(row[0]) if row else None
 
     def scenario(self, digest: str) -> Scenario:
         row = self.db.execute("SELECT doc FROM scenarios WHERE digest=?", (digest,)).fetchone()
         if row is None:
             raise StoreError(f"scenario {digest[:12]}… is not in {str(self.path)!r}")
-        return Scenario.from_json(_decompress(row[0]))
+        return Scenario.from_json(decompress(row[0]))
 
 
 def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite3.Row]]:

@@ -34,7 +34,7 @@ from datetime import datetime, timezone
 from typing import Any
 
 from .errors import EarthbenchError, StoreError
-from .store import METRIC_COLUMNS, Store, _decompress
+from .store import METRIC_COLUMNS, Store, decompress
 from .suite import suite_digest
 from .world import Scenario
 
@@ -209,7 +209,7 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
             out[d] = f"its scenario {d[:12]}… is not stored"
             continue
         try:
-            sc = Scenario.from_json(_decompress(row[0]))
+            sc = Scenario.from_json(decompress(row[0]))
         except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
             out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
             continue
@@ -251,7 +251,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
                 result.unjudged[r["reason"]] += 1
             continue
         try:
-            plan = _decompress(r["plan"])
+            plan = decompress(r["plan"])
         except Exception:  # noqa: BLE001 - an edited blob
             result.broken.append(Finding(r["id"], label, "its stored plan cannot be decompressed"))
             continue
