@@ -203,6 +203,7 @@ def viewer_html(replays: list[dict[str, Any]]) -> str:
         '<button type="button" id="rp-prev" title="previous action">◀|</button>'
         '<button type="button" id="rp-next" title="next action">|▶</button> '
         '<input type="range" id="rp-time" min="0" max="1000" value="0" step="1" aria-label="time"> '
+        '<label><input type="checkbox" id="rp-overlays" checked> paths and marks</label> '
         '<span id="rp-clock"></span></div>'
         '<div class="rp-body"><canvas id="rp-canvas" width="900" height="450"></canvas>'
         '<div class="rp-side"><p id="rp-verdict"></p><p id="rp-now"></p><ol id="rp-log"></ol></div></div>'
@@ -221,7 +222,7 @@ SCRIPT = r"""
   var slider = document.getElementById('rp-time'), clock = document.getElementById('rp-clock');
   var playBtn = document.getElementById('rp-play'), logEl = document.getElementById('rp-log');
   var nowEl = document.getElementById('rp-now'), verdictEl = document.getElementById('rp-verdict');
-  var ctx = canvas.getContext('2d');
+  var ctx = canvas.getContext('2d'), overlays = document.getElementById('rp-overlays');
   var COLOURS = {excavator: '#e67e00', truck: '#1f66c2', loader: '#2a9d2a'};
   var TERRAIN = [[0, [51, 51, 153]], [0.15, [0, 153, 255]], [0.25, [0, 204, 102]], [0.5, [255, 255, 153]],
                  [0.75, [128, 92, 84]], [1, [255, 255, 255]]];
@@ -393,6 +394,10 @@ SCRIPT = r"""
     if (cur.imgDirty) terrainImage();
     ctx.imageSmoothingEnabled = false;
     ctx.drawImage(cur.img, 0, 0, canvas.width, canvas.height);
+    var loaded = cur.applied ? doc.events[cur.applied - 1].loaded : 0;
+    clock.textContent = 't = ' + t.toFixed(1) + ' / ' + doc.makespan.toFixed(1) + ' s · loaded ' + loaded.toFixed(2) +
+      ' of ' + doc.target.toFixed(2) + ' m³';
+    if (!overlays.checked) return;
     poly(doc.dig_area, '#000', null, [6, 4], 1.2);
     doc.keep_outs.forEach(function (k) { poly(k, '#d00', 'rgba(220,0,0,0.25)'); });
     drawPaths(t);
@@ -422,9 +427,6 @@ SCRIPT = r"""
       var ev = active[mid];
       drawMachine(mid, pose(mid, t), !!(ev && ev.violations));
     });
-    var loaded = cur.applied ? doc.events[cur.applied - 1].loaded : 0;
-    clock.textContent = 't = ' + t.toFixed(1) + ' / ' + doc.makespan.toFixed(1) + ' s · loaded ' + loaded.toFixed(2) +
-      ' of ' + doc.target.toFixed(2) + ' m³';
     nowEl.textContent = now.length ? 'now: ' + now.map(function (ev) { return ev.machine + ' ' + ev.type + ' (action ' + ev.a + ')'; }).join(', ') : '';
     Array.prototype.forEach.call(logEl.children, function (li) {
       li.classList.toggle('rp-done', parseFloat(li.getAttribute('data-t')) <= t + 1e-9);
@@ -486,6 +488,7 @@ SCRIPT = r"""
     if (cur) seek(cur.doc.makespan * parseFloat(slider.value) / 1000);
   });
   sel.addEventListener('change', function () { togglePlay(false); load(parseInt(sel.value, 10)); });
+  overlays.addEventListener('change', function () { if (cur) draw(); });
   playBtn.addEventListener('click', function () { if (cur) togglePlay(); });
   document.getElementById('rp-prev').addEventListener('click', function () { step(-1); });
   document.getElementById('rp-next').addEventListener('click', function () { step(1); });
