@@ -60,6 +60,36 @@ def replay(scenario: Scenario, plan: Plan) -> tuple[Verdict, list[Step]]:
     return judge(scenario, plan), steps
 
 
+def machine_paths(scenario: Scenario, plan: Plan) -> dict[str, list[np.ndarray]]:
+    """Per machine, its moves (and a loader's charges) in time order, each an array of ``(t, x, y, yaw)`` rows.
+
+    Kept apart, not joined: a move that starts away from where the machine stands is a jump,
+    never an ordinary piece of path.
+    """
+    out: dict[str, list[np.ndarray]] = {mid: [] for mid in scenario.machines.ids}
+    for a in sorted(plan.actions, key=lambda a: a.t_start):
+        if a.machine not in out:
+            continue
+        if isinstance(a, Move):
+            out[a.machine].append(np.array(a.path, dtype=float))
+        elif isinstance(a, Charge):
+            (x, y, yaw), (ex, ey, _) = a.entry, a.end
+            out[a.machine].append(np.array([[a.t_start, x, y, yaw], [a.t_end, ex, ey, yaw]]))
+    return out
+
+
+def pose_at(start: tuple[float, float, float], segments: list[np.ndarray], t: float) -> tuple[float, float, float]:
+    """Where a machine is at time ``t``: on the move running then (linear between samples), else where the last one ended."""
+    p = start
+    for seg in segments:
+        if seg[0, 0] > t:
+            break
+        if seg[-1, 0] > t:
+            return tuple(float(np.interp(t, seg[:, 0], seg[:, k])) for k in (1, 2, 3))  # type: ignore[return-value]
+        p = (float(seg[-1, 1]), float(seg[-1, 2]), float(seg[-1, 3]))
+    return p
+
+
 def _pack(values: np.ndarray, dtype: str) -> str:
     return base64.b64encode(zlib.compress(np.ascontiguousarray(values, dtype=dtype).tobytes(), 9)).decode("ascii")
 
@@ -118,16 +148,10 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
             ev["violations"] = by_action[s.action]
         events.append(ev)
     machines = {}
-    for mid in m.ids:
+    for mid, segs in machine_paths(scenario, plan).items():
         p = m.pose(mid)
-        segs = []
-        for a in sorted((a for a in plan.actions if a.machine == mid and isinstance(a, (Move, Charge))), key=lambda a: a.t_start):
-            if isinstance(a, Move):
-                segs.append([[_r(v) for v in smp] for smp in a.path])
-            else:
-                (x, y, yaw), (ex, ey, _) = a.entry, a.end
-                segs.append([[_r(a.t_start), _r(x), _r(y), _r(yaw)], [_r(a.t_end), _r(ex), _r(ey), _r(yaw)]])
-        machines[mid] = {"start": [_r(p.x), _r(p.y), _r(p.yaw)], "segments": segs}
+        machines[mid] = {"start": [_r(p.x), _r(p.y), _r(p.yaw)],
+                         "segments": [[[_r(v) for v in smp] for smp in seg] for seg in segs]}
     exc = m.excavator
     return {
         "run": run_id, "label": label, "scenario": scenario.id, "verdict": verdict.summary(),
@@ -526,4 +550,4 @@ CSS = """
 """
 
 
-__all__ = ["CSS", "QUANTUM", "SCRIPT", "Step", "pick_runs", "replay", "replay_data", "viewer_html", "viewer_section"]
+__all__ = ["CSS", "QUANTUM", "SCRIPT", "Step", "machine_paths", "pick_runs", "pose_at", "replay", "replay_data", "viewer_html", "viewer_section"]
