@@ -232,19 +232,31 @@ def volume_time_figure(runs: pd.DataFrame, title: str):
     fig, ax = plt.subplots(figsize=(7, 4.8), constrained_layout=True)
     have = runs[runs["reason"].isin(["ok", "invalid"]) & runs["makespan_s"].notna()] if "makespan_s" in runs else runs.iloc[:0]
     colours = _colours(runs["solver"].unique())
+    from matplotlib.lines import Line2D
+
+    handles = []
     for solver, g in have.groupby("solver"):
         c = colours[solver]
         ok = g["reason"] == "ok"
         succ = ok & g["success"].astype(bool)
-        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, label=mpl_text(solver))
-        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c)
-        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=18, color=c, marker="x")
+        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, zorder=2)
+        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c, zorder=2)
+        # invalid runs: large, drawn over every valid point so none hides under them
+        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=70, color=c, marker="X", edgecolors="k",
+                   linewidths=0.6, zorder=4)
+        # the legend marker says what the planner has: a filled dot only when some run succeeded
+        counts = {"success": int(succ.sum()), "below threshold": int((ok & ~succ).sum()), "invalid": int((~ok).sum())}
+        kinds = [k for k, n in counts.items() if n]
+        marker = {"success": dict(marker="o", color=c), "below threshold": dict(marker="o", mfc="none", mec=c, color=c),
+                  "invalid": dict(marker="X", color=c, mec="k")}[kinds[0]]
+        handles.append(Line2D([], [], ls="none", ms=7, **marker,
+                              label=mpl_text(f"{solver} ({', '.join(f'{counts[k]} {k}' for k in kinds)})")))
     ax.set_xlabel("total time of the plan (makespan), s")
     ax.set_ylabel("loaded volume, m³")
-    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ×: invalid", fontsize=9)
+    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ✕: invalid (drawn on top)", fontsize=9)
     ax.grid(alpha=0.3)
     if len(have):
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(handles=handles, fontsize=7, loc="best")
     else:
         ax.text(0.5, 0.5, "no plans stored", ha="center", va="center", transform=ax.transAxes)
     return fig
@@ -258,6 +270,9 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
         y = np.append(rho[solver].to_numpy(), rho[solver].to_numpy()[-1] if len(taus) else 0.0)
         ax.step(x, y, where="post", color=colours.get(solver), label=mpl_text(solver))
     ax.set_xscale("log", base=2)
+    from matplotlib.ticker import FuncFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))  # τ = 1, 2, 4, … rather than 2⁰, 2¹, 2²
     ax.set_xlim(1, right)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel(xlabel)
