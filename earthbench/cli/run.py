@@ -28,9 +28,10 @@ Cases already in the database are skipped, so the same command resumes a killed 
 Each finished case prints one line; an invalid or failed one names the broken rule (or
 the error) and the command that shows it in full (earthbench runs --id N).
 
-Exit status: 0 when at least one case of the command succeeded (stored now or before),
-1 when none did (every case invalid, failed or below the success threshold), 2 for bad
-input, 130 when interrupted."""
+Exit status: 1 when no case of the command (run now or stored before) has a valid plan
+(every one invalid, timed out, out of memory, an error or crashed); with --require-success,
+1 unless at least one case succeeded (valid and at the success threshold). Otherwise 0;
+2 for bad input, 130 when interrupted."""
 
 
 def default_db() -> str:
@@ -55,6 +56,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rerun", action="store_true", help="run cases again even if they are stored, replacing their rows")
     p.add_argument("--seeds", metavar="A-B", help="only scenarios whose seed is in this range, e.g. 0-4 or 3")
     p.add_argument("--quiet", action="store_true", help="no progress output, only the summary")
+    p.add_argument("--require-success", action="store_true",
+                   help="exit with status 1 unless at least one case succeeded (default: unless one has a valid plan)")
     p.add_argument("--executor", choices=("local", "dask"), default=None,
                    help="where cases run: local slots (default) or a Dask cluster (needs the `dask` extra)")
     p.add_argument("--scheduler", metavar="ADDR",
@@ -155,14 +158,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run; "
                   "run the same command again to resume", file=sys.stderr)
             return 130
-        succeeded = any_success(store, cases)
+        enough = any_stored(store, cases, "success=1" if args.require_success else "reason='ok'")
         db = "" if args.db == default_db() else f" --db {args.db}"
         if not args.quiet:
             print(f"\nnext: earthbench runs{db} --suite {suite.name} --reason invalid  (what failed, then --id N for one run)\n"
                   f"      earthbench leaderboard{db} --suite {suite.name} --out DIR  (tables, figures and a page with replays)",
                   file=sys.stderr)
-        if cases and not succeeded:
-            print(f"earthbench: no case succeeded (exit status 1); see earthbench runs{db} --suite {suite.name}", file=sys.stderr)
+        if cases and not enough:
+            what = "succeeded" if args.require_success else "has a valid plan"
+            print(f"earthbench: no case {what} (exit status 1); see earthbench runs{db} --suite {suite.name}", file=sys.stderr)
             return 1
     return 0
 
@@ -174,11 +178,11 @@ def run_id(store: Store, case: Any) -> int | None:
     return None if row is None else int(row[0])
 
 
-def any_success(store: Store, cases: list[Any]) -> bool:
-    """Whether any of ``cases`` has a successful run stored (run by this command or before it)."""
-    ok = {tuple(r) for r in store.db.execute(
-        "SELECT scenario_digest, planner, planner_version, config_hash FROM runs WHERE success=1")}
-    return any(c.key in ok for c in cases)
+def any_stored(store: Store, cases: list[Any], where: str) -> bool:
+    """Whether any of ``cases`` has a stored run (by this command or before it) matching the SQL condition ``where``."""
+    keys = {tuple(r) for r in store.db.execute(
+        f"SELECT scenario_digest, planner, planner_version, config_hash FROM runs WHERE {where}")}
+    return any(c.key in keys for c in cases)
 
 
 def make_executor(args: argparse.Namespace, suite: Any) -> Any:
