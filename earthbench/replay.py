@@ -314,8 +314,8 @@ SCRIPT = r"""
     draw();
   }
   function fit() {
-    var g = cur.doc.grid, w = Math.min(canvas.parentNode.clientWidth - 20, 1100);
-    w = Math.max(w * 0.72, 280);
+    var g = cur.doc.grid, room = canvas.parentNode.clientWidth - 4;
+    var w = Math.max(room < 900 ? room : Math.min(room * 0.72, 1100), 240);  // narrow windows: the log goes below
     canvas.width = Math.round(w);
     canvas.height = Math.round(w * g.ny / g.nx);
   }

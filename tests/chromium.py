@@ -84,8 +84,7 @@ class DevTools:
         """A PNG of the viewport (or of ``clip``: x, y, width, height in CSS pixels, scale 1)."""
         params = {"format": "png"}
         if clip:
-            params["clip"] = dict(clip, scale=1)
-            params["captureBeyondViewport"] = True
+            params["clip"] = dict(clip, scale=1)  # within the viewport: capturing beyond it would resize the page
         png = base64.b64decode(self.call("Page.captureScreenshot", **params)["data"])
         if path is not None:
             Path(path).write_bytes(png)

@@ -79,3 +79,25 @@ def test_script_name_shows_as_text(page):
     assert page.js("document.querySelectorAll('script:not([type=\"application/json\"])').length") == 1
     assert page.js("document.querySelectorAll('td script, th script, caption script').length") == 0
     assert not [e for e in page.events if e.get("method") == "Page.javascriptDialogOpening"]
+
+
+def test_tables_fit_a_1400px_window_and_link_their_csvs(page):
+    assert page.js("(() => { const w = document.querySelector('table.sortable').closest('.wrap');"
+                   " return w.scrollWidth <= w.clientWidth; })()") is True
+    assert page.js("Array.from(document.links).map(a => a.getAttribute('href')).filter(h => h.endsWith('.csv'))") == [
+        "summary.csv", "runs.csv"]
+
+
+def test_filters_hide_rows(page):
+    visible = "Array.from(document.querySelectorAll('table.sortable tbody tr')).filter(r => r.offsetParent !== null).length"
+    total = page.js("document.querySelectorAll('table.sortable tbody tr').length")
+    page.js("document.querySelectorAll('details').forEach(d => d.open = true)")
+    assert page.js(visible) == total
+    page.js("(() => { const s = document.querySelector('.filters select[data-key=planner]'); s.value = 'greedy';"
+            " s.dispatchEvent(new Event('change')); })()")
+    shown = page.js("Array.from(document.querySelectorAll('table.sortable tbody tr')).filter(r => r.offsetParent !== null)"
+                    ".map(r => r.getAttribute('data-planner'))")
+    assert shown and set(shown) == {"greedy"} and len(shown) < total
+    page.js("(() => { const s = document.querySelector('.filters select[data-key=planner]'); s.value = '';"
+            " s.dispatchEvent(new Event('change')); })()")
+    assert page.js(visible) == total

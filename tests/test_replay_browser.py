@@ -46,7 +46,8 @@ def _canvas(dt, t: float) -> np.ndarray:
 
     dt.js(f"earthbenchReplay.setTime({t})")
     r = dt.js("(() => { const c = document.getElementById('rp-canvas'); c.scrollIntoView();"
-              " const b = c.getBoundingClientRect(); return [b.left + window.scrollX, b.top + window.scrollY, c.width, c.height]; })()")
+              " const b = c.getBoundingClientRect();"
+              " return [b.left + c.clientLeft + window.scrollX, b.top + c.clientTop + window.scrollY, c.width, c.height]; })()")
     png = dt.screenshot(clip={"x": r[0], "y": r[1], "width": r[2], "height": r[3]})
     return (mpimg.imread(io.BytesIO(png))[..., :3] * 255).round().astype(int)
 
