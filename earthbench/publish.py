@@ -10,9 +10,11 @@
   :func:`earthbench.store.load_runs`;
 * ``summary.csv`` — :func:`metrics.aggregate.aggregate` of those runs;
 * ``index.html`` — one self-contained page: inline CSS, a small inline script (allowed by a
-  content-security policy hash, so no other script can run), tables that sort on a click
-  and the figures as ``data:`` URIs; no network resource. Every string from the store (and
-  so from a plugin) is escaped with :func:`html.escape`;
+  content-security policy hash, so no other script can run), tables that sort on a click,
+  filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
+  and wrap their headings to fit the window, links to the CSVs, the figures as ``data:`` URIs
+  and the replay viewer of :mod:`earthbench.replay`; no network resource. Every string from
+  the store (and so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
   Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per m³ and over solve
