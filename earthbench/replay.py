@@ -165,13 +165,14 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
 
 
 def pick_runs(runs: pd.DataFrame, limit: int) -> pd.DataFrame:
-    """Up to ``limit`` runs with a plan worth replaying: per planner in turn, a success, an invalid run, then more.
-
-    A run published under several suites is picked once.
+    """Up to ``limit`` runs with a plan worth replaying: per planner in turn, a success, an invalid run, then more,
+    spread over the scenario families. A run published under several suites is picked once.
     """
     have = runs[runs["reason"].isin(["ok", "invalid"])].drop_duplicates("id").sort_values("id")
     if have.empty or limit <= 0:
         return have.iloc[:0]
+    if "family" in have:  # spread each planner's picks over the families: the first of each, then the second, …
+        have = have.assign(_nth=have.groupby(["solver", "family"]).cumcount()).sort_values(["_nth", "family", "id"])
     queues = []
     for _, g in have.groupby("solver", sort=True):
         succ, bad = g[g["success"].astype(bool)], g[g["reason"] == "invalid"]
@@ -182,7 +183,7 @@ def pick_runs(runs: pd.DataFrame, limit: int) -> pd.DataFrame:
         for q in queues:
             if q and len(picked) < limit:
                 picked.append(q.pop(0))
-    return have.loc[picked]
+    return have.loc[picked].drop(columns=["_nth"], errors="ignore")
 
 
 def viewer_section(store: Store, runs: pd.DataFrame, limit: int = 20) -> str:
@@ -282,6 +283,7 @@ SCRIPT = r"""
 
   function load(n) {
     var doc = replays[n], g = doc.grid;
+    sel.value = String(n);
     var deltas = doc.events.map(function (ev) { return ev.delta ? inflate(ev.delta.d) : Promise.resolve(null); });
     return Promise.all([inflate(g.rows)].concat(deltas)).then(function (arr) {
       var rows = arr[0], z = new Int32Array(g.nx * g.ny);
@@ -316,6 +318,7 @@ SCRIPT = r"""
   function fit() {
     var g = cur.doc.grid, room = canvas.parentNode.clientWidth - 4;
     var w = Math.max(room < 900 ? room : Math.min(room * 0.72, 1100), 240);  // narrow windows: the log goes below
+    w = Math.max(Math.min(w, 0.8 * window.innerHeight * g.nx / g.ny), 240);  // a tall map fits the window's height
     canvas.width = Math.round(w);
     canvas.height = Math.round(w * g.ny / g.nx);
   }
@@ -433,8 +436,8 @@ SCRIPT = r"""
       if (ev.fp) poly(ev.fp, bad ? '#d00' : (done ? '#000' : '#fff'), bad ? 'rgba(220,0,0,0.3)' : null, null, bad ? 2.5 : 1.2);
       if (ev.type === 'dump') {
         var tr = doc.machines.truck ? pose('truck', ev.t0) : pose(ev.machine, ev.t0), q = toPx(tr[0], tr[1]);
-        ctx.fillStyle = bad ? '#d00' : '#5b3a1a';
-        ctx.fillRect(q[0] + 6 + 5 * (k % 4), q[1] - 14, 7, 7);
+        ctx.fillStyle = bad ? '#d00' : '#5b3a1a'; ctx.strokeStyle = '#fff'; ctx.lineWidth = 1;
+        ctx.fillRect(q[0] + 8 + 9 * (k % 5), q[1] - 18, 8, 8); ctx.strokeRect(q[0] + 8 + 9 * (k % 5), q[1] - 18, 8, 8);
       }
       if (bad && ev.type !== 'move' && !ev.fp) {
         var p = pose(ev.machine, ev.t0), r = toPx(p[0], p[1]);
