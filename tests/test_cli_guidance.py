@@ -91,3 +91,17 @@ def test_validate_prints_no_missing_values(tmp_path, capsys):
     assert main(["validate", str(plan), "--scenario", str(scen)]) == 0
     out = capsys.readouterr().out
     assert "None" not in out and "solve_time_s" not in out and "volume_ratio" in out
+
+
+def test_settings_are_listed_and_typed(capsys):
+    from earthbench.cli._common import parse_config
+    from earthbench.registry import PLANNERS
+
+    assert main(["list", "--settings"]) == 0
+    out = capsys.readouterr().out
+    assert "settings: min_fill=0.6" in out and "params: n_bases=14" in out
+    cls = PLANNERS.get("singh-cannon-backhoe")
+    assert parse_config(["relax_fills=[0.5, 0.2]", "max_digs=7", "fill_min=1"], cls) == {
+        "relax_fills": (0.5, 0.2), "max_digs": 7, "fill_min": 1.0}
+    assert parse_config(["retime_moves=false", "mu_strategy=monotone"], PLANNERS.get("stl-tamp")) == {
+        "retime_moves": False, "mu_strategy": "monotone"}

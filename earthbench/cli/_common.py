@@ -128,7 +128,7 @@ def _convert(raw: str, hint: Any, where: str) -> Any:
 
 def add_config_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
-                   help="planner setting, a field of its Config (repeatable; see `earthbench list planners`), "
+                   help="planner setting, a field of its Config (repeatable; `earthbench list planners --settings` lists them), "
                         "converted to the field's type, e.g. --config min_fill=0.5")
 
 
