@@ -5,7 +5,7 @@
 the map (and the machines' end poses and dump positions, when they lie beyond it), the dig
 area and keep-outs, each machine's moves as separate pieces (a jump between two moves is a
 red dashed line, never an ordinary path), start poses (○) and end poses (▲ with the heading),
-the excavator's reach annulus at every station it dug from, bucket footprints, dumps (■ at the
+the excavator's reach annulus at every station it dug from (stations within 1.5 m drawn once), bucket footprints, dumps (■ at the
 truck), and every violation in red at its action with its rule. A machine beyond the crop is
 an arrow at the edge with its position.
 """
@@ -122,12 +122,14 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
     exc = m.excavator
     if exc is not None and "excavator" in paths:
         e0 = m.excavator_pose
-        stations = {tuple(np.round(pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], a.t_start)[:2], 2))
-                    for a in plan.actions if isinstance(a, Dig) and a.t_start <= t}
-        if not stations:
-            stations = {tuple(np.round(pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], t)[:2], 2))}
+        bases = [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], a.t_start)[:2]
+                 for a in sorted(plan.actions, key=lambda a: a.t_start) if isinstance(a, Dig) and a.t_start <= t]
+        stations: list[tuple[float, float]] = []
+        for b in bases or [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], t)[:2]]:
+            if all(math.hypot(b[0] - s[0], b[1] - s[1]) > 1.5 for s in stations):  # one ring per station, not per nudge
+                stations.append(b)
         th = np.linspace(0, 2 * math.pi, 121)
-        for k, (sx, sy) in enumerate(sorted(stations)):
+        for k, (sx, sy) in enumerate(stations):
             for r in (exc.reach_min, exc.reach_max):
                 ax.plot(sx + r * np.cos(th), sy + r * np.sin(th), ":", color="0.25", lw=0.9,
                         label="reach annulus" if k == 0 and r == exc.reach_min else None, zorder=2)
