@@ -48,13 +48,21 @@ class Step:
 
 
 def replay(scenario: Scenario, plan: Plan) -> tuple[Verdict, list[Step]]:
-    """The referee's verdict on the whole plan and the state after each action, in time order."""
+    """The referee's verdict on the whole plan and the state after each action, in time order.
+
+    The state after an action is the referee's judgement of the digs, charges and dumps up to
+    it (moves change neither the heightmap nor the load, only whether rules hold), so it costs
+    one short judgement per such action.
+    """
     order = sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n))
     steps: list[Step] = []
     z, loaded = scenario.terrain.z, 0.0
-    for k, n in enumerate(order):
-        if isinstance(plan.actions[n], (Dig, Charge, Dump)):  # only these change the terrain or the load
-            v = judge(scenario, Plan(tuple(plan.actions[m] for m in order[: k + 1])))
+    work: list[Any] = []  # digs, charges and dumps so far: the cut and the load depend on nothing else
+    for n in order:
+        a = plan.actions[n]
+        if isinstance(a, (Dig, Charge, Dump)):
+            work.append(a)
+            v = judge(scenario, Plan(tuple(work)))
             z, loaded = v.final_terrain.z, v.loaded_volume
         steps.append(Step(n, z, loaded))
     return judge(scenario, plan), steps
@@ -90,8 +98,11 @@ def pose_at(start: tuple[float, float, float], segments: list[np.ndarray], t: fl
     return p
 
 
-def _pack(values: np.ndarray, dtype: str) -> str:
-    return base64.b64encode(zlib.compress(np.ascontiguousarray(values, dtype=dtype).tobytes(), 9)).decode("ascii")
+def _pack(values: np.ndarray) -> str:
+    """Integers as ``"i2:"`` or ``"i4:"`` (little-endian 16 or 32 bits, the smaller that holds them) + base64 of zlib."""
+    dtype = "<i2" if values.size == 0 or int(np.abs(values).max()) < 2**15 else "<i4"
+    data = zlib.compress(np.ascontiguousarray(values, dtype=dtype).tobytes(), 6)
+    return dtype[1:] + ":" + base64.b64encode(data).decode("ascii")
 
 
 def _r(v: float, nd: int = 3) -> float:
@@ -116,8 +127,11 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
         return np.rint((z - lo) / q).astype(np.int32)
 
     zq = quant(z0)
-    # first differences along each row compress far better than the heights of a smooth terrain
-    rows = np.diff(zq, axis=1, prepend=0).astype(np.int32)
+    # differences along each row (the first column: down it, from zq[0, 0]) are small on a smooth terrain:
+    # 16 bits and far better compression than the heights themselves
+    base = int(zq[0, 0])
+    rows = np.diff(zq, axis=1, prepend=0)
+    rows[:, 0] = np.diff(zq[:, 0], prepend=base)
     by_action: dict[int, list[dict[str, Any]]] = {}
     for v in verdict.violations:
         by_action.setdefault(-1 if v.action is None else v.action, []).append(
@@ -134,7 +148,7 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
             changed = np.argwhere(cur != prev)
             (j0, i0), (j1, i1) = changed.min(axis=0), changed.max(axis=0) + 1
             ev["delta"] = {"i": int(i0), "j": int(j0), "w": int(i1 - i0), "h": int(j1 - j0),
-                           "d": _pack(cur[j0:j1, i0:i1] - prev[j0:j1, i0:i1], "<i4")}
+                           "d": _pack(cur[j0:j1, i0:i1] - prev[j0:j1, i0:i1])}
         prev = cur
         if isinstance(a, Dig):
             width = m.excavator.bucket_width if m.excavator is not None else 0.7
@@ -156,7 +170,7 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
     return {
         "run": run_id, "label": label, "scenario": scenario.id, "verdict": verdict.summary(),
         "grid": {"nx": int(z0.shape[1]), "ny": int(z0.shape[0]), "x0": t.origin[0], "y0": t.origin[1], "r": t.resolution,
-                 "lo": lo, "q": q, "hi": hi, "rows": _pack(rows, "<i4")},
+                 "lo": lo, "q": q, "hi": hi, "base": base, "rows": _pack(rows)},
         "dig_area": _poly(scenario.site.dig_area), "keep_outs": [_poly(k) for k in scenario.site.keep_outs],
         "reach": [exc.reach_min, exc.reach_max] if exc is not None else None,
         "target": scenario.task.target_volume, "makespan": _r(plan.makespan), "machines": machines,
@@ -259,9 +273,11 @@ SCRIPT = r"""
     for (var i = 0; i < s.length; i++) out[i] = s.charCodeAt(i);
     return out;
   }
-  function inflate(b64) {
-    var stream = new Blob([bytes(b64)]).stream().pipeThrough(new DecompressionStream('deflate'));
-    return new Response(stream).arrayBuffer().then(function (buf) { return new Int32Array(buf); });
+  function inflate(packed) {  // "i2:BASE64" or "i4:BASE64" of zlib-compressed little-endian integers
+    var stream = new Blob([bytes(packed.slice(3))]).stream().pipeThrough(new DecompressionStream('deflate'));
+    return new Response(stream).arrayBuffer().then(function (buf) {
+      return packed.slice(0, 2) === 'i2' ? new Int16Array(buf) : new Int32Array(buf);
+    });
   }
   function colour(f) {
     f = Math.max(0, Math.min(1, f));
@@ -286,10 +302,12 @@ SCRIPT = r"""
     sel.value = String(n);
     var deltas = doc.events.map(function (ev) { return ev.delta ? inflate(ev.delta.d) : Promise.resolve(null); });
     return Promise.all([inflate(g.rows)].concat(deltas)).then(function (arr) {
-      var rows = arr[0], z = new Int32Array(g.nx * g.ny);
+      var rows = arr[0], z = new Int32Array(g.nx * g.ny), first = g.base;
       for (var j = 0; j < g.ny; j++) {
-        var acc = 0;
-        for (var i = 0; i < g.nx; i++) { acc += rows[j * g.nx + i]; z[j * g.nx + i] = acc; }
+        first += rows[j * g.nx];
+        var acc = first;
+        z[j * g.nx] = acc;
+        for (var i = 1; i < g.nx; i++) { acc += rows[j * g.nx + i]; z[j * g.nx + i] = acc; }
       }
       var img = document.createElement('canvas');
       img.width = g.nx; img.height = g.ny;
