@@ -5,9 +5,9 @@
 the map (and the machines' end poses and dump positions, when they lie beyond it), the dig
 area and keep-outs, each machine's moves as separate pieces (a jump between two moves is a
 red dashed line, never an ordinary path), start poses (○) and end poses (▲ with the heading),
-the excavator's reach annulus at every station it dug from (stations within 1.5 m drawn once), bucket footprints, dumps (■ at the
-truck), and every violation in red at its action with its rule. A machine beyond the crop is
-an arrow at the edge with its position.
+the excavator's reach annulus at every station it dug from (stations within 1.5 m drawn
+once), bucket footprints, dumps (■ at the truck), and every violation in red at its action
+with its rule. A machine beyond the crop is an arrow at the edge with its position.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from .plan import Charge, Dig, Dump, Move, Plan  # noqa: E402
-from .referee import Verdict, footprint  # noqa: E402
-from .replay import machine_paths, pose_at, replay  # noqa: E402
+from .referee import Verdict  # noqa: E402
+from .replay import bucket_footprint, machine_paths, pose_at, replay  # noqa: E402
 from .world import Scenario  # noqa: E402
 
 _COLOURS = {"excavator": "tab:orange", "truck": "tab:blue", "loader": "tab:green"}
@@ -33,17 +33,8 @@ _JUMP = 0.05  # m: a move starting farther than this from where the machine stan
 
 
 def _fp(scenario: Scenario, a: Any) -> np.ndarray | None:
-    """The bucket footprint of a dig or a charge (the referee's rectangle), closed."""
-    m = scenario.machines
-    if isinstance(a, Dig) and m.excavator is not None:
-        poly = footprint(a.contact, a.heading, m.excavator.bucket_width, a.drag_length)
-    elif isinstance(a, Charge) and m.loader is not None:
-        (x, y, yaw), spec = a.entry, m.loader
-        poly = footprint((x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw)), yaw,
-                         spec.bucket_width, a.penetration)
-    else:
-        return None
-    return np.asarray(poly.exterior.coords)
+    fp = bucket_footprint(scenario, a)
+    return None if fp is None else np.asarray(fp)
 
 
 def view_box(scenario: Scenario, plan: Plan, pad: float = 0.5) -> tuple[float, float, float, float]:

@@ -105,8 +105,24 @@ def _pack(values: np.ndarray) -> str:
     return dtype[1:] + ":" + base64.b64encode(data).decode("ascii")
 
 
-def _r(v: float, nd: int = 3) -> float:
-    return round(float(v), nd)
+def _r(v: float, nd: int = 3) -> float | None:
+    """Rounded; ``None`` (JSON null) for an infinite or undefined number, e.g. a violation's magnitude."""
+    v = float(v)
+    return round(v, nd) if math.isfinite(v) else None
+
+
+def bucket_footprint(scenario: Scenario, a: Any) -> list[tuple[float, float]] | None:
+    """The referee's bucket rectangle of a dig or a charge (``None`` for other actions, or without the machine)."""
+    m = scenario.machines
+    if isinstance(a, Dig) and m.excavator is not None:
+        poly = footprint(a.contact, a.heading, m.excavator.bucket_width, a.drag_length)
+    elif isinstance(a, Charge) and m.loader is not None:
+        (x, y, yaw), spec = a.entry, m.loader
+        edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
+        poly = footprint(edge, yaw, spec.bucket_width, a.penetration)
+    else:
+        return None
+    return list(poly.exterior.coords)
 
 
 def _poly(points: Any) -> list[list[float]]:
@@ -150,14 +166,9 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
             ev["delta"] = {"i": int(i0), "j": int(j0), "w": int(i1 - i0), "h": int(j1 - j0),
                            "d": _pack(cur[j0:j1, i0:i1] - prev[j0:j1, i0:i1])}
         prev = cur
-        if isinstance(a, Dig):
-            width = m.excavator.bucket_width if m.excavator is not None else 0.7
-            ev["fp"] = _poly(footprint(a.contact, a.heading, width, a.drag_length).exterior.coords[:-1])
-            ev["contact"] = [_r(a.contact[0]), _r(a.contact[1])]
-        elif isinstance(a, Charge) and m.loader is not None:
-            (x, y, yaw), spec = a.entry, m.loader
-            edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
-            ev["fp"] = _poly(footprint(edge, yaw, spec.bucket_width, a.penetration).exterior.coords[:-1])
+        fp = bucket_footprint(scenario, a)
+        if fp is not None:
+            ev["fp"] = _poly(fp[:-1])
         if s.action in by_action:
             ev["violations"] = by_action[s.action]
         events.append(ev)
@@ -571,4 +582,4 @@ CSS = """
 """
 
 
-__all__ = ["CSS", "QUANTUM", "SCRIPT", "Step", "machine_paths", "pick_runs", "pose_at", "replay", "replay_data", "viewer_html", "viewer_section"]
+__all__ = ["CSS", "QUANTUM", "SCRIPT", "Step", "bucket_footprint", "machine_paths", "pick_runs", "pose_at", "replay", "replay_data", "viewer_html", "viewer_section"]
