@@ -24,12 +24,22 @@ pytestmark = needs_browser
 
 
 @pytest.fixture(scope="module")
-def page_2000(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("page")
+def store_2000(tmp_path_factory) -> Path:
     behaviours = standard_behaviours() + [Behaviour(ref("jumpy"), teleport=4.0)]
-    db = fill_store(root / "runs.db", suite_of(200), behaviours)
-    publish(db, root / "lb", terrain=False, replays=20)
-    return root / "lb" / "index.html"
+    return fill_store(tmp_path_factory.mktemp("page") / "runs.db", suite_of(200), behaviours)
+
+
+@pytest.fixture(scope="module")
+def page_2000(store_2000) -> Path:
+    publish(store_2000, store_2000.parent / "lb", terrain=False, replays=20)
+    return store_2000.parent / "lb" / "index.html"
+
+
+@pytest.mark.parametrize("replays", [0, 20])
+def test_publish_page_with_replays(benchmark, store_2000, tmp_path, replays):
+    """What the replays add to writing the tables, CSVs and page (no figures), side by side with none."""
+    benchmark.pedantic(publish, args=(store_2000, tmp_path / "lb"), kwargs={"figures": False, "replays": replays},
+                       rounds=3, iterations=1)
 
 
 def test_page_2000_runs_20_replays(benchmark, page_2000):
