@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .runner import REASONS, Case, CaseResult
+from .harness.cases import REASONS, Case, CaseResult
 
 
 def _clock(seconds: float) -> str:

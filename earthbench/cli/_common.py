@@ -8,6 +8,7 @@ import inspect
 import json
 import types
 import typing
+from pathlib import Path
 from typing import Any
 
 from ..errors import EarthbenchError, UnknownNameError
@@ -38,7 +39,7 @@ def _key_value(item: str, option: str) -> tuple[str, str]:
 
 def load_scenario(args: argparse.Namespace) -> Scenario:
     if args.scenario:
-        return Scenario.from_json(args.scenario)
+        return Scenario.from_json(Path(args.scenario))
     gen = TERRAINS.get(args.terrain)
     params = {}
     for item in args.param:

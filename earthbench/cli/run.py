@@ -14,7 +14,7 @@ import sys
 from typing import Any
 
 from ..errors import EarthbenchError
-from ..runner import REASONS, LocalExecutor, build_cases, run_cases
+from ..harness import REASONS, LocalExecutor, build_cases, run_cases
 from ..store import DEFAULT_DB, Store, summary_rows
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
@@ -186,9 +186,9 @@ def any_stored(store: Store, cases: list[Any], where: str) -> bool:
 
 
 def make_executor(args: argparse.Namespace, suite: Any) -> Any:
-    """The local executor, or a :class:`~earthbench.dask_executor.DaskExecutor` for ``--executor dask``."""
+    """The local executor, or a :class:`~earthbench.harness.dask_executor.DaskExecutor` for ``--executor dask``."""
     if (args.executor or ("dask" if args.scheduler else "local")) == "dask":
-        from ..dask_executor import DaskExecutor
+        from ..harness.dask_executor import DaskExecutor
         from ..errors import EarthbenchError
 
         try:
