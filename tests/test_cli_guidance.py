@@ -13,7 +13,7 @@ from earthbench.cli import main
 from earthbench.store import load_runs
 from earthbench.world import Scenario
 
-from conftest import tiny_suite_toml
+from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 

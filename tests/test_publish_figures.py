@@ -6,7 +6,7 @@ import matplotlib.colors as mcolors
 import pytest
 
 from earthbench.publish import profiles_figure, published_runs, volume_time_figure
-from leaderboard_fixtures import Behaviour, fill_store, ref, standard_behaviours, suite_of
+from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from earthbench.plan import Plan
 from earthbench.referee import judge
 from earthbench.replay import QUANTUM, pick_runs, replay, replay_data, viewer_html
 from earthbench.store import Store
-from leaderboard_fixtures import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
+from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 from planners.greedy import GreedyPlanner
 
 

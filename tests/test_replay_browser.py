@@ -18,7 +18,7 @@ from earthbench.plan import Plan
 from earthbench.publish import publish
 from earthbench.replay import replay
 from earthbench.store import Store
-from leaderboard_fixtures import Behaviour, fill_store, ref, standard_behaviours, suite_of
+from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 pytestmark = needs_browser
 

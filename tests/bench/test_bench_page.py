@@ -16,7 +16,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from chromium import chromium_page, needs_browser  # noqa: E402
-from leaderboard_fixtures import Behaviour, fill_store, ref, standard_behaviours, suite_of  # noqa: E402
+from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of  # noqa: E402
 
 from earthbench.publish import publish  # noqa: E402
 
