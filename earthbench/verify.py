@@ -329,7 +329,8 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .harness import Case, LocalExecutor, environment
+    from .harness import Case, LocalExecutor
+    from .harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:
         raise VerifyError("--sample must be at least 1")
