@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from metrics.aggregate import REASONS, RANKING_RULE, aggregate
-from metrics.profiles import cost_matrix, profile
+from .aggregate import REASONS, RANKING_RULE, aggregate
+from .profiles import cost_matrix, profile
 
 from .store import Store, load_runs
 

@@ -476,6 +476,8 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         reason = "memory" if d["outcome"] == "memory" or _mentions_memory(d.get("error", "")) else "error"
         return CaseResult(reason=reason, error=d.get("error", ""), **times, **common)
     plan_json = d["plan"]
+    from .scoring import score  # the one scoring rule (imported here: the case's child never needs it)
+
     try:
         verdict, metrics = score(case.scenario, plan_json, case.threshold)
     except Exception:  # noqa: BLE001 - a referee bug must not lose the plan; `earthbench rescore` can retry
@@ -485,21 +487,6 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         reason="ok" if verdict.valid else "invalid", metrics=metrics,
         violations=tuple(v.to_dict() for v in verdict.violations), plan_json=plan_json, **times, **common,
     )
-
-
-def score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
-    """Judge a plan and compute every registered metric; shared with ``earthbench rescore``."""
-    from metrics import evaluate  # the built-in metrics package; extra metrics come from plugins
-
-    from .plan import Plan
-    from .referee import judge
-
-    verdict = judge(scenario, plan_json)
-    try:
-        plan = Plan.from_json(plan_json)
-    except Exception:  # noqa: BLE001 - malformed: the verdict already says so
-        plan = Plan()
-    return verdict, evaluate(scenario, plan, verdict, threshold)
 
 
 @functools.lru_cache(maxsize=1)

@@ -58,10 +58,11 @@ from pathlib import Path
 from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
+from .scoring import DEFAULT_SUCCESS_THRESHOLD
 from .world import TRACKS, Budget, Scenario
 
 SUITE_GROUP = "earthbench.suites"
-DEFAULT_THRESHOLD = 0.9
+DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
 
 _TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include")
 _FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..runner import score
+from ..scoring import score
 from ..store import Store
 from .run import default_db
 
