@@ -3,20 +3,25 @@
 :func:`publish` writes, for every suite in the store (or the ones asked for):
 
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
-  (:data:`metrics.aggregate.RANKING_RULE`), with a reproducibility stamp (project commits,
-  suite digest, CPU models and cores, run dates, generation date) and the figures;
+  (:data:`earthbench.aggregate.RANKING_RULE`: the latest version of each planner, shared ranks
+  where paired tests cannot separate neighbours), with a reproducibility stamp (project
+  commits, suite digest, CPU models and cores, run dates, generation date); under it one table
+  per family and per target, a history table of older versions, and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
-* ``summary.csv`` — :func:`metrics.aggregate.aggregate` of those runs;
+* ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
+  ``scope`` = suite | family | target and ``group``), medians and rates with 95 % bootstrap intervals;
 * ``index.html`` — one self-contained page: inline CSS, a small inline script (allowed by a
   content-security policy hash, so no other script can run), tables that sort on a click
   and the figures as ``data:`` URIs; no network resource. Every string from the store (and
   so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
-  Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per m³ and over solve
-  time; solve-time profiles are drawn per CPU model when the runs come from several), and
+  Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per target m³ and over
+  solve time; solve-time profiles are drawn per CPU model when the runs come from several),
+  ``*-families`` (the time-per-target-m³ profile of each family), ``*-history-PLANNER`` (for a
+  planner with several versions: success rate and median time per target m³ by version), and
   ``*-terrain-PLANNER`` (terrain before and after, with machine paths and digs, for one case
   per planner: the scenario most planners have a plan for; its stored plan is judged again
   with :func:`earthbench.referee.judge` on the scenario the store keeps under the run's digest.
@@ -43,10 +48,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .aggregate import REASONS, RANKING_RULE, aggregate
+from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text
 from .profiles import cost_matrix, profile
 
-from .store import Store, load_runs
+from .store import Store, load_runs, suite_members
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
 FAILURE_COLUMNS = ("invalid", "timeout", "memory", "error", "crashed")
@@ -85,16 +90,6 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
     runs = pd.concat(frames, ignore_index=True)
     runs["solver"] = solver_labels(runs)
     return runs
-
-
-def suite_sizes(store: Store, names: Iterable[str]) -> dict[str, int]:
-    """Suite name → scenario count of its most recently registered version (as ``load_runs`` uses)."""
-    out = {}
-    for name in names:
-        ver = store.suite_version(name)
-        if ver is not None:
-            out[name] = store.db.execute("SELECT COUNT(*) FROM suite_scenarios WHERE suite_id=?", (ver["id"],)).fetchone()[0]
-    return out
 
 
 def load_runs_empty() -> pd.DataFrame:
@@ -140,29 +135,56 @@ def slug(text: str) -> str:
 
 
 def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
-    """Display values (text) and sort keys (numbers) of one table's rows, in rank order."""
+    """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
+
+    Medians and the success rate carry their 95 % bootstrap interval in brackets.
+    """
     rows = []
     for _, r in summary.iterrows():
         vr = _f(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else f" ± {_f(r['volume_ratio_sd'])}")
-        tpm = _f(r["time_per_m3_median"], ".1f") + (
-            "" if pd.isna(r["time_per_m3_q1"]) else f" ({_f(r['time_per_m3_q1'], '.1f')}–{_f(r['time_per_m3_q3'], '.1f')})")
         rows.append({
             "cells": [
-                ("Rank", str(r["rank"]), r["rank"]),
+                ("Rank", str(r["rank_label"]), r["rank"]),
                 ("Planner", str(r["planner"]), None),
                 ("Version", str(r["planner_version"]), None),
                 ("Config", str(r["config_hash"])[:8], None),
                 ("Runs", f"{r['runs']}/{r['of']}", r["runs"]),
-                ("Success", f"{100 * r['success_rate']:.0f}%", r["success_rate"]),
+                ("Success [95% CI]", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
+                 r["success_rate"]),
                 ("Volume ratio (mean ± SD)", vr, r["volume_ratio_mean"]),
-                ("Time per m³, s (median, IQR)", tpm, r["time_per_m3_median"]),
-                ("× lower bound", _f(r["time_per_m3_ratio_median"], ".2f"), r["time_per_m3_ratio_median"]),
-                ("Solve s (median)", _f(r["solve_time_median"], ".2f"), r["solve_time_median"]),
+                ("Overshoot m³ (mean)", _f(r["overshoot_m3_mean"], ".2f"), r["overshoot_m3_mean"]),
+                ("Time per target m³, s (median [95% CI])",
+                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
+                 r["time_per_target_m3_median"]),
+                ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
+                                          r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
+                ("Time per m³, s (median)", _f(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
+                ("Solve s (median [95% CI])", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
+                 r["solve_time_median"]),
                 ("Solve s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
                 *((reason, str(r[f"n_{reason}"]), r[f"n_{reason}"]) for reason in FAILURE_COLUMNS),
             ]
         })
     return rows
+
+
+def section_tables(summary: pd.DataFrame, all_versions: bool = False) -> dict[str, Any]:
+    """One suite and track's tables: the main rows, one table per family and per target (the same
+    configurations), and the history (older versions) unless ``all_versions`` ranks them all."""
+    shown = summary if all_versions else summary[summary["latest"].astype(bool)]
+    main = shown[shown["scope"] == "suite"]
+    keep = set(zip(main["planner"], main["planner_version"].astype(str), main["config_hash"]))
+    def mine(df: pd.DataFrame) -> pd.DataFrame:
+        return df[[k in keep for k in zip(df["planner"], df["planner_version"].astype(str), df["config_hash"])]]
+    breakdowns = []
+    for scope, word in (("family", "Family"), ("target", "Target")):
+        parts = mine(shown[shown["scope"] == scope])
+        if parts["group"].nunique() > 1:  # one family (or target) would repeat the suite's table
+            for group, g in parts.groupby("group", sort=True):
+                breakdowns.append((f"{word} {group}", table_rows(g)))
+    history = summary[(summary["scope"] == "suite") & ~summary["latest"].astype(bool)] if not all_versions else summary.iloc[:0]
+    return {"rows": table_rows(main), "breakdowns": breakdowns,
+            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"))}
 
 
 @dataclass
@@ -266,15 +288,15 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
 
 
 def profiles_figure(runs: pd.DataFrame, title: str):
-    """Performance profiles over time per m³ and over solve time (one panel per CPU model)."""
+    """Performance profiles over time per target m³ and over solve time (one panel per CPU model)."""
     plt = _plt()
     colours = _colours(runs["solver"].unique())
     models = sorted(runs["cpu_model"].fillna("unknown CPU").unique()) if "cpu_model" in runs else ["unknown CPU"]
     fig, axes = plt.subplots(1, 1 + len(models), figsize=(5.2 * (1 + len(models)), 4.2), constrained_layout=True, squeeze=False)
     axes = axes[0]
     solvers = sorted(runs["solver"].unique())
-    c = cost_matrix(runs, "time_per_m3").reindex(columns=solvers, fill_value=np.inf)
-    _draw_profile(axes[0], profile(c), colours, "τ (time per m³ within τ × the best)", "time per m³")
+    c = cost_matrix(runs, PRIMARY).reindex(columns=solvers, fill_value=np.inf)
+    _draw_profile(axes[0], profile(c), colours, "τ (time per target m³ within τ × the best)", "time per target m³")
     cpu = runs["cpu_model"].fillna("unknown CPU") if "cpu_model" in runs else pd.Series("unknown CPU", index=runs.index)
     for ax, model in zip(axes[1:], models):
         sub = runs[cpu == model]  # only the planners that ran on this CPU model are compared here
@@ -283,6 +305,46 @@ def profiles_figure(runs: pd.DataFrame, title: str):
         _draw_profile(ax, profile(c), colours, "τ (solve time within τ × the best)", label)
     axes[0].legend(fontsize=7, loc="lower right")
     fig.suptitle(mpl_text(title) + " — failures count as never solved", fontsize=10)
+    return fig
+
+
+def families_figure(runs: pd.DataFrame, title: str):
+    """One performance-profile panel per family over time per target m³ (families differ twofold in scale)."""
+    plt = _plt()
+    colours = _colours(runs["solver"].unique())
+    solvers = sorted(runs["solver"].unique())
+    families = sorted(runs["family"].fillna("?").astype(str).unique())
+    fig, axes = plt.subplots(1, len(families), figsize=(4.6 * len(families), 4.0), constrained_layout=True, squeeze=False)
+    for ax, fam in zip(axes[0], families):
+        sub = runs[runs["family"].fillna("?").astype(str) == fam]
+        c = cost_matrix(sub, PRIMARY).reindex(columns=solvers, fill_value=np.inf)
+        _draw_profile(ax, profile(c), colours, "τ (within τ × the best)", f"{fam} ({sub['scenario_digest'].nunique()} scenarios)")
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(mpl_text(title) + " — time per target m³ by family; failures count as never solved", fontsize=10)
+    return fig
+
+
+def history_figure(rows: pd.DataFrame, title: str):
+    """Success rate and median time per target m³ (95 % intervals) across one planner's versions."""
+    from .aggregate import _version_key
+
+    plt = _plt()
+    rows = rows.assign(_k=rows["planner_version"].map(_version_key)).sort_values(["_k", "config_hash"], kind="mergesort")
+    labels = [f"{v}" + (f"\n[{str(h)[:8]}]" if (rows["planner_version"] == v).sum() > 1 else "")
+              for v, h in zip(rows["planner_version"], rows["config_hash"])]
+    x = np.arange(len(rows))
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
+    for ax, (col, lo, hi, scale, ylabel) in zip(axes, (
+            ("success_rate", "success_rate_lo", "success_rate_hi", 100.0, "success rate, %"),
+            ("time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", 1.0, "time per target m³, s (median)"))):
+        y = rows[col].to_numpy(dtype=float) * scale
+        err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
+        ax.errorbar(x, y, yerr=np.nan_to_num(np.abs(err)), fmt="o-", capsize=3)
+        ax.set_xticks(x, [mpl_text(t) for t in labels], fontsize=8)
+        ax.set_xlabel("version")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    fig.suptitle(mpl_text(title) + " — by version, 95 % bootstrap intervals", fontsize=10)
     return fig
 
 
@@ -322,14 +384,15 @@ def terrain_figure(scenario_json: str, plan_json: str, title: str):
 
 
 #: Columns the run figures read (the frame shipped to a figure worker).
-FIGURE_COLUMNS = ["scenario_digest", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
-                  "solve_time_s", "cpu_model"]
+FIGURE_COLUMNS = ["scenario_digest", "family", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
+                  PRIMARY, "solve_time_s", "cpu_model"]
 
 
 def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
     kind, base, args = job
-    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "terrain": terrain_figure}[kind]
+    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "families": families_figure,
+             "history": history_figure, "terrain": terrain_figure}[kind]
     return _save(maker(*args), Path(base))[2]
 
 
@@ -491,6 +554,36 @@ _JS = """
 """
 
 
+_BREAKDOWN_NOTE = ("the same configurations on one family or one target of the suite, ranked by the same rule "
+                   "within it (the success rate is over that part's scenarios)")
+_HISTORY_NOTE = "older versions of the ranked planners, not ranked (`--all-versions` ranks every version)"
+
+
+def markdown_more_tables(sec: dict[str, Any]) -> list[str]:
+    """The breakdowns (one table per family and per target) and the history table under a suite's table."""
+    lines: list[str] = []
+    if sec.get("breakdowns"):
+        lines += [f"### Breakdowns: {_BREAKDOWN_NOTE}", ""]
+        for heading, rows in sec["breakdowns"]:
+            lines += [f"#### {md_escape(heading)}", "", markdown_table(rows)]
+    if sec.get("history"):
+        lines += [f"### History: {_HISTORY_NOTE}", "", markdown_table(sec["history"])]
+    return lines
+
+
+def html_more_tables(sec: dict[str, Any]) -> str:
+    """:func:`markdown_more_tables` for the page."""
+    e = html.escape
+    parts = []
+    if sec.get("breakdowns"):
+        parts.append(f"<h3>Breakdowns</h3><p class=\"rule\">{e(_BREAKDOWN_NOTE)}.</p>")
+        for heading, rows in sec["breakdowns"]:
+            parts.append(f"<h4>{e(heading)}</h4>" + html_table(rows))
+    if sec.get("history"):
+        parts.append(f"<h3>History</h3><p class=\"rule\">{e(_HISTORY_NOTE.replace('`', ''))}.</p>" + html_table(sec["history"]))
+    return "\n".join(parts)
+
+
 def html_page(sections: list[dict[str, Any]], generated: str) -> str:
     e = html.escape
     script_hash = base64.b64encode(hashlib.sha256(_JS.encode()).digest()).decode()
@@ -505,7 +598,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         f"<style>{_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f"<p>Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. "
-        "Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
+        "Brackets hold 95 % bootstrap confidence intervals. Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
     ]
     if not sections:
         parts.append("<p>No runs in the store.</p>")
@@ -515,6 +608,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
         parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines()))}</div>')
         parts.append(html_table(s["rows"]))
+        parts.append(html_more_tables(s))
         for cap, png in s["figures"]:
             data = base64.b64encode(png).decode()
             parts.append(f'<figure><img alt="{e(cap)}" src="data:image/png;base64,{data}"><figcaption>{e(cap)}</figcaption></figure>')
@@ -530,10 +624,11 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
 
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
-            workers: int | None = None) -> Published:
+            workers: int | None = None, all_versions: bool = False) -> Published:
     """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
 
     ``workers``: processes drawing the figures (default: one per core this process may use).
+    ``all_versions``: rank every stored version, not only each planner's latest.
     """
     out = Path(out)
     fig_dir = out / "figures"
@@ -544,14 +639,16 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
-        summary = aggregate(runs, suite_sizes(store, runs["suite"].unique()))
+        summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
+                            all_versions=all_versions)
         result.runs, result.summary = runs, summary
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
             ssum = summary[(summary["suite"] == suite) & (summary["track"] == track)]
             sec: dict[str, Any] = {
-                "suite": suite, "track": track, "rows": table_rows(ssum), "stamp": stamp(srun, suite, track, generated),
+                "suite": suite, "track": track, **section_tables(ssum, all_versions),
+                "stamp": stamp(srun, suite, track, generated),
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
@@ -559,14 +656,22 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 continue
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
-            cols = srun[[c for c in FIGURE_COLUMNS if c in srun]]
-            for kind, cap in (("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
-                              ("profiles", "Performance profiles: time per m³ and solve time (failures never solved)")):
+            shown = srun if all_versions else srun[_is_latest(srun, ssum)]
+            cols = shown[[c for c in FIGURE_COLUMNS if c in shown]]
+            kinds = [("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
+                     ("profiles", "Performance profiles: time per target m³ and solve time (failures never solved)")]
+            if shown["family"].nunique() > 1:
+                kinds.append(("families", "Performance profiles of time per target m³, one panel per family"))
+            for kind, cap in kinds:
                 path = fig_dir / f"{base}-{kind}"
                 jobs.append((kind, str(path), (cols, title)))
                 captions.append((sec, cap, path))
+            for planner, hist in _histories(ssum):
+                path = fig_dir / f"{base}-history-{slug(planner)}"
+                jobs.append(("history", str(path), (hist, f"{planner} on suite {suite}")))
+                captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
             if terrain:
-                for _, run in sample_runs(srun).iterrows():
+                for _, run in sample_runs(shown).iterrows():
                     digest = run["scenario_digest"]
                     if digest not in scenarios:
                         sc = store.scenario(digest)
@@ -593,19 +698,34 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     return result
 
 
+def _is_latest(runs: pd.DataFrame, summary: pd.DataFrame) -> pd.Series:
+    """Which runs belong to a configuration of the latest version of its planner (the ranked ones)."""
+    latest = summary[(summary["scope"] == "suite") & summary["latest"].astype(bool)]
+    keep = set(zip(latest["planner"], latest["planner_version"].astype(str)))
+    return pd.Series([k in keep for k in zip(runs["planner"], runs["planner_version"].astype(str))], index=runs.index)
+
+
+def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
+    """(planner, its suite-scope rows) for every planner of a table with more than one version."""
+    rows = summary[summary["scope"] == "suite"]
+    return [(str(p), g) for p, g in rows.groupby("planner", sort=True) if g["planner_version"].nunique() > 1]
+
+
 def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     lines = ["# earthbench leaderboard", "",
              f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-             "`–` means no value (no valid run). Columns: runs stored / scenarios in the suite; success rate over the "
-             "suite's scenarios (a scenario without a run is a failure); volume ratio over valid runs; "
-             "time per m³ over valid runs that loaded something, with its ratio to the scenario's lower bound; "
+             "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals. Columns: runs "
+             "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
+             "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
+             "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
+             "with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
              "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
              "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).", ""]
     if not sections:
         lines.append("No runs in the store.")
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
-                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"])]
+                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"]), *markdown_more_tables(s)]
         for cap, png, svg in s["md_figures"]:
             lines += [f"![{md_escape(cap)}]({png.as_posix()})", "", f"*{md_escape(cap)}* ([SVG]({svg.as_posix()}))", ""]
     return "\n".join(lines) + "\n"
