@@ -50,9 +50,9 @@ PRIMARY = "time_per_target_m3"
 RANK_ALPHA = 0.05
 RANKING_RULE = (
     "ranked by success rate (higher first), then median time per target m³ over valid runs (lower first), then "
-    f"median solve time (lower first); a planner shares the rank of the one above it (shown as 1=) unless a paired "
-    f"test on their shared scenarios separates them at α = {RANK_ALPHA:g} (exact McNemar on success, or Wilcoxon "
-    "signed-rank on time per target m³ where both are valid); ranks cover the latest version of each planner "
+    f"median solve time (lower first); a planner shares the rank of the first planner of the group above it (shown "
+    f"as 1=) unless a paired test on their shared scenarios separates the two at α = {RANK_ALPHA:g} (exact McNemar on "
+    "success, or Wilcoxon signed-rank on time per target m³ where both are valid); ranks cover the latest version of each planner "
     "(older versions: history) and never a configuration without a valid run")
 
 SUMMARY_COLUMNS = [
@@ -214,7 +214,8 @@ def _paired_vectors(g: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
 
 
 def separated(a: tuple[pd.Series, pd.Series], b: tuple[pd.Series, pd.Series], alpha: float = RANK_ALPHA) -> bool:
-    """Whether a paired test on shared scenarios tells two configurations apart (the shared-rank rule).
+    """Whether a paired test on shared scenarios tells two configurations apart (the shared-rank rule:
+    each row is tested against the first row of the group it would join, so ties never chain).
 
     Success over the union of their scenarios (a missing run is a failure), exact McNemar; else the
     primary time over the scenarios where both are valid, two-sided Wilcoxon signed-rank.
@@ -253,11 +254,12 @@ def rank(summary: pd.DataFrame, vectors: Sequence[tuple[pd.Series, pd.Series]] |
     labels: list[str] = ["–"] * len(s)
     for _, idx in s.groupby(TABLE, sort=False).groups.items():
         ranked = [i for i in idx if s.at[i, "ranked"]]
+        leader = None  # the first row of the current group of shared rank
         for pos, i in enumerate(ranked):
-            if pos and vectors is not None and not separated(vectors[s.at[ranked[pos - 1], "_v"]], vectors[s.at[i, "_v"]]):
-                ranks[i] = ranks[ranked[pos - 1]]
+            if leader is not None and vectors is not None and not separated(vectors[s.at[leader, "_v"]], vectors[s.at[i, "_v"]]):
+                ranks[i] = ranks[leader]
             else:
-                ranks[i] = float(pos + 1)
+                leader, ranks[i] = i, float(pos + 1)
         for i in ranked:
             shared = sum(1 for j in ranked if ranks[j] == ranks[i]) > 1
             labels[i] = f"{int(ranks[i])}=" if shared else str(int(ranks[i]))
