@@ -114,6 +114,7 @@ def test_wilcoxon_by_hand():
     # six positive differences: the exact two-sided p is 2 / 2**6
     assert st.loc["solve_time_s", "p_value"] == pytest.approx(2 / 64)
     assert st.loc["solve_time_s", "median_diff"] == 3.5
+    assert st.loc["solve_time_s", "median_diff_lo"] < 3.5 < st.loc["solve_time_s", "median_diff_hi"]  # the effect's 95 % CI
     assert st.loc["solve_time_s", "p_holm"] == pytest.approx(2 * 2 / 64)  # Holm over two metrics
     assert st.loc["solve_time_s", "verdict"] == "no significant difference"
     assert compare(a, b, ("solve_time_s",)).table.set_index("metric").loc["solve_time_s", "verdict"] == "B worse"
@@ -153,6 +154,21 @@ def test_cli_compare_two_stores(tmp_path, capsys):
     assert "success: A 0%, B 100%" in out and "McNemar p = 0.125" in out
     assert main(["compare", str(before), str(after), "--metric", "volume_ratio", "--alpha", "0.2"]) == 0
     assert "B better" in next(x for x in capsys.readouterr().out.splitlines() if x.startswith("volume_ratio"))
+
+
+def test_cli_compare_for_ci(db, capsys):
+    args = ["compare", str(db), "--metric", "volume_ratio", "--format", "markdown"]
+    # half loads half of greedy's volume on all 6 scenarios: p = 2 / 2**6 on one metric; success 6 vs 0 (McNemar)
+    assert main([*args, "--a", "greedy", "--b", "half", "--fail-on-regression", "volume_ratio"]) == 1
+    cap = capsys.readouterr()
+    assert "| metric | pairs |" in cap.out and "| volume\\_ratio | 6 |" in cap.out and "B worse" in cap.out
+    assert "regression: B is significantly worse on volume_ratio" in cap.err
+    assert main([*args, "--a", "greedy", "--b", "half", "--fail-on-regression", "success"]) == 1
+    assert main([*args, "--a", "half", "--b", "greedy", "--fail-on-regression", "volume_ratio,success"]) == 0  # B better
+    assert main([*args, "--a", "greedy", "--b", "half"]) == 0  # no guard: a report only
+    capsys.readouterr()
+    assert main([*args, "--a", "greedy", "--b", "half", "--fail-on-regression", "volume_ration"]) == 2
+    assert "Did you mean 'volume_ratio'" in capsys.readouterr().err
 
 
 def test_cli_compare_errors(db, capsys):
