@@ -177,7 +177,8 @@ def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None, *, member
 
     ``sizes``: suite name → its number of scenarios; ``members``: the suites' scenarios
     (columns ``suite``, ``scenario_digest``, ``family``, ``target_volume``), which give every
-    breakdown's scenario count. ``scopes``: the tables to make (``suite``, ``family``, ``target``).
+    breakdown's scenario count. ``scopes``: the tables to make (``suite``, ``family``, ``target``); a
+    suite with a single family (or target) gets no table for that scope.
     """
     sizes = sizes or {}
     of: dict[tuple[str, str, str], int] = {}
@@ -192,6 +193,10 @@ def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None, *, member
         if not len(runs):
             break
         sr = _scoped(runs, scope)
+        if scope != "suite":  # a suite of one family (or one target) has no breakdown: it would repeat the suite
+            parts = _scoped(members, scope) if members is not None and len(members) else sr
+            split = parts.groupby("suite")["group"].nunique()
+            sr = sr[sr["suite"].map(split).fillna(0) > 1]
         for key, g in sr.groupby(["suite", "track", "scope", "group", *GROUP[2:]], sort=True, dropna=False):
             suite, track, _, group, planner, version, _cfg = key
             n_of = of.get((suite, scope, group), sizes.get(suite) if scope == "suite" else None)

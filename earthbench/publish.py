@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text
+from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text, latest_versions
 from .profiles import cost_matrix, profile
 
 from .store import Store, load_runs, suite_members
@@ -175,7 +175,8 @@ def section_tables(summary: pd.DataFrame, all_versions: bool = False) -> dict[st
     main = shown[shown["scope"] == "suite"]
     keep = set(zip(main["planner"], main["planner_version"].astype(str), main["config_hash"]))
     def mine(df: pd.DataFrame) -> pd.DataFrame:
-        return df[[k in keep for k in zip(df["planner"], df["planner_version"].astype(str), df["config_hash"])]]
+        mask = [k in keep for k in zip(df["planner"], df["planner_version"].astype(str), df["config_hash"])]
+        return df.loc[np.array(mask, dtype=bool)]
     breakdowns = []
     for scope, word in (("family", "Family"), ("target", "Target")):
         parts = mine(shown[shown["scope"] == scope])
@@ -396,23 +397,41 @@ def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     return _save(maker(*args), Path(base))[2]
 
 
-def render_all(jobs: list[tuple[str, str, tuple[Any, ...]]], workers: int | None = None) -> list[bytes]:
-    """Render figure jobs, in parallel worker processes when there are several cores (fork on Linux)."""
-    import multiprocessing as mp
-    import os
+class Renderer:
+    """Figure jobs drawn in parallel worker processes (fork on Linux) while the caller goes on, e.g.
+    computing the tables' bootstrap intervals; in this process when there is one core."""
 
-    n = min(len(jobs), workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-    if n <= 1 or "fork" not in mp.get_all_start_methods():
-        return [_render(j) for j in jobs]
-    from concurrent.futures import ProcessPoolExecutor
+    def __init__(self, workers: int | None = None):
+        import multiprocessing as mp
+        import os
 
-    plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
-    warm = plt.figure()
-    warm.text(0.5, 0.5, "m³ τ ρ")
-    warm.canvas.draw()
-    plt.close(warm)
-    with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork")) as pool:
-        return list(pool.map(_render, jobs))
+        n = workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+        self._jobs: list[tuple[str, str, tuple[Any, ...]]] = []
+        self._futures: list[Any] = []
+        self._pool = None
+        if n > 1 and "fork" in mp.get_all_start_methods():
+            from concurrent.futures import ProcessPoolExecutor
+
+            plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
+            warm = plt.figure()
+            warm.text(0.5, 0.5, "m³ τ ρ")
+            warm.canvas.draw()
+            plt.close(warm)
+            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"))
+
+    def add(self, job: tuple[str, str, tuple[Any, ...]]) -> None:
+        self._jobs.append(job)
+        if self._pool is not None:
+            self._futures.append(self._pool.submit(_render, job))
+
+    def results(self) -> list[bytes]:
+        """The PNG of every job, in the order added (waits for the workers, then shuts them down)."""
+        if self._pool is None:
+            return [_render(j) for j in self._jobs]
+        try:
+            return [f.result() for f in self._futures]
+        finally:
+            self._pool.shutdown()
 
 
 def _save(fig, base: Path) -> tuple[Path, Path, bytes]:
@@ -635,28 +654,25 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     fig_dir.mkdir(parents=True, exist_ok=True)
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
-    jobs: list[tuple[str, str, tuple[Any, ...]]] = []
     captions: list[tuple[dict[str, Any], str, Path]] = []
+    renderer = Renderer(workers) if figures else None
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
-        summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
-                            all_versions=all_versions)
-        result.runs, result.summary = runs, summary
+        latest = latest_versions(runs)
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
-            ssum = summary[(summary["suite"] == suite) & (summary["track"] == track)]
             sec: dict[str, Any] = {
-                "suite": suite, "track": track, **section_tables(ssum, all_versions),
-                "stamp": stamp(srun, suite, track, generated),
+                "suite": suite, "track": track, "stamp": stamp(srun, suite, track, generated),
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
-            if not figures:
+            if renderer is None:
                 continue
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
-            shown = srun if all_versions else srun[_is_latest(srun, ssum)]
+            keep = [(suite, track, p, str(v)) in latest for p, v in zip(srun["planner"], srun["planner_version"])]
+            shown = srun if all_versions else srun[keep]
             cols = shown[[c for c in FIGURE_COLUMNS if c in shown]]
             kinds = [("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
                      ("profiles", "Performance profiles: time per target m³ and solve time (failures never solved)")]
@@ -664,12 +680,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 kinds.append(("families", "Performance profiles of time per target m³, one panel per family"))
             for kind, cap in kinds:
                 path = fig_dir / f"{base}-{kind}"
-                jobs.append((kind, str(path), (cols, title)))
+                renderer.add((kind, str(path), (cols, title)))
                 captions.append((sec, cap, path))
-            for planner, hist in _histories(ssum):
-                path = fig_dir / f"{base}-history-{slug(planner)}"
-                jobs.append(("history", str(path), (hist, f"{planner} on suite {suite}")))
-                captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
             if terrain:
                 for _, run in sample_runs(shown).iterrows():
                     digest = run["scenario_digest"]
@@ -682,9 +694,23 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                         scenarios[digest] = sc.to_json()
                     plan = store.plan_json(int(run["id"]))
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
-                    jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
+                    renderer.add(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
-    for (sec, cap, path), png in zip(captions, render_all(jobs, workers)):
+        # the tables (bootstrap intervals, paired tests) while the workers draw
+        summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
+                            all_versions=all_versions)
+        result.runs, result.summary = runs, summary
+        for sec in sections:
+            ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
+            sec.update(section_tables(ssum, all_versions))
+            if renderer is None:
+                continue
+            base = slug(f"{sec['suite']}-{sec['track']}")
+            for planner, hist in _histories(ssum):
+                path = fig_dir / f"{base}-history-{slug(planner)}"
+                renderer.add(("history", str(path), (hist, f"{planner} on suite {sec['suite']}")))
+                captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
+    for (sec, cap, path), png in zip(captions, renderer.results() if renderer else []):
         png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
         result.files += [png_path, svg_path]
         sec["figures"].append((cap, png))
@@ -696,13 +722,6 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     (out / "index.html").write_text(html_page(sections, generated))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
     return result
-
-
-def _is_latest(runs: pd.DataFrame, summary: pd.DataFrame) -> pd.Series:
-    """Which runs belong to a configuration of the latest version of its planner (the ranked ones)."""
-    latest = summary[(summary["scope"] == "suite") & summary["latest"].astype(bool)]
-    keep = set(zip(latest["planner"], latest["planner_version"].astype(str)))
-    return pd.Series([k in keep for k in zip(runs["planner"], runs["planner_version"].astype(str))], index=runs.index)
 
 
 def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:

@@ -61,7 +61,7 @@ def test_csvs_match_the_store(board, db):
     runs = pd.read_csv(board.out / "runs.csv")
     assert len(runs) == len(load_runs(db)) == 24
     summary = pd.read_csv(board.out / "summary.csv")
-    assert set(summary["scope"]) == {"suite", "family", "target"}
+    assert set(summary["scope"]) == {"suite", "target"}  # one family: no family breakdown
     g = summary[summary["scope"] == "suite"].set_index("planner")
     assert g.loc["greedy", "success_rate"] == 1.0 and g.loc["greedy", "runs"] == 6
     assert g.loc["flaky", "n_timeout"] == 3 and g.loc["flaky", "success_rate"] == 0.5
