@@ -183,3 +183,15 @@ def test_run_summary_uses_the_leaderboard_aggregates(tmp_path, capsys):
     assert f"{valid.volume_ratio.mean():.2f}" in out.split("half")[1]  # over valid runs, as the leaderboard
     assert "time/target m³ med" in out and "[" in out
     assert main(["runs", "--db", str(db), "--limit", "0"]) == 0
+
+
+def test_the_core_never_imports_the_metrics_plugin():
+    """Scoring iterates the metrics registry; no module of the core imports the ``metrics`` package."""
+    import ast
+
+    core = Path(__file__).resolve().parents[1] / "earthbench"
+    for path in core.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            assert not any(n == "metrics" or n.startswith("metrics.") for n in names), path
