@@ -618,7 +618,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         f"<style>{_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f"<p>Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. "
-        "Brackets hold 95 % bootstrap confidence intervals. Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
+        "Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate). Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
     ]
     if not sections:
         parts.append("<p>No runs in the store.</p>")
@@ -734,7 +734,7 @@ def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
 def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     lines = ["# earthbench leaderboard", "",
              f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-             "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals. Columns: runs "
+             "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate). Columns: runs "
              "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
              "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
              "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
