@@ -51,6 +51,7 @@ import pandas as pd
 from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text, latest_versions
 from .profiles import cost_matrix, profile
 
+from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
 from .store import Store, load_runs, suite_members
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -393,7 +394,7 @@ def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
     kind, base, args = job
     maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "families": families_figure,
-             "history": history_figure, "terrain": terrain_figure}[kind]
+             "history": history_figure, "terrain": terrain_figure, "cost-growth": cost_growth_figure}[kind]
     return _save(maker(*args), Path(base))[2]
 
 
@@ -629,6 +630,8 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines()))}</div>')
         parts.append(html_table(s["rows"]))
         parts.append(html_more_tables(s))
+        if s.get("scale_rows"):
+            parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
         for cap, png in s["figures"]:
             data = base64.b64encode(png).decode()
             parts.append(f'<figure><img alt="{e(cap)}" src="data:image/png;base64,{data}"><figcaption>{e(cap)}</figcaption></figure>')
@@ -668,10 +671,14 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
-            if renderer is None:
-                continue
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
+            sec["scale_rows"], job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            if renderer is None:
+                continue
+            if job is not None:
+                renderer.add(job)
+                captions.append((sec, SCALE_CAPTION, Path(job[1])))
             keep = [(suite, track, p, str(v)) in latest for p, v in zip(srun["planner"], srun["planner_version"])]
             shown = srun if all_versions else srun[keep]
             cols = shown[[c for c in FIGURE_COLUMNS if c in shown]]
@@ -746,6 +753,9 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
                   f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"]), *markdown_more_tables(s)]
+        if s.get("scale_rows"):
+            lines += ["", "scale: cost against target volume, median [interquartile range] over seeds of the valid runs "
+                      "(growth: solve s/m³ over the smallest target's).", "", markdown_table(s["scale_rows"])]
         for cap, png, svg in s["md_figures"]:
             lines += [f"![{md_escape(cap)}]({png.as_posix()})", "", f"*{md_escape(cap)}* ([SVG]({svg.as_posix()}))", ""]
     return "\n".join(lines) + "\n"
