@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import StoreError
-from .runner import Case, CaseResult, PlannerRef
+from .harness.cases import Case, CaseResult, PlannerRef
 from .store import Store, _decompress
 
 

@@ -645,6 +645,20 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
 # -- the whole leaderboard ---------------------------------------------------------------------------
 
 
+#: Leading characters that make a spreadsheet read a text cell as a formula (or a DDE call).
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_safe(df: pd.DataFrame) -> pd.DataFrame:
+    """A copy whose text cells cannot run as formulas: a leading ``=``, ``+``, ``-``, ``@``, tab or
+    carriage return gets a ``'`` before it (a planner's error text or name is not ours to trust)."""
+    out = df.copy()
+    for col in out.columns:
+        if not (pd.api.types.is_numeric_dtype(out[col]) or pd.api.types.is_datetime64_any_dtype(out[col])):
+            out[col] = out[col].astype(object).map(lambda v: "'" + v if isinstance(v, str) and v.startswith(FORMULA_STARTS) else v)
+    return out
+
+
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
             workers: int | None = None, all_versions: bool = False) -> Published:
@@ -655,13 +669,13 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     """
     out = Path(out)
     fig_dir = out / "figures"
-    fig_dir.mkdir(parents=True, exist_ok=True)
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
     captions: list[tuple[dict[str, Any], str, Path]] = []
-    renderer = Renderer(workers) if figures else None
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
+        fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
+        renderer = Renderer(workers) if figures else None
         latest = latest_versions(runs)
         sections = []
         scenarios: dict[str, str] = {}
@@ -724,8 +738,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         sec["figures"].append((cap, png))
         sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
     runs_csv = runs.drop(columns=[c for c in ("packages",) if c in runs])
-    runs_csv.to_csv(out / "runs.csv", index=False)
-    summary.to_csv(out / "summary.csv", index=False)
+    spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
+    spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
     (out / "README.md").write_text(markdown_page(sections, generated))
     (out / "index.html").write_text(html_page(sections, generated))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]

@@ -43,7 +43,7 @@ from .world import Scenario
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from .runner import Case, CaseResult
+    from .harness.cases import Case, CaseResult
     from .suite import Suite
 
 SCHEMA_VERSION = 1

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from earthbench.plan import Plan
-from earthbench.runner import Case, CaseResult, PlannerRef, environment
+from earthbench.harness import Case, CaseResult, PlannerRef, environment
 from earthbench.scoring import score
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite

@@ -9,7 +9,7 @@ import math
 import sys
 from typing import Any
 
-from ..runner import REASONS
+from ..harness import REASONS
 from ..scoring import is_success
 from ..store import Store
 from .run import default_db
