@@ -5,8 +5,11 @@
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
   (:data:`earthbench.aggregate.RANKING_RULE`: the latest version of each planner, shared ranks
   where paired tests cannot separate neighbours), with a reproducibility stamp (project
-  commits, suite digest, CPU models and cores, run dates, generation date); under it one table
-  per family and per target, a history table of older versions, and the figures;
+  commits, suite digest, CPU models and cores, run dates, generation date), what each figure
+  rests on (referee figures re-judgeable from the stored plans; solve times from the machine
+  named for each planner, † on solve-time columns that mix machines; the latest
+  ``earthbench verify`` spot re-timing of each planner version); under it one table per family
+  and per target, a history table of older versions, and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
@@ -53,6 +56,7 @@ from .profiles import cost_matrix, profile
 
 from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
 from .store import Store, load_runs, suite_members
+from .verify import latest_spot_checks, machine_label
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
 FAILURE_COLUMNS = ("invalid", "timeout", "memory", "error", "crashed")
@@ -203,6 +207,14 @@ class Stamp:
     last: str
     generated: str
     n_models: int = 1
+    solve_machines: list[str] = field(default_factory=list)  #: per planner: the machines its solve times come from
+    spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
+    n_machines: int = 1
+
+    @property
+    def mixed(self) -> bool:
+        """Whether the table's solve times were measured on more than one machine."""
+        return self.n_machines > 1
 
     def lines(self) -> list[str]:
         commits = ", ".join(self.commits[:3]) + (f" and {len(self.commits) - 3} more" if len(self.commits) > 3 else "")
@@ -212,10 +224,32 @@ class Stamp:
             f"project commit: {commits or 'unknown'}",
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
+            PROVENANCE,
+            *(["† solve-time columns mix machines: compare those figures only between rows from the same machine"] if self.mixed else []),
         ]
 
+    def planner_lines(self) -> list[str]:
+        """Per planner: where its solve times come from, and its spot re-timings (text from the store)."""
+        return [*self.solve_machines, *(f"spot re-timing: {line}" for line in self.spot_checks)]
 
-def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str) -> Stamp:
+
+#: What each figure of a table rests on (stated in every stamp).
+PROVENANCE = ("provenance: success, volume and time-per-m³ figures are the referee's, recomputed from the stored plans "
+              "when stores are merged (`earthbench merge` re-judges every plan); solve times, CPU times and memory are "
+              "as measured on the machine that ran each case (below), and can only be spot-checked by rerunning "
+              "(`earthbench verify`)")
+
+
+def _machine_of(runs: pd.DataFrame) -> pd.Series:
+    """Each run's machine, labelled as :func:`earthbench.verify.machine_label` does."""
+    cols = {"hostname": "hostname", "cpu_model": "cpu_model", "cores": "cpu_cores"}
+    get = {k: (runs[c] if c in runs else pd.Series(None, index=runs.index)) for k, c in cols.items()}
+    return pd.Series([machine_label({k: (None if pd.isna(get[k].iloc[i]) else get[k].iloc[i]) for k in cols})
+                      for i in range(len(runs))], index=runs.index, dtype=object)
+
+
+def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = ()) -> Stamp:
+    """The stamp of one table; ``spot_checks`` (:class:`earthbench.verify.SpotCheck`) of its planners are listed."""
     def uniq(col: str) -> list[str]:
         return sorted({str(v) for v in runs[col].dropna()}) if col in runs else []
 
@@ -226,9 +260,24 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str) -> Stamp:
     digests = uniq("suite_digest")
     started, finished = uniq("started_at"), uniq("finished_at")
     thr = runs["threshold"].dropna()
+    timed = runs[runs["solve_time_s"].notna()] if "solve_time_s" in runs else runs.iloc[:0]
+    machine = _machine_of(timed)
+    solve_machines = []
+    for solver, g in machine.groupby(timed["solver"] if "solver" in timed else timed["planner"], sort=True):
+        where = "; ".join(f"{m} ({n} run{'s' if n != 1 else ''})" for m, n in g.value_counts().sort_index().items())
+        solve_machines.append(f"solve times of {solver}: {where}")
+    versions = set(zip(runs["planner"], runs["planner_version"])) if len(runs) else set()
+    spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
-                 max(1, len(uniq("cpu_model"))))
+                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()))
+
+
+def mark_mixed_solve_columns(rows: list[dict[str, Any]], mixed: bool) -> list[dict[str, Any]]:
+    """Headings of solve-time columns get a † when the table's solve times come from several machines."""
+    if not mixed:
+        return rows
+    return [{**r, "cells": [((h + " †") if h.startswith("Solve") else h, text, key) for h, text, key in r["cells"]]} for r in rows]
 
 
 # -- figures ---------------------------------------------------------------------------------------
@@ -498,7 +547,7 @@ RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner")
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
                ("time_per_target_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
-               ("cpu_model", "CPU")]
+               ("cpu_model", "CPU"), ("hostname", "Host")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_time_s"}
 
 
@@ -627,7 +676,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         anchor = "s-" + slug(f"{s['suite']}-{s['track']}")
         parts.append(f'<section id="{e(anchor)}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
-        parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines()))}</div>')
+        parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div>')
         parts.append(html_table(s["rows"]))
         parts.append(html_more_tables(s))
         if s.get("scale_rows"):
@@ -677,17 +726,20 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
         renderer = Renderer(workers) if figures else None
         latest = latest_versions(runs)
+        spot_checks = latest_spot_checks(store)
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
+            st = stamp(srun, suite, track, generated, spot_checks)
             sec: dict[str, Any] = {
-                "suite": suite, "track": track, "stamp": stamp(srun, suite, track, generated),
+                "suite": suite, "track": track, "stamp": st,
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
-            sec["scale_rows"], job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            scale_rows, job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            sec["scale_rows"] = mark_mixed_solve_columns(scale_rows, st.mixed) if scale_rows else scale_rows
             if renderer is None:
                 continue
             if job is not None:
@@ -724,7 +776,11 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         result.runs, result.summary = runs, summary
         for sec in sections:
             ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
-            sec.update(section_tables(ssum, all_versions))
+            tables = section_tables(ssum, all_versions)
+            mixed = sec["stamp"].mixed
+            sec.update(rows=mark_mixed_solve_columns(tables["rows"], mixed),
+                       breakdowns=[(h, mark_mixed_solve_columns(r, mixed)) for h, r in tables["breakdowns"]],
+                       history=mark_mixed_solve_columns(tables["history"], mixed))
             if renderer is None:
                 continue
             base = slug(f"{sec['suite']}-{sec['track']}")
@@ -766,7 +822,9 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         lines.append("No runs in the store.")
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
-                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"]), *markdown_more_tables(s)]
+                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "",
+                  *(f"- {md_escape(line)}" for line in s["stamp"].planner_lines()), "", markdown_table(s["rows"]),
+                  *markdown_more_tables(s)]
         if s.get("scale_rows"):
             lines += ["", "scale: cost against target volume, median [interquartile range] over seeds of the valid runs "
                       "(growth: solve s/m³ over the smallest target's).", "", markdown_table(s["scale_rows"])]

@@ -72,6 +72,19 @@ _FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
 
 
+def suite_digest(members: Iterable[tuple[str, str]], threshold: float) -> str:
+    """A suite version's identity from its (scenario id, scenario digest) pairs and threshold.
+
+    A function of its own so a store can recompute the digest of a suite it only lists; the
+    threshold is read as a float, so ``1`` and ``1.0`` (as SQLite gives it back) are one suite.
+    """
+    h = hashlib.sha256()
+    for sid, d in sorted(members):
+        h.update(f"{sid}\t{d}\n".encode())
+    h.update(f"threshold\t{float(threshold)!r}\n".encode())
+    return h.hexdigest()
+
+
 @dataclass(frozen=True)
 class Family:
     """One generator with fixed parameters, swept over targets × seeds."""
@@ -127,11 +140,7 @@ class Suite:
     @cached_property
     def digest(self) -> str:
         """sha256 over the sorted (id, scenario digest) pairs and the success threshold."""
-        h = hashlib.sha256()
-        for sid, d in sorted((s.id, s.digest) for s in self.scenarios):
-            h.update(f"{sid}\t{d}\n".encode())
-        h.update(f"threshold\t{self.success_threshold!r}\n".encode())
-        return h.hexdigest()
+        return suite_digest(((s.id, s.digest) for s in self.scenarios), self.success_threshold)
 
     def select(self, seeds: Iterable[int] | None = None) -> tuple[Scenario, ...]:
         """The scenarios whose seed is in ``seeds`` (all when None)."""

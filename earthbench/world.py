@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import difflib
+import functools
 import hashlib
 import json
 import math
@@ -326,9 +327,12 @@ class Scenario:
         d["terrain"].pop("z")
         return d
 
-    @property
+    @functools.cached_property
     def digest(self) -> str:
-        """sha256 over canonical JSON of the content and the heightmap's little-endian bytes."""
+        """sha256 over canonical JSON of the content and the heightmap's little-endian bytes.
+
+        Computed once per object (a scenario and its read-only heightmap never change).
+        """
         h = hashlib.sha256(_canonical(self._content()).encode())
         h.update(np.ascontiguousarray(self.terrain.z, dtype="<f8").tobytes())
         return h.hexdigest()
