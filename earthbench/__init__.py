@@ -2,8 +2,7 @@
 
 The data flows one way: suite → scenarios → planner → plan → referee → metrics → store →
 leaderboard. This package holds the core; planners, terrains and metrics register as plugins
-through entry points (docs/DESIGN.md §1–2). The core still imports the built-in ``metrics``
-package for scoring and aggregation, the one exception to its import rule.
+through entry points (docs/DESIGN.md §1–2); the core never imports them.
 """
 
 from .errors import (
