@@ -44,7 +44,7 @@ import io
 import math
 import re
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -56,6 +56,7 @@ import pandas as pd
 from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text, latest_versions
 from .profiles import cost_matrix, profile
 
+from .plotting import mpl_text, planner_colours, pyplot
 from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
 from .store import Store, load_runs, suite_members
 from .verify import latest_spot_checks, machine_label
@@ -129,11 +130,6 @@ def md_escape(text: Any) -> str:
     """Text safe in a Markdown table cell: markup characters backslash-escaped, no newlines."""
     s = str(text).replace("\r", " ").replace("\n", " ")
     return _MD_SPECIAL.sub(r"\\\1", s)
-
-
-def mpl_text(text: Any) -> str:
-    """Text matplotlib draws literally (``$`` would start mathtext)."""
-    return str(text).replace("$", r"\$")
 
 
 def slug(text: str) -> str:
@@ -286,27 +282,12 @@ def mark_mixed_solve_columns(rows: list[dict[str, Any]], mixed: bool) -> list[di
 # -- figures ---------------------------------------------------------------------------------------
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _colours(solvers: Iterable[str]) -> dict[str, Any]:
-    plt = _plt()
-    cmap = plt.get_cmap("tab10")
-    return {s: cmap(i % 10) for i, s in enumerate(sorted(solvers))}
-
-
 def volume_time_figure(runs: pd.DataFrame, title: str):
     """Loaded volume against total execution time (the plan's makespan) per run and planner."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.8), constrained_layout=True)
     have = runs[runs["reason"].isin(["ok", "invalid"]) & runs["makespan_s"].notna()] if "makespan_s" in runs else runs.iloc[:0]
-    colours = _colours(runs["solver"].unique())
+    colours = planner_colours(runs["solver"].unique())
     from matplotlib.lines import Line2D
 
     handles = []
@@ -358,8 +339,8 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
 
 def profiles_figure(runs: pd.DataFrame, title: str):
     """Performance profiles over time per target m³ and over solve time (one panel per CPU model)."""
-    plt = _plt()
-    colours = _colours(runs["solver"].unique())
+    plt = pyplot()
+    colours = planner_colours(runs["solver"].unique())
     models = sorted(runs["cpu_model"].fillna("unknown CPU").unique()) if "cpu_model" in runs else ["unknown CPU"]
     fig, axes = plt.subplots(1, 1 + len(models), figsize=(5.2 * (1 + len(models)), 4.2), constrained_layout=True, squeeze=False)
     axes = axes[0]
@@ -379,8 +360,8 @@ def profiles_figure(runs: pd.DataFrame, title: str):
 
 def families_figure(runs: pd.DataFrame, title: str):
     """One performance-profile panel per family over time per target m³ (families differ twofold in scale)."""
-    plt = _plt()
-    colours = _colours(runs["solver"].unique())
+    plt = pyplot()
+    colours = planner_colours(runs["solver"].unique())
     solvers = sorted(runs["solver"].unique())
     families = sorted(runs["family"].fillna("?").astype(str).unique())
     fig, axes = plt.subplots(1, len(families), figsize=(4.6 * len(families), 4.0), constrained_layout=True, squeeze=False)
@@ -397,7 +378,7 @@ def history_figure(rows: pd.DataFrame, title: str):
     """Success rate and median time per target m³ (95 % intervals) across one planner's versions."""
     from .aggregate import version_key
 
-    plt = _plt()
+    plt = pyplot()
     rows = rows.assign(_k=rows["planner_version"].map(version_key)).sort_values(["_k", "config_hash"], kind="mergesort")
     labels = [f"{v}" + (f"\n[{str(h)[:8]}]" if (rows["planner_version"] == v).sum() > 1 else "")
               for v, h in zip(rows["planner_version"], rows["config_hash"])]
@@ -480,7 +461,7 @@ class Renderer:
         if n > 1 and "fork" in mp.get_all_start_methods():
             from concurrent.futures import ProcessPoolExecutor
 
-            plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
+            plt = pyplot()  # load fonts and the mathtext parser once, before the workers fork
             warm = plt.figure()
             warm.text(0.5, 0.5, "m³ τ ρ")
             warm.canvas.draw()
@@ -504,7 +485,7 @@ class Renderer:
 
 def _save(fig, base: Path) -> tuple[Path, Path, bytes]:
     """Write ``base.png`` and ``base.svg``; return the paths and the PNG bytes."""
-    plt = _plt()
+    plt = pyplot()
     engine = fig.get_layout_engine()
     if engine is not None:  # lay out once, not once per format (the same pixels, a fifth less time)
         engine.execute(fig)

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .plotting import mpl_text, planner_colours, pyplot
+
 #: Consecutive targets of a size ladder differ by at least this factor.
 LADDER_STEP = 2.0
 #: A ladder has at least this many target sizes.
@@ -100,14 +102,13 @@ def scale_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
 
 def cost_growth_figure(runs: pd.DataFrame, title: str):
     """Log–log: solve time per m³ and time per m³ against the target, median and IQR over seeds."""
-    from .publish import _colours, _plt, mpl_text
 
     from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-    plt = _plt()
+    plt = pyplot()
     summary = scale_summary(runs)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
-    colours = _colours(runs["solver"].unique())
+    colours = planner_colours(runs["solver"].unique())
     panels = (("solve_per_m3", "solve time per m³ loaded, s/m³"), ("time_per_m3", "time per m³ (makespan / loaded), s/m³"))
     for ax, (col, label) in zip(axes, panels):
         for solver, g in summary.groupby("solver") if not summary.empty else ():
