@@ -22,7 +22,9 @@ action:
   metres along/across the drag passes these checks (the best such is used and counted as
   ``contact_repaired``: the fitted surface smooths earlier cuts, so the NLP sometimes aims at a
   hole it cannot see). The last dig's depth is bisected so that the loaded
-  volume meets the target instead of overshooting it.
+  volume meets the target instead of overshooting it. In the as-planned mode
+  (:meth:`Converter.dig_as_planned`) the NLP's digs are executed as they are: its contact,
+  heading and modelled depth, the full drag, no repair and no trimming.
 - Durations: a dig lasts the swing to its bearing plus the minimum stroke time, a dump the
   swing to the truck plus the minimum dump time (plus 1 µs each, never less).
 """
@@ -359,12 +361,28 @@ class Converter:
         if found is None:
             return self._skip("no_material")
         contact, depth, vol = found
-        es = self.exc_spec
-        drag = es.max_drag_length
+        drag = self.exc_spec.max_drag_length
         if vol > remaining:  # the last bucket: bisect the depth to meet the target, then the drag
             contact, depth = self.exact_last_cut(st, contact, heading, depth, remaining)
             if self.cut_volume(st, contact, heading, depth) > remaining * 1.002:  # even a skim overshoots
                 drag = self._bisect_drag(st, contact, heading, depth, remaining)
+        return self._dig_and_dump(st, contact, heading, depth, drag)
+
+    def dig_as_planned(self, st: SimState, contact: tuple[float, float], heading: float, depth: float) -> float:
+        """The NLP's own dig (contact, heading, depth, full drag) as it is: no contact repair, no
+        last-bucket trimming. A dig the referee would reject (reach, footprint, dump reach) is
+        skipped and counted (``as_planned_<why>``) rather than emitted into an invalid plan."""
+        why = self.dig_ok(st, contact, heading)
+        if why is not None:
+            return self._skip(f"as_planned_{why}")
+        depth = min(depth, self.max_depth(st, contact))
+        if depth <= 1e-6:
+            return self._skip("as_planned_no_depth")
+        return self._dig_and_dump(st, contact, heading, depth, self.exc_spec.max_drag_length)
+
+    def _dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
+                      drag: float) -> float:
+        es = self.exc_spec
         dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)

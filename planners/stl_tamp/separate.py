@@ -70,7 +70,7 @@ from earthbench.world import Heightmap, Scenario
 from terrains.surface import fit_rbf
 
 from .convert import Converter, SimState
-from .guess import PhaseSeed, build_guess, fill_volumes
+from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box
 from .model import PhaseNLP, Solution
 from .planner import Config as StlTampConfig
@@ -110,8 +110,7 @@ class Config(LocalNLPConfig):
     trust_radius: float = 0.5
     trust_angle: float = 0.5
     trust_rounds: int = 2
-    max_iter: int = 250
-    max_cpu_time: float = 4.0
+    max_iter: int = 250  # an iteration cap only (no CPU-time cap: load must not change a plan)
     mu_strategy: str = "adaptive"
     max_areas: int = 40
     volume_tol: float = 1e-4
@@ -225,7 +224,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.3.2"
+    version = "0.4.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -351,8 +350,7 @@ class SeparatePlanner(Planner):
         # the arm's IK guess at the model's height of each contact after the earlier cuts (the
         # rule often digs one spot several times: the fitted surface's height would leave the
         # contact constraint violated by up to a metre and IPOPT in restoration)
-        pz = nlp.evaluate(build_guess(nlp, s0, seeds, floor), params)["contact_heights"]
-        seeds = [dataclasses.replace(sd, pz=float(h)) for sd, h in zip(seeds, pz)]
+        seeds = settle_contacts(nlp, s0, seeds, floor, params)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
@@ -422,7 +420,7 @@ class SeparatePlanner(Planner):
         solution; rounds stop at the first failure or when the time gain is below 1 %.
         """
         c = self.config
-        S = nlp.solver(c.max_iter, c.max_cpu_time, {"mu_strategy": c.mu_strategy})
+        S = nlp.solver(c.max_iter, {"mu_strategy": c.mu_strategy})
         lb, ub = nlp.bounds(box, fixed)
         Xl, Ul, phl, sll = nlp.unpack(lb, s0)
         Xu, Uu, phu, slu = nlp.unpack(ub, s0)
