@@ -112,6 +112,8 @@ class Config(LocalNLPConfig):
     reseed: bool = True
     retry: bool = True  # a failed local solve is solved once more (on from its last iterate, or from all digs)
     ipopt_tol: float = 1e-4
+    acceptable_tol: float = 1e-2  # IPOPT's acceptable level, after acceptable_iter iterates (0: never)
+    acceptable_iter: int = 3
     accept_feasible: float = 1e-3  # accept a capped solve whose iterate violates no constraint by more
     # execute the NLP's own digs (contact, heading, depth, full drag) without contact repair or
     # last-bucket trimming: the paper's plans as they are (its Table I); the referee judges them
@@ -238,7 +240,8 @@ class StlTampPlanner(Planner):
 
     def _ipopt_options(self) -> dict[str, Any]:
         c = self.config
-        return {"mu_strategy": c.mu_strategy, "tol": c.ipopt_tol, "acceptable_tol": 1e-2, "acceptable_iter": 3}
+        return {"mu_strategy": c.mu_strategy, "tol": c.ipopt_tol, "acceptable_tol": c.acceptable_tol,
+                "acceptable_iter": c.acceptable_iter}
 
     # -- global layer ------------------------------------------------------------------------------
     def _global(self, scenario: Scenario, st: SimState, surf, tour: list[Area], target: float, side: float,

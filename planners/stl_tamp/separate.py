@@ -71,7 +71,7 @@ from terrains.surface import fit_rbf
 
 from .convert import Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box
+from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
 from .model import PhaseNLP, Solution
 from .planner import Config as StlTampConfig
 from .planner import LocalNLPConfig
@@ -305,6 +305,7 @@ class SeparatePlanner(Planner):
                 "fit_time_s": trace.fit_time_s,
                 "build_time_s": trace.build_time_s,
                 "fallbacks": trace.fallbacks,
+                "local_solves": solve_counts([r for r in trace.areas if "status" in r]),
                 "skipped": dict(conv.skips),
                 "local": trace.areas,
                 "plan_time_s": time.perf_counter() - t_start,
