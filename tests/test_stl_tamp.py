@@ -224,3 +224,46 @@ def test_phase_zero_with_a_still_truck_keeps_the_excavators_path():
     assert conv.move_both(st, ve, we, np.zeros(4), np.zeros(4), dts) == "excavator"
     assert (st.exc.x, st.exc.y, st.exc.yaw) == pytest.approx(tuple(end), abs=1e-9)
     assert st.t < dts.sum()  # and faster than the NLP's pace
+
+
+def test_as_planned_executes_the_nlps_own_digs():
+    """as_planned: each dig is at an NLP contact and heading with the full drag and no trimming;
+    the plan is judged as it is (here valid), and the local solve counts are reported."""
+    from earthbench.plan import Dig
+
+    sc = rbf(1, 1.5, n_bases=14)
+    plan = StlTampPlanner(global_layer=False, as_planned=True).plan(sc)
+    v = judge(sc, plan)
+    assert v.valid, v.violations[:3]
+    digs = [a for a in plan.actions if isinstance(a, Dig)]
+    assert digs and all(d.drag_length == pytest.approx(sc.machines.excavator.max_drag_length) for d in digs)
+    assert not any(k == "contact_repaired" for k in plan.info["skipped"])
+    counts = plan.info["local_solves"]
+    assert counts["total"] == len(plan.info["local"]) and sum(counts[k] for k in counts if k != "total") == counts["total"]
+
+
+def test_the_global_layer_splits_a_large_site_into_windows_of_one_shape():
+    from planners.stl_tamp.hierarchy import global_blocks, global_lattice
+
+    assert global_blocks((0.0, 12.0, 0.0, 6.0), (12.0, 6.0)) == [(0.0, 12.0, 0.0, 6.0)]
+    tiles = global_blocks((0.0, 96.0, 0.0, 48.0), (12.0, 6.0))
+    assert len(tiles) == 64 and all(b[1] - b[0] <= 12.0 + 1e-9 and b[3] - b[2] <= 6.0 + 1e-9 for b in tiles)
+    assert sum((b[1] - b[0]) * (b[3] - b[2]) for b in tiles) == pytest.approx(96.0 * 48.0)
+    # the lattice of one window is the one fit_rbf gives the whole paper map (margin 1)
+    assert global_lattice((12.0, 6.0), 1.0) == fit_rbf(rbf(0, 1.0).terrain, spacing=1.0, solver="cholesky").shape
+
+
+def test_solve_counts_are_the_planners_report_and_malformed_counts_add_nothing():
+    from planners.stl_tamp.hierarchy import solve_counts
+    from planners.stl_tamp.report import local_solve_counts
+
+    recs = [{"status": "Solve_Succeeded"}, {"status": "Solved_To_Acceptable_Level"},
+            {"status": "Maximum_Iterations_Exceeded (feasible iterate accepted)"},
+            {"status": "Solve_Succeeded", "fallback": "IK initial guess"}]
+    c = solve_counts(recs)
+    assert (c["succeeded"], c["acceptable"], c["capped"], c["fallback"], c["total"]) == (1, 1, 1, 1, 4)
+    sc = rbf(0, 1.0)
+    m = local_solve_counts(sc, Plan(actions=(), info={"local_solves": c}), None)
+    assert m["planner_reported_local_succeeded"] == 1 and m["planner_reported_local_succeeded_share"] == 0.25
+    for bad in ({}, {"local_solves": "many"}, {"local_solves": dict(c, total=-1)}, {"local_solves": dict(c, capped=1.5)}):
+        assert local_solve_counts(sc, Plan(actions=(), info=bad), None) == {}
