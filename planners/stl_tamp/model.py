@@ -389,6 +389,13 @@ class PhaseNLP:
         self._pz_fn = ca.Function("pz", [w, p], [ca.vertcat(*[pz[i] for i in range(1, m1)])])
         self.build_time_s = time.perf_counter() - t0
         self._solvers: dict[tuple, Any] = {}
+        self._unreported_build_s = self.build_time_s
+
+    def take_build_time(self) -> float:
+        """Construction seconds (the graph, then each IPOPT solver with its derivatives) not yet
+        reported: a planner adds them to its build time once."""
+        t, self._unreported_build_s = self._unreported_build_s, 0.0
+        return t
 
     # -- packing -----------------------------------------------------------------------------------
     def pack_p(self, **vals: Any) -> np.ndarray:
@@ -469,6 +476,7 @@ class PhaseNLP:
         or wall-time cap: a plan must not depend on how loaded the machine is."""
         key = (max_iter, repr(sorted((options or {}).items())), repr(sorted((casadi_options or {}).items())))
         if key not in self._solvers:
+            t0 = time.perf_counter()
             ipopt = {"max_iter": max_iter, "print_level": 0, "tol": 1e-6,
                      "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
                      "linear_solver": "mumps", "hessian_approximation": "exact", "sb": "yes"}
@@ -477,6 +485,9 @@ class PhaseNLP:
             self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
                                                                       **(casadi_options or {})})
             one_blas_thread()
+            dt = time.perf_counter() - t0
+            self.build_time_s += dt
+            self._unreported_build_s += dt
         return self._solvers[key]
 
     def solve(self, params: np.ndarray, w0: np.ndarray, box: tuple[float, float, float, float], *,

@@ -261,8 +261,7 @@ class StlTampPlanner(Planner):
                       dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
                       eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
         t0 = time.perf_counter()
-        nlp, hit = get_nlp(shape, scenario, box)
-        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0
         seeds = [PhaseSeed(a.px, a.py, a.psi, c.eta_init if j < need else 0.0, a.base, tour[0].truck,
                            float(surf(a.px, a.py))) for j, a in enumerate(tour[:m_g])]
@@ -273,6 +272,7 @@ class StlTampPlanner(Planner):
         cbox = (max(window[0], box[0]), min(window[1], box[1]), max(window[2], box[2]), min(window[3], box[3]))
         sol = nlp.solve(params, w0, cbox, max_iter=c.global_max_iter, accept_feasible=c.accept_feasible,
                         max_dig_phases=min(need, m_g) if fixed_phases else None, options=self._ipopt_options())
+        trace.build_time_s += nlp.take_build_time()
         rec = {"used": True, "phases": m_g, "status": sol.status, "iterations": sol.iterations,
                "solve_time_s": sol.solve_time_s, "success": sol.success, "eta": np.round(sol.eta, 3).tolist(),
                "volume": float(np.sum(sol.V)), "wall_s": time.perf_counter() - t0}
@@ -301,8 +301,7 @@ class StlTampPlanner(Planner):
         c, exc = self.config, scenario.machines.excavator
         t_wall = time.perf_counter()
         shape = self.local_shape(scenario)
-        nlp, hit = get_nlp(shape, scenario, box)
-        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0
         # terrain parameter: a fit of the current grid around the area (the digs so far included)
         t0 = time.perf_counter()
@@ -352,6 +351,7 @@ class StlTampPlanner(Planner):
                 n_iter, t_solve = n_iter + sol2.iterations, t_solve + sol2.solve_time_s
                 if sol2.success and float(np.sum(sol2.V)) > float(np.sum(sol.V)):
                     sol = sol2
+        trace.build_time_s += nlp.take_build_time()
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
                                "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),

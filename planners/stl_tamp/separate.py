@@ -329,8 +329,7 @@ class SeparatePlanner(Planner):
         digs = list(digs) + [dataclasses.replace(digs[-1], volume=0.0)] * (c.m_local - len(digs))
         stl = StlTampPlanner(self._stl_config())
         shape = stl.local_shape(scenario)
-        nlp, hit = get_nlp(shape, scenario, box)
-        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0
         t0 = time.perf_counter()
         hw = c.local_fit_half
@@ -356,6 +355,7 @@ class SeparatePlanner(Planner):
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
         sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
+        trace.build_time_s += nlp.take_build_time()
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, self.side(scenario))),
                                "base": list(area.base), "status": sol.status, "iterations": sol.iterations,
                                "rounds": rounds, "guess_time": float(nlp.node_times(*self._durations(nlp, w0, s0))[-1]),
