@@ -267,3 +267,20 @@ def test_solve_counts_are_the_planners_report_and_malformed_counts_add_nothing()
     assert m["planner_reported_local_succeeded"] == 1 and m["planner_reported_local_succeeded_share"] == 0.25
     for bad in ({}, {"local_solves": "many"}, {"local_solves": dict(c, total=-1)}, {"local_solves": dict(c, capped=1.5)}):
         assert local_solve_counts(sc, Plan(actions=(), info=bad), None) == {}
+
+
+@settings(max_examples=40, deadline=None)
+@given(hst.floats(1.0, 11.0), hst.floats(1.0, 5.0), hst.floats(-math.pi, math.pi), hst.floats(0.01, 0.4),
+       hst.floats(0.1, 1.0))
+def test_trial_cuts_on_a_window_take_what_the_whole_grid_takes(x, y, heading, depth, drag):
+    from earthbench.referee import apply_cut, cut_level
+
+    sc = rbf(3, 1.0, n_bases=30)
+    st = SimState.start(sc)
+    conv = Converter(sc, eta_on=0.25, min_dig_volume=0.02, depth=0.4)
+    es = sc.machines.excavator
+    z = st.z.copy()
+    whole = apply_cut(sc.terrain, z, (x, y), heading, es.bucket_width, drag, cut_level(sc.terrain, z, (x, y), depth),
+                      es.bucket_capacity)
+    assert conv.cut_volume(st, (x, y), heading, depth, drag) == pytest.approx(whole, rel=1e-9, abs=1e-12)
+    assert np.array_equal(st.z, sc.terrain.z)  # a trial cut leaves the grid as it was

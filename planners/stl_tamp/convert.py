@@ -42,7 +42,7 @@ from shapely.geometry import Polygon
 from earthbench.motion import swing_time, wrap
 from earthbench.plan import Dig, Dump, Move
 from earthbench.referee import apply_cut, cut_level, footprint
-from earthbench.world import Pose, Scenario
+from earthbench.world import Heightmap, Pose, Scenario
 
 EPS_T = 1e-6
 
@@ -260,11 +260,29 @@ class Converter:
 
     def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
                    drag: float | None = None) -> float:
+        """What the referee's cut would take here, on a copy of the grid around the footprint
+        only (the same cells at the same place: a whole-grid copy per trial cut made the
+        conversion grow with the map's area)."""
         es = self.exc_spec
-        z = st.z.copy()
-        level = cut_level(self.sc.terrain, z, contact, depth)
         drag = es.max_drag_length if drag is None else drag
-        return apply_cut(self.sc.terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
+        terrain, z = self._window(st, contact, heading, drag)
+        level = cut_level(terrain, z, contact, depth)
+        return apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
+
+    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float) -> tuple[Heightmap, np.ndarray]:
+        t = self.sc.terrain
+        r, (x0, y0) = t.resolution, t.origin
+        ny, nx = st.z.shape
+        ex, ey = contact[0] + math.cos(heading) * drag, contact[1] + math.sin(heading) * drag
+        pad = self.exc_spec.bucket_width + 3 * r
+        i0 = max(int(math.floor((min(contact[0], ex) - pad - x0) / r)), 0)
+        i1 = min(int(math.ceil((max(contact[0], ex) + pad - x0) / r)) + 1, nx)
+        j0 = max(int(math.floor((min(contact[1], ey) - pad - y0) / r)), 0)
+        j1 = min(int(math.ceil((max(contact[1], ey) + pad - y0) / r)) + 1, ny)
+        if i1 - i0 < 2 or j1 - j0 < 2:
+            return t, st.z.copy()
+        sub = st.z[j0:j1, i0:i1].copy()
+        return Heightmap((x0 + i0 * r, y0 + j0 * r), r, sub), sub
 
     def max_depth(self, st: SimState, contact: tuple[float, float]) -> float:
         d = min(self.depth, self.exc_spec.max_cut_depth)

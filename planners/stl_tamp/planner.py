@@ -99,8 +99,11 @@ class Config(LocalNLPConfig):
     # the global problem's window (m): sites larger than this are split into windows of at most
     # this size, each with its own global problem over its areas (same shape: one solver), visited
     # nearest-first; a window's target is at most block_fill of what its areas are estimated to hold
+    # (its phases: block_phases, so one window's target is at most block_phases - 1 areas; the
+    # graph grows with the square of the phases, so fewer phases per window cost less per m³)
     global_window: tuple[float, float] = (12.0, 6.0)
     block_fill: float = 0.8
+    block_phases: int = 6
     # iteration caps only: no CPU- or wall-time cap, so machine load never changes a plan
     max_iter: int = 150
     global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
@@ -183,7 +186,8 @@ class StlTampPlanner(Planner):
         while remaining > c.volume_tol and left:
             block = nearest_block(blocks, left, (st.exc.x, st.exc.y))
             in_block = [a for a in left if in_box(a.centre, block)]
-            v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block))
+            v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
+                                                             (c.block_phases - 1) * c.area_vmax)
             tour = greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3)
             if c.global_layer and len(tour) > 1:
                 t0 = time.perf_counter()  # Algorithm 1, step 1: the surface function (of the window)
@@ -248,11 +252,11 @@ class StlTampPlanner(Planner):
                 box: tuple[float, float, float, float], window: tuple[float, float, float, float], fixed_phases: bool,
                 trace: Trace) -> tuple[list[Area], dict[str, Any]]:
         """The global problem of one window: which of ``tour``'s areas to dig, in which order.
-        ``fixed_phases``: one phase count for every window (one solver for the whole site), the
-        dig phases a smaller target needs bounded through η."""
+        ``fixed_phases``: one phase count (``block_phases``) for every window, so one solver serves
+        the whole site; the dig phases a smaller target needs are bounded through η."""
         c, exc = self.config, scenario.machines.excavator
         need = int(math.ceil(target / c.area_vmax))
-        m_g = c.m_global_max if fixed_phases else max(1, min(c.m_global_max, need + 1, len(tour)))
+        m_g = c.block_phases if fixed_phases else max(1, min(c.m_global_max, need + 1, len(tour)))
         cap = exc.bucket_capacity * c.fill_estimate
         shape = Shape(phases=m_g, steps=c.n_global, contact_step=c.n_global // 2, unit_width=side, unit_length=side,
                       unit_depth=c.dig_depth, vmax=c.area_vmax,
