@@ -284,3 +284,14 @@ def test_trial_cuts_on_a_window_take_what_the_whole_grid_takes(x, y, heading, de
                       es.bucket_capacity)
     assert conv.cut_volume(st, (x, y), heading, depth, drag) == pytest.approx(whole, rel=1e-9, abs=1e-12)
     assert np.array_equal(st.z, sc.terrain.z)  # a trial cut leaves the grid as it was
+
+
+def test_ipopt_runs_on_one_blas_thread(local_setup):
+    """The solver's OpenBLAS (the copy CasADi loads) is set to one thread once a solver exists."""
+    import ctypes
+
+    _, pl, nlp, *_ = local_setup
+    nlp.solver(pl.config.max_iter, pl._ipopt_options())
+    with open("/proc/self/maps") as f:
+        paths = sorted({ln.split()[-1] for ln in f if "libcasadi-tp-openblas" in ln})
+    assert paths and all(ctypes.CDLL(p).openblas_get_num_threads() == 1 for p in paths)

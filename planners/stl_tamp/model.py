@@ -131,13 +131,20 @@ def one_blas_thread() -> bool:
     import glob
     import os
 
-    for path in sorted(glob.glob(os.path.join(os.path.dirname(ca.__file__), "libcasadi-tp-openblas.so*"))):
+    try:  # the copies the process has loaded (a wheel ships several files, not symlinks)
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "libcasadi-tp-openblas" in ln})
+    except OSError:
+        paths = []
+    paths = paths or sorted(glob.glob(os.path.join(os.path.dirname(ca.__file__), "libcasadi-tp-openblas.so*")))
+    done = False
+    for path in paths:
         try:
             ctypes.CDLL(path).openblas_set_num_threads(1)
-            return True
+            done = True
         except (OSError, AttributeError):
             continue
-    return False
+    return done
 
 
 def _sigmoid(x: Any, k: float) -> Any:
