@@ -72,7 +72,7 @@ from terrains.surface import fit_rbf
 from .convert import Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
-from .model import PhaseNLP, Solution
+from .model import PhaseNLP, Solution, quantize
 from .planner import Config as StlTampConfig
 from .planner import LocalNLPConfig
 from .planner import StlTampPlanner
@@ -354,6 +354,7 @@ class SeparatePlanner(Planner):
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
+        fixed = {k: quantize(v) for k, v in fixed.items()}  # see model.QUANTUM
         sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
         trace.build_time_s += nlp.take_build_time()
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, self.side(scenario))),
@@ -428,7 +429,7 @@ class SeparatePlanner(Planner):
         rad = np.array([c.trust_radius, c.trust_radius, c.trust_angle, c.trust_angle, c.trust_angle, c.trust_angle,
                         c.trust_radius, c.trust_radius, c.trust_angle])
         best: Solution | None = None
-        centre = w0
+        params, centre = quantize(params), quantize(w0)  # the same plan for inputs that differ by rounding noise
         log: list[dict[str, Any]] = []
         for _ in range(max(c.trust_rounds, 1)):
             Xc = nlp.unpack(centre, s0)[0]
