@@ -109,7 +109,8 @@ class Config(LocalNLPConfig):
     global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
     mu_strategy: str = "adaptive"
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks) or "raise"
-    max_fallbacks: int = 6
+    max_fallbacks: int = 6  # at least this many, or max_fallback_share of the local solves so far (large sites)
+    max_fallback_share: float = 0.05
     volume_tol: float = 1e-4
     min_local_target: float = 0.8  # in buckets
     reseed: bool = True
@@ -363,11 +364,12 @@ class StlTampPlanner(Planner):
         if retry is not None:
             rec["retry"] = retry
         if not sol.success:
-            if c.on_failure != "fallback" or trace.fallbacks >= c.max_fallbacks:
+            allowed = max(c.max_fallbacks, math.ceil(c.max_fallback_share * (len(trace.locals_) + 1)))
+            if c.on_failure != "fallback" or trace.fallbacks >= allowed:
                 raise StlTampSolveError(
                     f"local solve for the area at ({cx:.2f}, {cy:.2f}) failed: IPOPT {sol.status} after "
                     f"{sol.iterations} iterations ({sol.solve_time_s:.2f} s); fallbacks used {trace.fallbacks} of "
-                    f"{c.max_fallbacks if c.on_failure == 'fallback' else 0}")
+                    f"{allowed if c.on_failure == 'fallback' else 0}")
             trace.fallbacks += 1
             sol = nlp._solution(w0, params, False, "fallback: IK initial guess", 0, 0.0, float("nan"), {})
             rec["fallback"] = "IK initial guess"
