@@ -75,7 +75,8 @@ def test_inverse_kinematics_reaches_the_point():
 
 
 def test_local_solve_meets_the_volume_and_its_specs(local_setup):
-    sol = _solve(local_setup, 0.84)
+    # three buckets seeded for three buckets' volume, at the planner's η guess
+    sol = _solve(local_setup, 0.84, k_active=3, eta0=Config().eta_init)
     assert sol.success, sol.status
     assert float(np.sum(sol.V)) == pytest.approx(0.84, abs=0.02)
     assert np.all(sol.V <= 0.28 + 1e-6)
