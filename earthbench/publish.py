@@ -13,9 +13,11 @@
   :func:`earthbench.store.load_runs`;
 * ``summary.csv`` — :func:`metrics.aggregate.aggregate` of those runs;
 * ``index.html`` — one self-contained page: inline CSS, a small inline script (allowed by a
-  content-security policy hash, so no other script can run), tables that sort on a click
-  and the figures as ``data:`` URIs; no network resource. Every string from the store (and
-  so from a plugin) is escaped with :func:`html.escape`;
+  content-security policy hash, so no other script can run), tables that sort on a click,
+  filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
+  and wrap their headings to fit the window, links to the CSVs, the figures as ``data:`` URIs
+  and the replay viewer of :mod:`earthbench.replay`; no network resource. Every string from
+  the store (and so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
   Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per m³ and over solve
@@ -152,6 +154,7 @@ def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
         tpm = _f(r["time_per_m3_median"], ".1f") + (
             "" if pd.isna(r["time_per_m3_q1"]) else f" ({_f(r['time_per_m3_q1'], '.1f')}–{_f(r['time_per_m3_q3'], '.1f')})")
         rows.append({
+            "attrs": {"planner": str(r["planner"]), "version": str(r["planner_version"])},
             "cells": [
                 ("Rank", str(r["rank"]), r["rank"]),
                 ("Planner", str(r["planner"]), None),
@@ -281,19 +284,31 @@ def volume_time_figure(runs: pd.DataFrame, title: str):
     fig, ax = plt.subplots(figsize=(7, 4.8), constrained_layout=True)
     have = runs[runs["reason"].isin(["ok", "invalid"]) & runs["makespan_s"].notna()] if "makespan_s" in runs else runs.iloc[:0]
     colours = _colours(runs["solver"].unique())
+    from matplotlib.lines import Line2D
+
+    handles = []
     for solver, g in have.groupby("solver"):
         c = colours[solver]
         ok = g["reason"] == "ok"
         succ = ok & g["success"].astype(bool)
-        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, label=mpl_text(solver))
-        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c)
-        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=18, color=c, marker="x")
+        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, zorder=2)
+        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c, zorder=2)
+        # invalid runs: large, drawn over every valid point so none hides under them
+        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=70, color=c, marker="X", edgecolors="k",
+                   linewidths=0.6, zorder=4)
+        # the legend marker says what the planner has: a filled dot only when some run succeeded
+        counts = {"success": int(succ.sum()), "below threshold": int((ok & ~succ).sum()), "invalid": int((~ok).sum())}
+        kinds = [k for k, n in counts.items() if n]
+        marker = {"success": dict(marker="o", color=c), "below threshold": dict(marker="o", mfc="none", mec=c, color=c),
+                  "invalid": dict(marker="X", color=c, mec="k")}[kinds[0]]
+        handles.append(Line2D([], [], ls="none", ms=7, **marker,
+                              label=mpl_text(f"{solver} ({', '.join(f'{counts[k]} {k}' for k in kinds)})")))
     ax.set_xlabel("total time of the plan (makespan), s")
     ax.set_ylabel("loaded volume, m³")
-    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ×: invalid", fontsize=9)
+    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ✕: invalid (drawn on top)", fontsize=9)
     ax.grid(alpha=0.3)
     if len(have):
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(handles=handles, fontsize=7, loc="best")
     else:
         ax.text(0.5, 0.5, "no plans stored", ha="center", va="center", transform=ax.transAxes)
     return fig
@@ -307,6 +322,9 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
         y = np.append(rho[solver].to_numpy(), rho[solver].to_numpy()[-1] if len(taus) else 0.0)
         ax.step(x, y, where="post", color=colours.get(solver), label=mpl_text(solver))
     ax.set_xscale("log", base=2)
+    from matplotlib.ticker import FuncFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))  # τ = 1, 2, 4, … rather than 2⁰, 2¹, 2²
     ax.set_xlim(1, right)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel(xlabel)
@@ -456,11 +474,15 @@ def html_table(rows: list[dict[str, Any]], caption: str = "", cls: str = "sortab
         for _, text, key in r["cells"]:
             k = _sortkey(key)
             tds.append(f'<td data-v="{e(k)}">{e(text)}</td>' if key is not None else f"<td>{e(text)}</td>")
-        body.append("<tr>" + "".join(tds) + "</tr>")
+        attrs = "".join(f' data-{k}="{e(v)}"' for k, v in r.get("attrs", {}).items())
+        body.append(f"<tr{attrs}>" + "".join(tds) + "</tr>")
     cap = f"<caption>{e(caption)}</caption>" if caption else ""
     return (f'<div class="wrap"><table class="{cls}">{cap}<thead><tr>{head}</tr></thead><tbody>\n' + "\n".join(body)
             + "\n</tbody></table></div>")
 
+
+#: Row attributes the page's filters match (``data-KEY`` on each row) → the runs column they come from.
+FILTERS = {"family": "family", "planner": "planner", "version": "planner_version"}
 
 RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner"), ("reason", "Reason"),
                ("success", "Success"), ("volume_ratio", "Volume ratio"), ("time_per_m3", "Time per m³, s"),
@@ -473,6 +495,7 @@ def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
     cols = [(c, h) for c, h in RUN_COLUMNS if c in runs]
     out = []
     data = {c: runs[c].tolist() for c, _ in cols}
+    filters = {k: runs[c].astype(str).tolist() for k, c in FILTERS.items() if c in runs}
     for i in range(len(runs)):
         cells = []
         for c, h in cols:
@@ -484,15 +507,20 @@ def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
                 cells.append((h, "yes" if bool(v) else "no", 1.0 if bool(v) else 0.0))
             else:
                 cells.append((h, "" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v), None))
-        out.append({"cells": cells})
+        out.append({"cells": cells, "attrs": {k: v[i] for k, v in filters.items()}})
     return out
 
 
 _CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem auto;max-width:1200px;padding:0 1rem;color:#222}
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5rem auto;max-width:1800px;padding:0 1rem;color:#222}
 h1{font-size:1.6rem}h2{font-size:1.25rem;margin-top:2.5rem;border-bottom:1px solid #ccc}
-table{border-collapse:collapse;margin:1rem 0;font-size:.85rem}
-th,td{border:1px solid #ddd;padding:.25rem .5rem;text-align:right;white-space:nowrap}
+table{border-collapse:collapse;margin:1rem 0;font-size:.8rem}
+th,td{border:1px solid #ddd;padding:.2rem .35rem;text-align:right}
+th{white-space:normal;vertical-align:bottom;min-width:3.2em}td{white-space:nowrap}
+td:nth-child(2),td:nth-child(3){white-space:normal;overflow-wrap:anywhere;min-width:6em}
+.filters{display:flex;flex-wrap:wrap;gap:.3rem 1rem;font-size:.85rem;margin:.6rem 0}
+tr.hidden{display:none}
+@media (max-width:900px){body{margin:.5rem;padding:0 .25rem}table{font-size:.72rem}th,td{padding:.15rem .2rem}}
 td:nth-child(2),td:nth-child(3),th:nth-child(2),th:nth-child(3){text-align:left}
 th{background:#f3f3f3;cursor:pointer;user-select:none}
 th[aria-sort=ascending]::after{content:" ▲"}th[aria-sort=descending]::after{content:" ▼"}
@@ -538,13 +566,45 @@ _JS = """
   document.querySelectorAll('table.sortable th').forEach(function (th) {
     th.addEventListener('click', function () { sortBy(th); });
   });
+  // filters: a row shows when every chosen value matches its data-KEY attribute
+  document.querySelectorAll('.filters').forEach(function (bar) {
+    var section = bar.closest('section');
+    function apply() {
+      var want = {};
+      bar.querySelectorAll('select').forEach(function (s) { if (s.value) want[s.getAttribute('data-key')] = s.value; });
+      section.querySelectorAll('table.sortable tbody tr').forEach(function (tr) {
+        var show = Object.keys(want).every(function (k) { return !tr.hasAttribute('data-' + k) || tr.getAttribute('data-' + k) === want[k]; });
+        tr.classList.toggle('hidden', !show);
+      });
+    }
+    bar.querySelectorAll('select').forEach(function (s) { s.addEventListener('change', apply); });
+  });
 })();
 """
 
 
-def html_page(sections: list[dict[str, Any]], generated: str) -> str:
+def filter_bar(sec: dict[str, Any]) -> str:
+    """Selects for the values of each filter key seen in a section's rows."""
     e = html.escape
-    script_hash = base64.b64encode(hashlib.sha256(_JS.encode()).digest()).decode()
+    values: dict[str, set[str]] = {k: set() for k in FILTERS}
+    for r in sec["rows"] + sec["run_rows"]:
+        for k, v in r.get("attrs", {}).items():
+            values.setdefault(k, set()).add(v)
+    parts = []
+    for k, vs in values.items():
+        if len(vs) > 1:
+            opts = "".join(f'<option value="{e(v)}">{e(v)}</option>' for v in sorted(vs))
+            parts.append(f'<label>{e(k.capitalize())} <select data-key="{e(k)}"><option value="">all</option>{opts}</select></label>')
+    return f'<div class="filters">Filter: {"".join(parts)}</div>' if parts else ""
+
+
+def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") -> str:
+    """The self-contained page; ``viewer`` is the replay section (:func:`earthbench.replay.viewer_section`)."""
+    from .replay import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
+
+    e = html.escape
+    script = _JS + REPLAY_SCRIPT
+    script_hash = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
     csp = (f"default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'sha256-{script_hash}'; "
            "base-uri 'none'; form-action 'none'")
     parts = [
@@ -553,10 +613,11 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         f'<meta http-equiv="Content-Security-Policy" content="{e(csp)}">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         "<title>earthbench leaderboard</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<style>{_CSS}{REPLAY_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f"<p>Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. "
-        "Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
+        'Invalid plans are counted, never ranked. Tables: <a href="summary.csv">summary.csv</a>; every run: '
+        '<a href="runs.csv">runs.csv</a>.' + (' Replays: <a href="#replay">below</a>.' if viewer else "") + "</p>",
     ]
     if not sections:
         parts.append("<p>No runs in the store.</p>")
@@ -565,6 +626,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f'<section id="{e(anchor)}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
         parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div>')
+        parts.append(filter_bar(s))
         parts.append(html_table(s["rows"]))
         if s.get("scale_rows"):
             parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
@@ -574,7 +636,8 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f"<details><summary>All {len(s['run_rows'])} runs of this table</summary>")
         parts.append(html_table(s["run_rows"], cls="sortable runs"))
         parts.append("</details></section>")
-    parts.append(f"<script>{_JS}</script></body></html>")
+    parts.append(viewer)
+    parts.append(f"<script>{script}</script></body></html>")
     return "\n".join(parts) + "\n"
 
 
@@ -597,11 +660,14 @@ def spreadsheet_safe(df: pd.DataFrame) -> pd.DataFrame:
 
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
-            workers: int | None = None) -> Published:
+            workers: int | None = None, replays: int = 20) -> Published:
     """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
 
-    ``workers``: processes drawing the figures (default: one per core this process may use).
+    ``workers``: processes drawing the figures (default: one per core this process may use);
+    ``replays``: how many runs the page's replay viewer embeds (0: none).
     """
+    from .replay import viewer_section
+
     out = Path(out)
     fig_dir = out / "figures"
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -652,6 +718,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
                     jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
+        viewer = viewer_section(store, runs, replays)
     fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
     for (sec, cap, path), png in zip(captions, render_all(jobs, workers)):
         png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
@@ -662,7 +729,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
     spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
     (out / "README.md").write_text(markdown_page(sections, generated))
-    (out / "index.html").write_text(html_page(sections, generated))
+    (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
     return result
 

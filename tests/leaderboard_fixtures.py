@@ -61,6 +61,7 @@ class Behaviour:
     slow: float = 1.0  # solve time = greedy's measured time × slow
     cpu_model: str | None = None  # override the environment's CPU model
     fail_every: int = 1  # with ``fail``: fail on every n-th scenario only
+    teleport: float = 0.0  # shift the truck's moves this far east: an invalid plan (discontinuous, dump reach)
 
 
 def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
@@ -85,6 +86,8 @@ def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
                 else:
                     k = max(0, int(round(len(plan.actions) * b.keep)))
                     mine = Plan(plan.actions[:k]) if b.keep < 1 else plan
+                    if b.teleport:
+                        mine = Plan(tuple(_shifted(a, b.teleport) for a in mine.actions))
                     text = mine.to_json()
                     verdict, metrics = score(sc, text, suite.success_threshold)
                     metrics.update(solve_time_s=common["solve_time_s"], solve_cpu_s=common["solve_cpu_s"])
@@ -92,6 +95,13 @@ def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
                                      violations=tuple(v.to_dict() for v in verdict.violations), plan_json=text, **common)
                 store.record(case, res)
     return db
+
+
+def _shifted(action: Any, dx: float) -> Any:
+    """The truck's moves ``dx`` further east: it jumps off its start, and the dumps may miss it."""
+    if getattr(action, "kind", "") == "move" and action.machine == "truck":
+        return dataclasses.replace(action, path=tuple((t, x + dx, y, yaw) for t, x, y, yaw in action.path))
+    return action
 
 
 def standard_behaviours() -> list[Behaviour]:

@@ -25,6 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="tables, CSVs and page only")
     p.add_argument("--no-terrain", action="store_true", help="skip the terrain before/after figures (no re-judging)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="processes drawing figures (default: one per core)")
+    p.add_argument("--replays", type=int, default=20, metavar="N",
+                   help="runs the page's replay viewer embeds, a success and an invalid run per planner first (default: 20; 0: none)")
     return p
 
 
@@ -33,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
-                  workers=args.jobs)
+                  workers=args.jobs, replays=args.replays)
     runs = 0 if res.runs is None else len(res.runs)
     tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
     print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "

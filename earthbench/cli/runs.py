@@ -26,6 +26,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("table", "csv", "json"), default="table", help="output format (default: table)")
     p.add_argument("--id", type=int, metavar="RUN", help="show one run in full: config, violations, error, output tail")
     p.add_argument("--plan-out", metavar="FILE", help="with --id: write the run's plan JSON to FILE")
+    p.add_argument("--scenario-out", metavar="FILE",
+                   help="with --id: write the run's scenario JSON to FILE (then: earthbench validate PLAN --scenario FILE, "
+                        "earthbench show --scenario FILE --plan PLAN)")
     return p
 
 
@@ -72,6 +75,12 @@ def _show(store: Store, args: argparse.Namespace) -> int:
     print(f"run {r['id']}: {r['scenario_id']} × {r['planner']} {r['planner_version']} (config {r['config_hash']})")
     print(f"  suite {r['suite']} ({r['suite_digest'][:12]}), scenario digest {r['scenario_digest'][:12]}")
     print(f"  reason {r['reason']}, success {bool(r['success'])} (threshold {r['threshold']})")
+    violations = json.loads(r["violations"] or "[]")
+    for v in violations:  # what broke comes first: it is why one looks at a run
+        where = "plan" if v["action"] is None else f"action {v['action']}"
+        print(f"  violation: {where}: {v['rule']} ({v['magnitude']:.3g}) {v['message']}")
+    if r["error"]:
+        print("  error:\n    " + r["error"].strip().replace("\n", "\n    "))
     print(f"  solve {_cell(r['solve_time_s'])} s wall, {_cell(r['solve_cpu_s'])} s CPU; start-up {_cell(r['startup_s'])} s; "
           f"peak RSS {_cell(r['peak_rss_mb'])} MB; cores {r['cores']}; {r['started_at']} → {r['finished_at']}")
     if cfg:
@@ -83,10 +92,6 @@ def _show(store: Store, args: argparse.Namespace) -> int:
         print("  metrics:")
         for k, v in json.loads(r["metrics"]).items():
             print(f"    {k:<28} {_cell(v)}")
-    for v in json.loads(r["violations"] or "[]"):
-        print(f"  violation: action {v['action']}: {v['rule']} ({v['magnitude']:.3g}) {v['message']}")
-    if r["error"]:
-        print("  error:\n    " + r["error"].strip().replace("\n", "\n    "))
     if r["log_tail"]:
         print("  output (tail):\n    " + r["log_tail"].strip().replace("\n", "\n    "))
     if args.plan_out:
@@ -97,4 +102,10 @@ def _show(store: Store, args: argparse.Namespace) -> int:
         with open(args.plan_out, "w") as f:
             f.write(plan)
         print(f"plan written to {args.plan_out}")
+    if args.scenario_out:
+        store.scenario(r["scenario_digest"]).to_json(args.scenario_out)
+        print(f"scenario written to {args.scenario_out}")
+    if violations and not (args.plan_out and args.scenario_out):
+        print(f"  to see it: earthbench runs --db {args.db} --id {args.id} --plan-out P.json --scenario-out S.json, "
+              "then earthbench show --scenario S.json --plan P.json", file=sys.stderr)
     return 0

@@ -50,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
             where = "plan" if v.action is None else f"action {v.action}"
             print(f"  {where}: {v.rule} (magnitude {v.magnitude:.4g}) {v.message}")
         for k, val in metrics.items():
+            if val is None:  # e.g. solve times: measured by the harness around a planner call, not here
+                continue
             if isinstance(val, float) and math.isfinite(val):
                 val = f"{val:.4g}"
             print(f"  {k:<26} {val}")
