@@ -110,6 +110,8 @@ class Verdict:
     digs: tuple[DigRecord, ...] = ()
     dumps: int = 0
     travel: dict[str, float] = field(default_factory=dict)
+    #: (end time, cumulative loaded volume) after each dump, in replay order: when the truck got what.
+    load_curve: tuple[tuple[float, float], ...] = ()
 
     @property
     def valid(self) -> bool:
@@ -330,6 +332,7 @@ class _Replay:
         self.removed = 0.0
         self.digs: list[DigRecord] = []
         self.dumps = 0
+        self.load_curve: list[tuple[float, float]] = []
         self.travel = {mid: 0.0 for mid in m.ids}
 
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
@@ -364,6 +367,7 @@ class _Replay:
             digs=tuple(self.digs),
             dumps=self.dumps,
             travel=self.travel,
+            load_curve=tuple(self.load_curve),
         )
 
     # -- motion ------------------------------------------------------------------------------
@@ -477,6 +481,7 @@ class _Replay:
         self.loaded += take
         self.bucket -= take
         self.dumps += 1
+        self.load_curve.append((a.t_end, self.loaded))
 
     # -- excavator actions ---------------------------------------------------------------------
     def _swing_time(self, base: Pose, target: tuple[float, float], spec: ExcavatorSpec) -> tuple[float, float]:
@@ -551,6 +556,7 @@ class _Replay:
         self.loaded += take
         self.bucket -= take
         self.dumps += 1
+        self.load_curve.append((a.t_end, self.loaded))
         self.turn = bearing - base.yaw
 
     # -- collisions ------------------------------------------------------------------------------

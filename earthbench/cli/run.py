@@ -15,7 +15,7 @@ from typing import Any
 
 from ..errors import EarthbenchError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
-from ..store import DEFAULT_DB, Store, summary_rows
+from ..store import DEFAULT_DB, Store, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
 
@@ -73,24 +73,33 @@ def _fmt(v: Any, spec: str = ".2f") -> str:
 
 
 def print_summary(store: Store, suite: str, planners: list[str] | None = None, file: Any = None) -> None:
-    """A table per planner of everything stored for ``suite``."""
-    rows = summary_rows(store, suite, planners)
+    """A row per planner configuration of everything stored for ``suite``: the leaderboard's aggregates
+    (:func:`earthbench.aggregate.aggregate`), 95 % intervals in brackets."""
+    import pandas as pd
+
+    from ..aggregate import aggregate, ci_text
+
+    runs = load_runs(store, suite=suite)
+    if planners is not None:
+        runs = runs[runs["planner"].isin(planners)]
     file = file or sys.stdout
-    if not rows:
+    if runs.empty:
         print(f"no runs stored for suite {suite!r}", file=file)
         return
-    head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/m³ med", "solve s med", *REASONS]
+    rows = aggregate(runs, members=suite_members(store, [suite]), all_versions=True)
+    head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/target m³ med", "time/m³ med", "solve s med", *REASONS]
     table = [head]
-    names = [r["planner"] for r in rows]
-    for r in rows:
-        vr = _fmt(r["volume_ratio_mean"]) + ("±" + _fmt(r["volume_ratio_sd"]) if r["volume_ratio_sd"] is not None else "")
-        label = f"{r['planner']} {r['version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
+    names = rows["planner"].tolist()
+    for _, r in rows.iterrows():
+        vr = _fmt(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else "±" + _fmt(r["volume_ratio_sd"]))
+        label = f"{r['planner']} {r['planner_version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
         table.append([
-            label, f"{r['runs']}/{r['of']}", f"{100 * r['success']:.0f}%", vr, _fmt(r["time_per_m3_median"], ".1f"),
-            _fmt(r["solve_time_median"], ".2f"), *(str(r["counts"].get(k, 0)) for k in REASONS),
+            label, f"{r['runs']}/{r['of']}", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
+            vr, ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
+            _fmt(r["time_per_m3_median"], ".1f"), _fmt(r["solve_time_median"], ".2f"), *(str(r[f"n_{k}"]) for k in REASONS),
         ])
     widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    print(f"\nsuite {suite}:", file=file)
+    print(f"\nsuite {suite} (95 % bootstrap intervals in brackets):", file=file)
     for n, row in enumerate(table):
         print("  " + "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))), file=file)
         if n == 0:

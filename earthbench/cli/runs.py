@@ -7,12 +7,15 @@ import csv
 import json
 import math
 import sys
+from typing import Any
 
 from ..harness import REASONS
+from ..scoring import is_success
 from ..store import Store
 from .run import default_db
 
-COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio", "time_per_m3", "solve_time_s")
+COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio",
+           "time_per_target_m3", "time_per_m3", "solve_time_s")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -40,11 +43,23 @@ def _cell(v: object) -> str:
     return str(v)
 
 
+def _values(r: Any, threshold: float | None) -> dict[str, Any]:
+    """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, and with a
+    suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`, as the leaderboard)."""
+    metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+    d = {c: r[c] if c in r.keys() else metrics.get(c) for c in COLUMNS}
+    if threshold is not None:
+        d["success"] = int(is_success(r["valid"], r["volume_ratio"], threshold))
+    return d
+
+
 def run(args: argparse.Namespace) -> int:
     with Store(args.db, create=False) as store:
         if args.id is not None:
             return _show(store, args)
         rows = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
+        ver = store.suite_version(args.suite) if args.suite else None
+        rows = [_values(r, None if ver is None else ver["threshold"]) for r in rows]
         if args.format == "json":
             json.dump([{c: r[c] for c in COLUMNS} for r in rows], sys.stdout, indent=1)
             print()
