@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -13,9 +14,10 @@ from hypothesis import strategies as hst
 from earthbench import Move, Plan
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
+from planners.stl_tamp.separate import SeparatePlanner
 from planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
 from planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
-from planners.stl_tamp.guess import build_guess, fill_volumes
+from planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
 from planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
 from planners.stl_tamp.model import inverse_kinematics, tip_position
 from terrains.rbf import rbf
@@ -50,10 +52,11 @@ def _solve(local_setup, target, *, k_active=5, eta0=1.0, fixed=None, max_iter=30
     seeds = local_seeds(area, k_active, c.m_local, 0.7, 1.0, surf, eta0, area.truck)
     p = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=target,
                    alpha=(c.alpha_u, c.alpha_t, c.alpha_v, c.alpha_eta, 0.0), goal=area.base, floor=0.0)
+    seeds = settle_contacts(nlp, st.s0, seeds, 0.0, p)
     w0 = fill_volumes(nlp, build_guess(nlp, st.s0, seeds, 0.0), p, [eta0 * cap] * c.m_local)
     cx, cy = area.centre
     box = (cx - 1.45, cx + 1.45, cy - 1.45, cy + 1.45)
-    return nlp.solve(p, w0, box, fixed_tasks=fixed, max_iter=max_iter, max_cpu_time=60.0, options=pl._ipopt_options())
+    return nlp.solve(p, w0, box, fixed_tasks=fixed, max_iter=max_iter, options=pl._ipopt_options())
 
 
 def test_registered_as_stl_tamp():
@@ -72,7 +75,8 @@ def test_inverse_kinematics_reaches_the_point():
 
 
 def test_local_solve_meets_the_volume_and_its_specs(local_setup):
-    sol = _solve(local_setup, 0.84)
+    # three buckets seeded for three buckets' volume, at the planner's η guess
+    sol = _solve(local_setup, 0.84, k_active=3, eta0=Config().eta_init)
     assert sol.success, sol.status
     assert float(np.sum(sol.V)) == pytest.approx(0.84, abs=0.02)
     assert np.all(sol.V <= 0.28 + 1e-6)
@@ -107,8 +111,10 @@ def test_paper_switch_digs_the_minimum_number_of_buckets(buckets):
         assert v.valid, v.violations[:3]
         assert v.loaded_volume == pytest.approx(buckets * 0.28, abs=0.01)
         assert plan.info["digs"] == buckets
-        (local,) = plan.info["local"]  # the whole target in the one local problem
-        assert buckets <= sum(e >= Config().eta_on for e in local["eta"]) <= 5
+        # 0.6.0: the one area's local problem sometimes stops at the acceptable level short of
+        # the target (seeds 0 and 4 at 2 buckets); a second solve on the lowered grid takes the
+        # rest, and the phases selected over both are still at least the buckets
+        assert buckets <= sum(e >= Config().eta_on for r in plan.info["local"] for e in r["eta"])
         assert plan.info["global"]["used"] is False  # one area: nothing for the global layer to choose
 
 
@@ -116,16 +122,21 @@ def test_fixed_tasks_reuse_the_same_nlp(local_setup):
     """The ``separate`` baseline: η and contacts fixed through bounds, motions optimised."""
     sc, pl, nlp, st, area, surf = local_setup
     c = pl.config
-    seeds = local_seeds(area, 2, 5, 0.7, 1.0, surf, 1.0, area.truck)
+    # the base stands still after phase 0: a fixed drag heading must lie on the radial line
+    seeds = [dataclasses.replace(s, psi=math.atan2(area.base[1] - s.py, area.base[0] - s.px))
+             for s in local_seeds(area, 2, 5, 0.7, 1.0, surf, 1.0, area.truck)]
     p = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=0.5,
                    alpha=(c.alpha_u, c.alpha_t, 0.0, 0.0, 0.0), goal=area.base, floor=0.0)
+    seeds = settle_contacts(nlp, st.s0, seeds, 0.0, p)
     w0 = fill_volumes(nlp, build_guess(nlp, st.s0, seeds, 0.0), p)  # η with model volume 0.95 V_max
     sl = nlp._slices()
     eta = w0[sl["eta"]][1:]
     fixed = {"eta": eta, "px": [s.px for s in seeds], "py": [s.py for s in seeds], "psi": [s.psi for s in seeds]}
     cx, cy = area.centre
-    sol = nlp.solve(p, w0, (cx - 1.45, cx + 1.45, cy - 1.45, cy + 1.45), fixed_tasks=fixed, max_iter=300,
-                    max_cpu_time=60.0, options=pl._ipopt_options())
+    # separate's trust-region rounds (plain IPOPT strays from the feasible guess into the dead
+    # branch of the disjunction, see SeparatePlanner._solve)
+    sol, _ = SeparatePlanner()._solve(nlp, p, w0, st.s0, (cx - 1.45, cx + 1.45, cy - 1.45, cy + 1.45),
+                                      {k: np.asarray(v, float) for k, v in fixed.items()})
     assert sol.success, sol.status
     assert np.allclose(sol.eta[1:], eta)
     assert np.allclose(sol.px[1:], fixed["px"]) and np.allclose(sol.py[1:], fixed["py"])
@@ -216,3 +227,74 @@ def test_phase_zero_with_a_still_truck_keeps_the_excavators_path():
     assert conv.move_both(st, ve, we, np.zeros(4), np.zeros(4), dts) == "excavator"
     assert (st.exc.x, st.exc.y, st.exc.yaw) == pytest.approx(tuple(end), abs=1e-9)
     assert st.t < dts.sum()  # and faster than the NLP's pace
+
+
+def test_as_planned_executes_the_nlps_own_digs():
+    """as_planned: each dig is at an NLP contact and heading with the full drag and no trimming;
+    the plan is judged as it is (here valid), and the local solve counts are reported."""
+    from earthbench.plan import Dig
+
+    sc = rbf(1, 1.5, n_bases=14)
+    plan = StlTampPlanner(global_layer=False, as_planned=True).plan(sc)
+    v = judge(sc, plan)
+    assert v.valid, v.violations[:3]
+    digs = [a for a in plan.actions if isinstance(a, Dig)]
+    assert digs and all(d.drag_length == pytest.approx(sc.machines.excavator.max_drag_length) for d in digs)
+    assert not any(k == "contact_repaired" for k in plan.info["skipped"])
+    counts = plan.info["local_solves"]
+    assert counts["total"] == len(plan.info["local"]) and sum(counts[k] for k in counts if k != "total") == counts["total"]
+
+
+def test_the_global_layer_splits_a_large_site_into_windows_of_one_shape():
+    from planners.stl_tamp.hierarchy import global_blocks, global_lattice
+
+    assert global_blocks((0.0, 12.0, 0.0, 6.0), (12.0, 6.0)) == [(0.0, 12.0, 0.0, 6.0)]
+    tiles = global_blocks((0.0, 96.0, 0.0, 48.0), (12.0, 6.0))
+    assert len(tiles) == 64 and all(b[1] - b[0] <= 12.0 + 1e-9 and b[3] - b[2] <= 6.0 + 1e-9 for b in tiles)
+    assert sum((b[1] - b[0]) * (b[3] - b[2]) for b in tiles) == pytest.approx(96.0 * 48.0)
+    # the lattice of one window is the one fit_rbf gives the whole paper map (margin 1)
+    assert global_lattice((12.0, 6.0), 1.0) == fit_rbf(rbf(0, 1.0).terrain, spacing=1.0, solver="cholesky").shape
+
+
+def test_solve_counts_are_the_planners_report_and_malformed_counts_add_nothing():
+    from planners.stl_tamp.hierarchy import solve_counts
+    from planners.stl_tamp.report import local_solve_counts
+
+    recs = [{"status": "Solve_Succeeded"}, {"status": "Solved_To_Acceptable_Level"},
+            {"status": "Maximum_Iterations_Exceeded (feasible iterate accepted)"},
+            {"status": "Solve_Succeeded", "fallback": "IK initial guess"}]
+    c = solve_counts(recs)
+    assert (c["succeeded"], c["acceptable"], c["capped"], c["fallback"], c["total"]) == (1, 1, 1, 1, 4)
+    sc = rbf(0, 1.0)
+    m = local_solve_counts(sc, Plan(actions=(), info={"local_solves": c}), None)
+    assert m["planner_reported_local_succeeded"] == 1 and m["planner_reported_local_succeeded_share"] == 0.25
+    for bad in ({}, {"local_solves": "many"}, {"local_solves": dict(c, total=-1)}, {"local_solves": dict(c, capped=1.5)}):
+        assert local_solve_counts(sc, Plan(actions=(), info=bad), None) == {}
+
+
+@settings(max_examples=40, deadline=None)
+@given(hst.floats(1.0, 11.0), hst.floats(1.0, 5.0), hst.floats(-math.pi, math.pi), hst.floats(0.01, 0.4),
+       hst.floats(0.1, 1.0))
+def test_trial_cuts_on_a_window_take_what_the_whole_grid_takes(x, y, heading, depth, drag):
+    from earthbench.referee import apply_cut, cut_level
+
+    sc = rbf(3, 1.0, n_bases=30)
+    st = SimState.start(sc)
+    conv = Converter(sc, eta_on=0.25, min_dig_volume=0.02, depth=0.4)
+    es = sc.machines.excavator
+    z = st.z.copy()
+    whole = apply_cut(sc.terrain, z, (x, y), heading, es.bucket_width, drag, cut_level(sc.terrain, z, (x, y), depth),
+                      es.bucket_capacity)
+    assert conv.cut_volume(st, (x, y), heading, depth, drag) == pytest.approx(whole, rel=1e-9, abs=1e-12)
+    assert np.array_equal(st.z, sc.terrain.z)  # a trial cut leaves the grid as it was
+
+
+def test_ipopt_runs_on_one_blas_thread(local_setup):
+    """The solver's OpenBLAS (the copy CasADi loads) is set to one thread once a solver exists."""
+    import ctypes
+
+    _, pl, nlp, *_ = local_setup
+    nlp.solver(pl.config.max_iter, pl._ipopt_options())
+    with open("/proc/self/maps") as f:
+        paths = sorted({ln.split()[-1] for ln in f if "libcasadi-tp-openblas" in ln})
+    assert paths and all(ctypes.CDLL(p).openblas_get_num_threads() == 1 for p in paths)

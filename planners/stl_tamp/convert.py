@@ -22,7 +22,9 @@ action:
   metres along/across the drag passes these checks (the best such is used and counted as
   ``contact_repaired``: the fitted surface smooths earlier cuts, so the NLP sometimes aims at a
   hole it cannot see). The last dig's depth is bisected so that the loaded
-  volume meets the target instead of overshooting it.
+  volume meets the target instead of overshooting it. In the as-planned mode
+  (:meth:`Converter.dig_as_planned`) the NLP's digs are executed as they are: its contact,
+  heading and modelled depth, the full drag, no repair and no trimming.
 - Durations: a dig lasts the swing to its bearing plus the minimum stroke time, a dump the
   swing to the truck plus the minimum dump time (plus 1 µs each, never less).
 """
@@ -40,7 +42,7 @@ from shapely.geometry import Polygon
 from earthbench.motion import swing_time, wrap
 from earthbench.plan import Dig, Dump, Move
 from earthbench.referee import apply_cut, cut_level, footprint
-from earthbench.world import Pose, Scenario
+from earthbench.world import Heightmap, Pose, Scenario
 
 EPS_T = 1e-6
 
@@ -258,11 +260,29 @@ class Converter:
 
     def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
                    drag: float | None = None) -> float:
+        """What the referee's cut would take here, on a copy of the grid around the footprint
+        only (the same cells at the same place: a whole-grid copy per trial cut made the
+        conversion grow with the map's area)."""
         es = self.exc_spec
-        z = st.z.copy()
-        level = cut_level(self.sc.terrain, z, contact, depth)
         drag = es.max_drag_length if drag is None else drag
-        return apply_cut(self.sc.terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
+        terrain, z = self._window(st, contact, heading, drag)
+        level = cut_level(terrain, z, contact, depth)
+        return apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
+
+    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float) -> tuple[Heightmap, np.ndarray]:
+        t = self.sc.terrain
+        r, (x0, y0) = t.resolution, t.origin
+        ny, nx = st.z.shape
+        ex, ey = contact[0] + math.cos(heading) * drag, contact[1] + math.sin(heading) * drag
+        pad = self.exc_spec.bucket_width + 3 * r
+        i0 = max(int(math.floor((min(contact[0], ex) - pad - x0) / r)), 0)
+        i1 = min(int(math.ceil((max(contact[0], ex) + pad - x0) / r)) + 1, nx)
+        j0 = max(int(math.floor((min(contact[1], ey) - pad - y0) / r)), 0)
+        j1 = min(int(math.ceil((max(contact[1], ey) + pad - y0) / r)) + 1, ny)
+        if i1 - i0 < 2 or j1 - j0 < 2:
+            return t, st.z.copy()
+        sub = st.z[j0:j1, i0:i1].copy()
+        return Heightmap((x0 + i0 * r, y0 + j0 * r), r, sub), sub
 
     def max_depth(self, st: SimState, contact: tuple[float, float]) -> float:
         d = min(self.depth, self.exc_spec.max_cut_depth)
@@ -359,12 +379,28 @@ class Converter:
         if found is None:
             return self._skip("no_material")
         contact, depth, vol = found
-        es = self.exc_spec
-        drag = es.max_drag_length
+        drag = self.exc_spec.max_drag_length
         if vol > remaining:  # the last bucket: bisect the depth to meet the target, then the drag
             contact, depth = self.exact_last_cut(st, contact, heading, depth, remaining)
             if self.cut_volume(st, contact, heading, depth) > remaining * 1.002:  # even a skim overshoots
                 drag = self._bisect_drag(st, contact, heading, depth, remaining)
+        return self._dig_and_dump(st, contact, heading, depth, drag)
+
+    def dig_as_planned(self, st: SimState, contact: tuple[float, float], heading: float, depth: float) -> float:
+        """The NLP's own dig (contact, heading, depth, full drag) as it is: no contact repair, no
+        last-bucket trimming. A dig the referee would reject (reach, footprint, dump reach) is
+        skipped and counted (``as_planned_<why>``) rather than emitted into an invalid plan."""
+        why = self.dig_ok(st, contact, heading)
+        if why is not None:
+            return self._skip(f"as_planned_{why}")
+        depth = min(depth, self.max_depth(st, contact))
+        if depth <= 1e-6:
+            return self._skip("as_planned_no_depth")
+        return self._dig_and_dump(st, contact, heading, depth, self.exc_spec.max_drag_length)
+
+    def _dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
+                      drag: float) -> float:
+        es = self.exc_spec
         dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)

@@ -11,6 +11,7 @@ re-checks every referee rule on it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -123,7 +124,8 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
             work_j = max(abs(turn_t - turn_c), abs(boom_t - boom_c), abs(arm_t - arm_c))
             dtm = max(dtm, move_j / (jrate * max(kc, 1)))
             eta = seed.eta if seed is not None else 0.0
-            dtw = max(work_j / (jrate * nw), eta * sh.work_time / nw * 1.05, 0.05)
+            swing = abs(turn_t - turn_c) / exc.swing_rate if sh.hold_base else 0.0  # priced on top (model.Shape.hold_base)
+            dtw = max(work_j / (jrate * nw), ((1.0 - math.exp(-eta / sh.eta_saturation)) * sh.work_time + swing) * 1.05 / nw, 0.05)
             ph["px"][i], ph["py"][i], ph["psi"][i], ph["eta"][i] = ref.px, ref.py, ref.psi, eta
         elif ref is not None:
             ph["px"][i], ph["py"][i], ph["psi"][i] = ref.px, ref.py, ref.psi
@@ -181,3 +183,12 @@ def fill_volumes(nlp: PhaseNLP, w0: np.ndarray, params: np.ndarray, goals: list[
     V[1:] = np.clip(ev["volumes"], 0.0, vmax)
     w[sl["V"]] = V
     return w
+
+
+def settle_contacts(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed], floor: float,
+                    params: np.ndarray) -> list[PhaseSeed]:
+    """``seeds`` with each contact height taken from the model after the earlier phases' cuts:
+    a later phase that digs where an earlier one cut would otherwise start with its tip up to a
+    bucket's depth above the ground, the contact constraint (3) violated."""
+    pz = nlp.evaluate(build_guess(nlp, s0, seeds, floor), params)["contact_heights"]
+    return [dataclasses.replace(sd, pz=float(h)) for sd, h in zip(seeds, pz)]

@@ -74,11 +74,60 @@ class Trace:
     global_: dict[str, Any] = field(default_factory=dict)
     locals_: list[dict[str, Any]] = field(default_factory=list)
     fallbacks: int = 0
+    regenerated: int = 0
 
 
 def site_box(scenario: Scenario) -> tuple[float, float, float, float]:
     xs, ys = zip(*scenario.site.dig_area)
     return (min(xs), max(xs), min(ys), max(ys))
+
+
+def global_blocks(box: tuple[float, float, float, float], window: tuple[float, float]) -> list[tuple[float, float, float, float]]:
+    """The site box split into equal tiles of at most ``window`` (m): the global layer's groups
+    of areas. One tile (the box itself) when the site fits, as the paper's 12 m × 6 m map does."""
+    xmin, xmax, ymin, ymax = box
+    nx = max(1, math.ceil((xmax - xmin) / window[0] - 1e-9))
+    ny = max(1, math.ceil((ymax - ymin) / window[1] - 1e-9))
+    wx, wy = (xmax - xmin) / nx, (ymax - ymin) / ny
+    return [(xmin + a * wx, xmin + (a + 1) * wx, ymin + b * wy, ymin + (b + 1) * wy) for b in range(ny) for a in range(nx)]
+
+
+def global_lattice(window: tuple[float, float], spacing: float) -> tuple[int, int]:
+    """(ny, nx) of the global surface over one window: the lattice ``fit_rbf`` gives a window
+    of that size with its default margin, fixed so that every window shares one NLP."""
+    return (math.ceil(window[1] / spacing) + 3, math.ceil(window[0] / spacing) + 3)
+
+
+def in_box(pt: tuple[float, float], box: tuple[float, float, float, float]) -> bool:
+    return box[0] <= pt[0] <= box[1] and box[2] <= pt[1] <= box[3]
+
+
+def nearest_block(blocks: list[tuple[float, float, float, float]], areas: list[Area],
+                  pos: tuple[float, float]) -> tuple[float, float, float, float]:
+    """The tile with areas left whose centre is nearest to ``pos`` (ties: the first)."""
+    live = [b for b in blocks if any(in_box(a.centre, b) for a in areas)]
+    return min(live, key=lambda b: math.hypot(0.5 * (b[0] + b[1]) - pos[0], 0.5 * (b[2] + b[3]) - pos[1]))
+
+
+def solve_counts(records: list[dict[str, Any]]) -> dict[str, int]:
+    """How the local solves ended (the planner's own report, from IPOPT's status): succeeded
+    (Solve_Succeeded at the planner's tolerance), acceptable (IPOPT's acceptable level), capped
+    (iteration cap, feasible iterate accepted), fallback (the IK guess executed), other."""
+    out = {"succeeded": 0, "acceptable": 0, "capped": 0, "fallback": 0, "other": 0}
+    for r in records:
+        st = str(r.get("status", ""))
+        if "fallback" in r:
+            out["fallback"] += 1
+        elif st == "Solve_Succeeded":
+            out["succeeded"] += 1
+        elif st.startswith("Solved_To_Acceptable"):
+            out["acceptable"] += 1
+        elif "feasible iterate accepted" in st:
+            out["capped"] += 1
+        else:
+            out["other"] += 1
+    out["total"] = len(records)
+    return out
 
 
 def fitting_side(scenario: Scenario, side: float) -> float:

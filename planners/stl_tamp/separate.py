@@ -70,9 +70,9 @@ from earthbench.world import Heightmap, Scenario
 from terrains.surface import fit_rbf
 
 from .convert import Converter, SimState
-from .guess import PhaseSeed, build_guess, fill_volumes
-from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box
-from .model import PhaseNLP, Solution
+from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
+from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
+from .model import PhaseNLP, Solution, quantize
 from .planner import Config as StlTampConfig
 from .planner import LocalNLPConfig
 from .planner import StlTampPlanner
@@ -110,8 +110,7 @@ class Config(LocalNLPConfig):
     trust_radius: float = 0.5
     trust_angle: float = 0.5
     trust_rounds: int = 2
-    max_iter: int = 250
-    max_cpu_time: float = 4.0
+    max_iter: int = 250  # an iteration cap only (no CPU-time cap: load must not change a plan)
     mu_strategy: str = "adaptive"
     max_areas: int = 40
     volume_tol: float = 1e-4
@@ -225,7 +224,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.3.2"
+    version = "0.4.0"
     tracks = ("backhoe",)
     Config = Config
 
@@ -306,6 +305,7 @@ class SeparatePlanner(Planner):
                 "fit_time_s": trace.fit_time_s,
                 "build_time_s": trace.build_time_s,
                 "fallbacks": trace.fallbacks,
+                "local_solves": solve_counts([r for r in trace.areas if "status" in r]),
                 "skipped": dict(conv.skips),
                 "local": trace.areas,
                 "plan_time_s": time.perf_counter() - t_start,
@@ -329,8 +329,7 @@ class SeparatePlanner(Planner):
         digs = list(digs) + [dataclasses.replace(digs[-1], volume=0.0)] * (c.m_local - len(digs))
         stl = StlTampPlanner(self._stl_config())
         shape = stl.local_shape(scenario)
-        nlp, hit = get_nlp(shape, scenario, box)
-        trace.build_time_s += 0.0 if hit else nlp.build_time_s
+        nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0
         t0 = time.perf_counter()
         hw = c.local_fit_half
@@ -351,12 +350,13 @@ class SeparatePlanner(Planner):
         # the arm's IK guess at the model's height of each contact after the earlier cuts (the
         # rule often digs one spot several times: the fitted surface's height would leave the
         # contact constraint violated by up to a metre and IPOPT in restoration)
-        pz = nlp.evaluate(build_guess(nlp, s0, seeds, floor), params)["contact_heights"]
-        seeds = [dataclasses.replace(sd, pz=float(h)) for sd, h in zip(seeds, pz)]
+        seeds = settle_contacts(nlp, s0, seeds, floor, params)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
+        fixed = {k: quantize(v) for k, v in fixed.items()}  # see model.QUANTUM
         sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
+        trace.build_time_s += nlp.take_build_time()
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, self.side(scenario))),
                                "base": list(area.base), "status": sol.status, "iterations": sol.iterations,
                                "rounds": rounds, "guess_time": float(nlp.node_times(*self._durations(nlp, w0, s0))[-1]),
@@ -422,14 +422,14 @@ class SeparatePlanner(Planner):
         solution; rounds stop at the first failure or when the time gain is below 1 %.
         """
         c = self.config
-        S = nlp.solver(c.max_iter, c.max_cpu_time, {"mu_strategy": c.mu_strategy})
+        S = nlp.solver(c.max_iter, {"mu_strategy": c.mu_strategy})
         lb, ub = nlp.bounds(box, fixed)
         Xl, Ul, phl, sll = nlp.unpack(lb, s0)
         Xu, Uu, phu, slu = nlp.unpack(ub, s0)
         rad = np.array([c.trust_radius, c.trust_radius, c.trust_angle, c.trust_angle, c.trust_angle, c.trust_angle,
                         c.trust_radius, c.trust_radius, c.trust_angle])
         best: Solution | None = None
-        centre = w0
+        params, centre = quantize(params), quantize(w0)  # the same plan for inputs that differ by rounding noise
         log: list[dict[str, Any]] = []
         for _ in range(max(c.trust_rounds, 1)):
             Xc = nlp.unpack(centre, s0)[0]

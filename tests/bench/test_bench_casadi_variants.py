@@ -61,14 +61,12 @@ def test_local_solve_variant(benchmark, case, variant, tmp_path, monkeypatch):
     elif variant == "sx-warm":
         near = p.copy()
         near[nlp.K + 2 + NX] = 0.9  # the target volume parameter
-        w0 = nlp.solve(near, w0, box, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
-                       accept_feasible=c.accept_feasible, options=options).info["w"]
-    nlp.solver(c.max_iter, c.max_cpu_time, options, casadi_options)
+        w0 = nlp.solve(near, w0, box, max_iter=c.max_iter, accept_feasible=c.accept_feasible, options=options).info["w"]
+    nlp.solver(c.max_iter, options, casadi_options)
     setup_s = time.perf_counter() - t0
 
     def solve():
-        return nlp.solve(p, w0, box, max_iter=c.max_iter, max_cpu_time=c.max_cpu_time,
-                         accept_feasible=c.accept_feasible, options=options, casadi_options=casadi_options)
+        return nlp.solve(p, w0, box, max_iter=c.max_iter, accept_feasible=c.accept_feasible, options=options, casadi_options=casadi_options)
 
     sol = benchmark.pedantic(solve, rounds=3, iterations=1)
     benchmark.extra_info.update(status=sol.status, iterations=sol.iterations, setup_s=round(setup_s, 2))
