@@ -21,7 +21,7 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.motion import swing_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.referee import apply_cut
+from earthbench.cut import apply_cut
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short

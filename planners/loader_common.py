@@ -9,7 +9,7 @@ rank dig candidates; the rest lives here:
   heading ``h`` into the pile, the entry pose of a charge: the cutting edge starts just before
   the first material in the bucket's corridor and the loader's pose (front axle) is
   ``bucket_offset`` behind it.
-- :func:`simulate_charge` — the referee's own cut (:func:`earthbench.referee.charge_cut`) on a
+- :func:`simulate_charge` — the referee's own cut (:func:`earthbench.cut.charge_cut`) on a
   copy of the grid. The penetration is chosen so that the bucket takes whole cells up to the
   capacity and no more, so the loader never drives onto material its bucket cannot take.
 - :func:`search_routes` — car-like routes at or above the minimum turning radius: an optional
@@ -38,7 +38,8 @@ import numpy as np
 
 from earthbench.motion import wrap
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
-from earthbench.referee import cell_heights, charge_cut, densify, loader_base_level, step_excess
+from earthbench.cut import charge_cut
+from earthbench.referee.loader import cell_heights, densify, loader_base_level, step_excess
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
 
 MARGIN = 0.995

@@ -126,7 +126,7 @@ excavator repeatedly digs the stroke in reach that fills the bucket most (draggi
 itself, as deep as allowed and never below the floor), swings to the truck and dumps, until
 the target volume is loaded or nothing worth a dig is left in reach.
 
-It predicts volumes with the referee's own cut model (``earthbench.referee.apply_cut``), so
+It predicts volumes with the referee's own cut model (``earthbench.cut.apply_cut``), so
 its claims match what the referee measures. Replace ``plan`` with your method.
 """
 
@@ -140,7 +140,7 @@ from shapely.geometry import Polygon
 
 from earthbench import Dig, Dump, Move, Plan, Planner, Prediction, Scenario
 from earthbench.motion import swing_time, turn_drive_turn
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint
 
 EPS_T = 1e-6  # seconds added to minimum durations so that rounding never makes them short
 

@@ -43,7 +43,7 @@ Without a design grade (``site.floor`` None) the lowest ground in the dig area s
 floor, so the planner never digs a pit below the surrounding site.
 
 Execution model: the chosen dig is applied to the planner's copy of the grid with the referee's
-own :func:`~earthbench.referee.apply_cut`, so the predicted volume of every dig is the one the
+own :func:`~earthbench.cut.apply_cut`, so the predicted volume of every dig is the one the
 referee will measure. Each dig is followed by a dump into the truck. When nothing worth
 ``fill_min`` of a bucket remains anywhere, the planner relaxes V_min through ``relax_fills``
 before giving up.
@@ -62,7 +62,7 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate

@@ -2,7 +2,7 @@
 
 The NLP's trajectories are a model; the referee judges the plan on the real heightmap with
 its flat cut. The conversion therefore replays every decision on an exact copy of what the
-referee will do (``earthbench.referee.apply_cut``/``cut_level`` on our own copy of the grid,
+referee will do (``earthbench.cut.apply_cut``/``cut_level`` on our own copy of the grid,
 ``earthbench.motion.swing_time`` for durations) and re-checks every rule before it emits an
 action:
 
@@ -39,7 +39,7 @@ from shapely.geometry import Polygon
 
 from earthbench.motion import swing_time, wrap
 from earthbench.plan import Dig, Dump, Move
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Pose, Scenario
 
 EPS_T = 1e-6
