@@ -102,6 +102,31 @@ def reach_of(corners: np.ndarray) -> float:
     return float(np.max(np.hypot(corners[..., 0], corners[..., 1])))
 
 
+def _polygons(corners: np.ndarray) -> np.ndarray:
+    return shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+
+
+def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray) -> np.ndarray:
+    """Whether the bodies of machine ``a`` at ``poses_a[k, 3]`` (x, y, yaw) and ``b`` at
+    ``poses_b[k, 3]`` (or one pose for all) touch: the footprint part of the clearance rule."""
+    pa = np.asarray(poses_a, dtype=float).reshape(-1, 3)
+    pb = np.broadcast_to(np.asarray(poses_b, dtype=float).reshape(-1, 3), pa.shape)
+    out = np.zeros(len(pa), dtype=bool)
+    near = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]) < reach_of(a.body(0.0, 0.0, 0.0)) + reach_of(b.body(0.0, 0.0, 0.0))
+    if near.any():
+        out[near] = shapely.intersects(_polygons(a.body(*pa[near].T)), _polygons(b.body(*pb[near].T)))
+    return out
+
+
+def off_map_excess(scenario: Scenario, spec: Spec, poses: np.ndarray) -> np.ndarray:
+    """How far (m) the outline at each of ``poses[k, 3]`` reaches beyond the map (≤ 0: on it)."""
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    corners = spec.outline(p[:, 0], p[:, 1], p[:, 2])
+    xmin, xmax, ymin, ymax = scenario.terrain.extent
+    cx, cy = corners[..., 0], corners[..., 1]
+    return np.maximum.reduce([xmin - cx, cx - xmax, ymin - cy, cy - ymax]).max(axis=1)
+
+
 class Timeline:
     """A machine's samples over time (its start, then every move and charge), on the motion model."""
 
@@ -210,16 +235,13 @@ class Replay:
             return
         spec = self.specs[machine]
         dense = dense_poses(path, self.spacing, reach_of(spec.outline(0.0, 0.0, 0.0)))
-        corners = spec.outline(dense[:, 1], dense[:, 2], dense[:, 3])
         if not self.sc.outside_open:
-            xmin, xmax, ymin, ymax = self.terrain.extent
-            cx, cy = corners[..., 0], corners[..., 1]
-            out = np.maximum.reduce([xmin - cx, cx - xmax, ymin - cy, cy - ymax]).max(axis=1)
+            out = off_map_excess(self.sc, spec, dense[:, 1:4])
             k = int(np.argmax(out))
             if out[k] > ABS_TOL:
                 self.flag(n, "off_map", out[k], f"{machine}'s footprint leaves the map by {out[k]:.3f} m at ({dense[k, 1]:.2f}, {dense[k, 2]:.2f}), t={dense[k, 0]:.2f} s")
         if self.keep_outs:
-            polys = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+            polys = _polygons(spec.outline(dense[:, 1], dense[:, 2], dense[:, 3]))
             for ko in self.keep_outs:
                 hit = shapely.intersects(polys, ko)
                 if hit.any():
@@ -249,15 +271,10 @@ class Replay:
         if bad.any():
             self.flag(self._active(times[k]), "collision", clearance - d[k], f"{machine} and truck {d[k]:.3f} m apart at t={times[k]:.3f} s; clearance {clearance} m")
             return
-        near = d < reach_of(spec.body(0.0, 0.0, 0.0)) + reach_of(tspec.body(0.0, 0.0, 0.0))
-        if near.any():
-            ca = spec.body(pa[near, 0], pa[near, 1], pa[near, 2])
-            cb = tspec.body(pb[near, 0], pb[near, 1], pb[near, 2])
-            ring = lambda c: shapely.polygons(np.concatenate([c, c[:, :1]], axis=1))  # noqa: E731
-            touch = shapely.intersects(ring(ca), ring(cb))
-            if touch.any():
-                t = times[near][int(np.argmax(touch))]
-                self.flag(self._active(t), "collision", 1.0, f"{machine}'s and the truck's footprints touch at t={t:.3f} s")
+        touch = bodies_touch(spec, pa, tspec, pb)
+        if touch.any():
+            t = times[int(np.argmax(touch))]
+            self.flag(self._active(t), "collision", 1.0, f"{machine}'s and the truck's footprints touch at t={t:.3f} s")
 
     def _active(self, t: float) -> int | None:
         who = [n for n, a in enumerate(self.plan.actions) if isinstance(a, (Move, Charge)) and a.t_start - ABS_TOL <= t <= a.t_end + ABS_TOL]
