@@ -355,6 +355,8 @@ def _clear(scenario: Scenario, z: np.ndarray, route: Route, base: float) -> bool
     xy = route.p[:, :2]
     if np.min(np.hypot(xy[:, 0] - truck.x, xy[:, 1] - truck.y)) < spec.clearance + 0.1:
         return False
+    if step_excess(scenario.terrain, z, xy, base, spec.max_step)[0] > -1e-3:  # the axle: a quick first test
+        return False
     if not scenario.outside_open and np.max(off_map_excess(scenario, spec, route.p[:, :3])) > -0.2:
         return False
     if bodies_touch(spec, route.p[:, :3], scenario.machines.truck, np.array([truck.x, truck.y, truck.yaw])).any():

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from ..cut import charge_along, footprint, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, loader_dump_excess, wrap
@@ -73,27 +74,56 @@ def _rectangle_points(corners: np.ndarray, spacing: float, interior: bool) -> np
     return a + fu[:, None] * u + fv[:, None] * v
 
 
+#: :func:`wheel_step_excess` reports any excess below this (m) as this value: poses whose
+#: neighbourhood holds no cell higher than that are not looked at cell by cell.
+STEP_FLOOR = -0.01
+
+
 def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float) -> tuple[float, float, float]:
     """Largest height above ``base + max_step`` of the cells under the wheels along ``path[k, 4]``
-    on the motion model's arcs (≤ 0: traversable), and where (x, y).
+    on the motion model's arcs (≤ 0: traversable; at least :data:`STEP_FLOOR`), and where (x, y).
 
     The union of the wheels' rectangle over a motion is its first position plus what its
     edges sweep; so the whole first rectangle and then its edges at poses no more than a third
-    of a cell apart (in the rectangle's every corner) are looked up, missing no cell.
+    of a cell apart (in the rectangle's every corner) are looked up, missing no cell. Poses
+    whose rectangle's centre is farther than its half-diagonal (and two cells) from every cell
+    above ``base + max_step + STEP_FLOOR`` are skipped (a distance transform of those cells).
     """
     h = terrain.resolution / 3
     wheels0 = spec.wheels(0.0, 0.0, 0.0)[0]
     dense = dense_poses(path, h, reach_of(wheels0))
+    centre = wheels0.mean(axis=0)
+    reach = reach_of(wheels0 - centre)
+    high = z > base + spec.max_step + STEP_FLOOR
+    if not high.any():
+        return STEP_FLOOR, float(dense[0, 1]), float(dense[0, 2])
+    r = terrain.resolution
+    ny, nx = z.shape
+    cyaw, syaw = np.cos(dense[:, 3]), np.sin(dense[:, 3])
+    i = np.floor((dense[:, 1] + centre[0] * cyaw - centre[1] * syaw - terrain.origin[0]) / r).astype(int)
+    j = np.floor((dense[:, 2] + centre[0] * syaw + centre[1] * cyaw - terrain.origin[1]) / r).astype(int)
+    pad = int(math.ceil(reach / r)) + 2
+    i0, i1 = max(i.min() - pad, 0), min(i.max() + pad + 1, nx)
+    j0, j1 = max(j.min() - pad, 0), min(j.max() + pad + 1, ny)
+    if i0 >= i1 or j0 >= j1 or not high[j0:j1, i0:i1].any():
+        return STEP_FLOOR, float(dense[0, 1]), float(dense[0, 2])
+    sub = high[j0:j1, i0:i1]
+    dist = distance_transform_edt(~sub) * r
+    ii, jj = np.clip(i - i0, 0, i1 - i0 - 1), np.clip(j - j0, 0, j1 - j0 - 1)
+    inside = (i >= i0) & (i < i1) & (j >= j0) & (j < j1)
+    near = ~inside | (dist[jj, ii] <= reach + 2 * r)
+    near[0] = True  # the first rectangle is looked up whole
+    poses = dense[near]
     first = _rectangle_points(spec.wheels(*dense[0, 1:4])[0], h, interior=True)
     edge = _rectangle_points(wheels0, h, interior=False)
-    c, s = np.cos(dense[:, 3])[:, None], np.sin(dense[:, 3])[:, None]
-    ex = dense[:, 1:2] + edge[None, :, 0] * c - edge[None, :, 1] * s
-    ey = dense[:, 2:3] + edge[None, :, 0] * s + edge[None, :, 1] * c
+    c, s = np.cos(poses[:, 3])[:, None], np.sin(poses[:, 3])[:, None]
+    ex = poses[:, 1:2] + edge[None, :, 0] * c - edge[None, :, 1] * s
+    ey = poses[:, 2:3] + edge[None, :, 0] * s + edge[None, :, 1] * c
     pts = np.vstack([first, np.column_stack([ex.ravel(), ey.ravel()])])
     hgt = cell_heights(terrain, z, pts) - base - spec.max_step
     hgt = np.where(np.isnan(hgt), -np.inf, hgt)
     k = int(np.argmax(hgt))
-    return float(hgt[k]), float(pts[k, 0]), float(pts[k, 1])
+    return max(float(hgt[k]), STEP_FLOOR), float(pts[k, 0]), float(pts[k, 1])
 
 
 def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, max_step: float) -> tuple[float, int]:
