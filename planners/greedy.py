@@ -21,7 +21,9 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.motion import swing_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.cut import apply_cut
+from earthbench.cut import apply_cut, path_cells
+from earthbench.motion import ABS_TOL
+from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
@@ -48,7 +50,7 @@ class GreedyPlanner(Planner):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.0"
+    version = "1.1"
     tracks = ("backhoe",)
     Config = GreedyConfig
 
@@ -165,10 +167,15 @@ class _Greedy:
         # prefer a full bucket, then (among equals) the stroke nearest the current swing
         order = np.argsort(-np.minimum(est, want * 1.05))[:6]
         best = None
+        track_level = self.station()[0]
         for k in order:
             trial = self.z.copy()
             level = self.terrain.height_at(p[k, 0], p[k, 1], self.z) - depth[k]
             vol = apply_cut(self.terrain, trial, tuple(p[k]), float(h[k]), self.exc.bucket_width, self.exc.max_drag_length, level, self.exc.bucket_capacity)
+            jj, ii, _ = path_cells(self.terrain, trial.shape, tuple(p[k]), float(h[k]), self.exc.bucket_width, self.exc.max_drag_length)
+            cut = trial[jj, ii] < self.z[jj, ii]
+            if undermining_excess(self.terrain, trial, self.exc, self.base, track_level, jj[cut], ii[cut]) > -ABS_TOL:
+                continue  # the referee's undermining rule
             if best is None or vol > best[0] + 1e-9:
                 best = (vol, (float(p[k, 0]), float(p[k, 1])), float(h[k]), float(depth[k]))
         return best
@@ -191,6 +198,16 @@ class _Greedy:
         self.t += dur
         self.loaded += min(self.bucket, self.truck_spec.capacity - self.loaded)
         self.turn = math.atan2(target[1] - self.base.y, target[0] - self.base.x) - self.base.yaw
+
+    def station(self, base: Pose | None = None) -> tuple[float, float]:
+        """The referee's ground level under the tracks and tilt at ``base`` (default: here)."""
+        b = base or self.base
+        if base is None and getattr(self, "_station", (None,))[0] == b:
+            return self._station[1]
+        out = track_level_and_tilt(self.sc, self.z, self.exc, b)
+        if base is None:
+            self._station = (b, out)
+        return out
 
     # -- relocation ----------------------------------------------------------------------------
     def truck_in_reach(self, base: Pose | None = None, truck: Pose | None = None) -> bool:
@@ -233,6 +250,10 @@ class _Greedy:
             if any(ko.contains(Point(key)) for ko in self.keep_outs):
                 continue
             bearing = math.atan2(key[1] - self.base.y, key[0] - self.base.x)
+            yaw = turn_drive_turn(self.base, key, 0.0, self.exc.travel_speed, self.exc.yaw_rate)[-1][3]
+            if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - 0.01:
+                visited.add(key)
+                continue  # the referee's tilt rule
             if self._place_truck_and_go(Pose(key[0], key[1], self.base.yaw), bearing):
                 visited.add(key)
                 return True
