@@ -64,12 +64,14 @@ def cut_along(
     length: float,
     level: float,
     capacity: float,
+    cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Cut:
-    """:func:`apply_cut`, also telling where along the path the bucket filled."""
+    """:func:`apply_cut`, also telling where along the path the bucket filled; ``cells`` is
+    :func:`path_cells` of the same path when the caller already has it."""
     if capacity <= 0:
         return Cut(0.0, 0.0)
     r = terrain.resolution
-    jj, ii, dist = path_cells(terrain, z.shape, contact, heading, width, length)
+    jj, ii, dist = path_cells(terrain, z.shape, contact, heading, width, length) if cells is None else cells
     if jj.size == 0:
         return Cut(0.0)
     excess = np.maximum(z[jj, ii] - level, 0.0) * (r * r)

@@ -156,18 +156,21 @@ def _on_arc(p0: np.ndarray, theta0: np.ndarray, dyaw: np.ndarray, length: np.nda
     return p0[:, 0] + ax, p0[:, 1] + ay
 
 
-def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0) -> np.ndarray:
+def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0, only: np.ndarray | None = None) -> np.ndarray:
     """Poses ``[m, 4]`` (t, x, y, yaw) along the motion model's curve through ``path[k, 4]``.
 
     Consecutive poses are at most ``spacing`` apart along the curve, and a point ``reach``
     metres from the pose (a footprint's corner) moves at most ``spacing`` between them; every
-    sample of ``path`` is among the poses. Yaw is continuous (unwrapped).
+    sample of ``path`` is among the poses. Yaw is continuous (unwrapped). With ``only`` (one
+    flag per arc) the arcs not flagged contribute just their first sample.
     """
     p = np.asarray(path, dtype=float).reshape(-1, 4)
     if len(p) < 2:
         return p.copy()
     a = arcs(p)
     n = np.maximum(np.ceil(np.maximum(a["length"], np.abs(a["dyaw"]) * reach) / spacing).astype(int), 1)
+    if only is not None:
+        n = np.where(only, n, 1)
     seg = np.repeat(np.arange(len(n)), n)
     f = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)) / n[seg]
     yaw0 = p[0, 3] + np.concatenate([[0.0], np.cumsum(a["dyaw"])])
@@ -177,14 +180,15 @@ def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0) -> np.ndar
     return np.vstack([out, last])
 
 
-def poses_at(path: np.ndarray, times: np.ndarray) -> np.ndarray:
+def poses_at(path: np.ndarray, times: np.ndarray, arc: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Poses ``[m, 3]`` (x, y, yaw) at ``times`` on the motion model's curve through ``path``;
-    before the first sample the machine is at the first, after the last at the last."""
+    before the first sample the machine is at the first, after the last at the last.
+    ``arc`` is ``arcs(path)`` when the caller already has it."""
     p = np.asarray(path, dtype=float).reshape(-1, 4)
     times = np.asarray(times, dtype=float)
     if len(p) < 2:
         return np.repeat(p[:1, 1:4], len(times), axis=0)
-    a = arcs(p)
+    a = arcs(p) if arc is None else arc
     yaw0 = p[0, 3] + np.concatenate([[0.0], np.cumsum(a["dyaw"])])
     k = np.clip(np.searchsorted(p[:, 0], times, side="right") - 1, 0, len(p) - 2)
     f = np.clip((times - p[k, 0]) / np.where(a["dt"][k] > 0, a["dt"][k], 1.0), 0.0, 1.0)

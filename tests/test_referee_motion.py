@@ -188,3 +188,17 @@ def test_a_limit_the_dense_motion_breaks_is_caught_however_sparsely_it_is_sample
     coarse = judge(sc, Plan((arc((x, y, yaw), curvature, signed, 0.0, speed=speed, n=sparse),)))
     checked = {"step", "keep_out", "off_map", "speed", "turning_radius", "collision"}
     assert rules(dense) & checked <= rules(coarse), (dense.violations, coarse.violations)
+
+
+@settings(max_examples=30, deadline=None)
+@given(curvature=st.floats(-0.5, 0.5), length=st.floats(-6.0, 6.0), n=st.integers(1, 5), t=st.floats(-1.0, 12.0))
+def test_a_timeline_pose_is_the_motion_models_pose(curvature, length, n, t):
+    from earthbench.referee.replay import Timeline
+
+    if abs(curvature * length) / n > math.pi - 0.05:
+        return
+    m = arc((1.0, 2.0, 0.3), curvature, length, 0.5, speed=1.0, n=n)
+    line = Timeline(Pose(1.0, 2.0, 0.3), [m])
+    p = line.pose(t)
+    q = poses_at(line.path, np.array([t]))[0]
+    assert (p.x, p.y, p.yaw) == pytest.approx(tuple(q), abs=1e-9)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..cut import apply_cut, cut_level, footprint, path_cells
+from ..cut import cut_along, cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
 from ..world import ExcavatorSpec, Heightmap, Pose, Scenario
@@ -88,9 +88,10 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     if floor is not None and level < floor - ABS_TOL:
         r.flag(n, "below_floor", floor - level, f"cut level {level:.4f} m is below the floor {floor} m")
         level = floor
-    jj, ii, _ = path_cells(r.terrain, r.z.shape, a.contact, a.heading, spec.bucket_width, a.drag_length)
+    cells = path_cells(r.terrain, r.z.shape, a.contact, a.heading, spec.bucket_width, a.drag_length)
+    jj, ii, _ = cells
     before = r.z[jj, ii]
-    vol = apply_cut(r.terrain, r.z, a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity - r.bucket)
+    vol = cut_along(r.terrain, r.z, a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity - r.bucket, cells).volume
     cut = r.z[jj, ii] < before
     jj, ii = jj[cut], ii[cut]
     excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj, ii)

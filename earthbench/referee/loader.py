@@ -11,6 +11,7 @@ within ``max_step`` of it; off the map the open ground is level (a closed map's 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -79,51 +80,66 @@ def _rectangle_points(corners: np.ndarray, spacing: float, interior: bool) -> np
 STEP_FLOOR = -0.01
 
 
+@functools.lru_cache(maxsize=16)
+def _wheel_points(spec: LoaderSpec, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The wheels' rectangle at the origin, points on its edges and points covering it."""
+    wheels0 = spec.wheels(0.0, 0.0, 0.0)[0]
+    return wheels0, _rectangle_points(wheels0, spacing, interior=False), _rectangle_points(wheels0, spacing, interior=True)
+
+
+def _placed(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    c, s = np.cos(poses[:, 3])[:, None], np.sin(poses[:, 3])[:, None]
+    x = poses[:, 1:2] + points[None, :, 0] * c - points[None, :, 1] * s
+    y = poses[:, 2:3] + points[None, :, 0] * s + points[None, :, 1] * c
+    return np.column_stack([x.ravel(), y.ravel()])
+
+
 def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float) -> tuple[float, float, float]:
     """Largest height above ``base + max_step`` of the cells under the wheels along ``path[k, 4]``
     on the motion model's arcs (≤ 0: traversable; at least :data:`STEP_FLOOR`), and where (x, y).
 
     The union of the wheels' rectangle over a motion is its first position plus what its
     edges sweep; so the whole first rectangle and then its edges at poses no more than a third
-    of a cell apart (in the rectangle's every corner) are looked up, missing no cell. Poses
-    whose rectangle's centre is farther than its half-diagonal (and two cells) from every cell
-    above ``base + max_step + STEP_FLOOR`` are skipped (a distance transform of those cells).
+    of a cell apart (in the rectangle's every corner) are looked up, missing no cell. Arcs
+    along which the rectangle's centre stays farther than its half-diagonal (and two cells)
+    from every cell above ``base + max_step + STEP_FLOOR`` are skipped (a distance transform
+    of those cells bounds the distance along the whole arc from its two ends).
     """
+    path = np.asarray(path, dtype=float).reshape(-1, 4)
     h = terrain.resolution / 3
-    wheels0 = spec.wheels(0.0, 0.0, 0.0)[0]
-    dense = dense_poses(path, h, reach_of(wheels0))
-    centre = wheels0.mean(axis=0)
-    reach = reach_of(wheels0 - centre)
+    wheels0, edge, cover = _wheel_points(spec, h)
+    first = _placed(cover, path[:1])
     high = z > base + spec.max_step + STEP_FLOOR
     if not high.any():
-        return STEP_FLOOR, float(dense[0, 1]), float(dense[0, 2])
+        return STEP_FLOOR, float(path[0, 1]), float(path[0, 2])
+    centre = wheels0.mean(axis=0)
+    reach = reach_of(wheels0 - centre)
     r = terrain.resolution
     ny, nx = z.shape
-    cyaw, syaw = np.cos(dense[:, 3]), np.sin(dense[:, 3])
-    i = np.floor((dense[:, 1] + centre[0] * cyaw - centre[1] * syaw - terrain.origin[0]) / r).astype(int)
-    j = np.floor((dense[:, 2] + centre[0] * syaw + centre[1] * cyaw - terrain.origin[1]) / r).astype(int)
-    pad = int(math.ceil(reach / r)) + 2
+    a = arcs(path) if len(path) > 1 else None
+    travel = a["length"] + np.abs(a["dyaw"]) * float(np.hypot(*centre)) if a is not None else np.zeros(0)
+    pad = int(math.ceil((reach + (travel.max() if travel.size else 0.0)) / r)) + 3
+    cyaw, syaw = np.cos(path[:, 3]), np.sin(path[:, 3])
+    i = np.floor((path[:, 1] + centre[0] * cyaw - centre[1] * syaw - terrain.origin[0]) / r).astype(int)
+    j = np.floor((path[:, 2] + centre[0] * syaw + centre[1] * cyaw - terrain.origin[1]) / r).astype(int)
     i0, i1 = max(i.min() - pad, 0), min(i.max() + pad + 1, nx)
     j0, j1 = max(j.min() - pad, 0), min(j.max() + pad + 1, ny)
     if i0 >= i1 or j0 >= j1 or not high[j0:j1, i0:i1].any():
-        return STEP_FLOOR, float(dense[0, 1]), float(dense[0, 2])
-    sub = high[j0:j1, i0:i1]
-    dist = distance_transform_edt(~sub) * r
-    ii, jj = np.clip(i - i0, 0, i1 - i0 - 1), np.clip(j - j0, 0, j1 - j0 - 1)
+        return STEP_FLOOR, float(path[0, 1]), float(path[0, 2])
+    dist = distance_transform_edt(~high[j0:j1, i0:i1]) * r
     inside = (i >= i0) & (i < i1) & (j >= j0) & (j < j1)
-    near = ~inside | (dist[jj, ii] <= reach + 2 * r)
-    near[0] = True  # the first rectangle is looked up whole
-    poses = dense[near]
-    first = _rectangle_points(spec.wheels(*dense[0, 1:4])[0], h, interior=True)
-    edge = _rectangle_points(wheels0, h, interior=False)
-    c, s = np.cos(poses[:, 3])[:, None], np.sin(poses[:, 3])[:, None]
-    ex = poses[:, 1:2] + edge[None, :, 0] * c - edge[None, :, 1] * s
-    ey = poses[:, 2:3] + edge[None, :, 0] * s + edge[None, :, 1] * c
-    pts = np.vstack([first, np.column_stack([ex.ravel(), ey.ravel()])])
-    hgt = cell_heights(terrain, z, pts) - base - spec.max_step
+    d = np.where(inside, dist[np.clip(j - j0, 0, j1 - j0 - 1), np.clip(i - i0, 0, i1 - i0 - 1)], 0.0)
+    pts = [first]
+    if a is not None:
+        near = (d[:-1] + d[1:] - travel) / 2 <= reach + 2 * r
+        if near.any():
+            dense = dense_poses(path, h, reach_of(wheels0), only=near)
+            pts.append(_placed(edge, dense))
+    pts_all = np.vstack(pts)
+    hgt = cell_heights(terrain, z, pts_all) - base - spec.max_step
     hgt = np.where(np.isnan(hgt), -np.inf, hgt)
     k = int(np.argmax(hgt))
-    return max(float(hgt[k]), STEP_FLOOR), float(pts[k, 0]), float(pts[k, 1])
+    return max(float(hgt[k]), STEP_FLOOR), float(pts_all[k, 0]), float(pts_all[k, 1])
 
 
 def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, max_step: float) -> tuple[float, int]:
