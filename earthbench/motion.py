@@ -127,10 +127,10 @@ def arcs(path: np.ndarray) -> dict[str, np.ndarray]:
     and ``theta0`` (direction of travel at the start of the arc).
     """
     p = np.asarray(path, dtype=float).reshape(-1, 4)
-    dt = np.diff(p[:, 0])
-    dx, dy = np.diff(p[:, 1]), np.diff(p[:, 2])
+    d = p[1:] - p[:-1]
+    dt, dx, dy = d[:, 0], d[:, 1], d[:, 2]
     chord = np.hypot(dx, dy)
-    dyaw = (np.diff(p[:, 3]) + math.pi) % (2 * math.pi) - math.pi
+    dyaw = (d[:, 3] + math.pi) % (2 * math.pi) - math.pi
     direction = np.arctan2(dy, dx)
     # at |Δψ| = π both turning senses fit: take the one whose arc starts forward
     half_turn = np.abs(np.abs(dyaw) - math.pi) < 1e-9
@@ -156,18 +156,19 @@ def _on_arc(p0: np.ndarray, theta0: np.ndarray, dyaw: np.ndarray, length: np.nda
     return p0[:, 0] + ax, p0[:, 1] + ay
 
 
-def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0, only: np.ndarray | None = None) -> np.ndarray:
+def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0, only: np.ndarray | None = None, arc: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Poses ``[m, 4]`` (t, x, y, yaw) along the motion model's curve through ``path[k, 4]``.
 
     Consecutive poses are at most ``spacing`` apart along the curve, and a point ``reach``
     metres from the pose (a footprint's corner) moves at most ``spacing`` between them; every
     sample of ``path`` is among the poses. Yaw is continuous (unwrapped). With ``only`` (one
-    flag per arc) the arcs not flagged contribute just their first sample.
+    flag per arc) the arcs not flagged contribute just their first sample. ``arc`` is
+    ``arcs(path)`` when the caller already has it.
     """
     p = np.asarray(path, dtype=float).reshape(-1, 4)
     if len(p) < 2:
         return p.copy()
-    a = arcs(p)
+    a = arcs(p) if arc is None else arc
     n = np.maximum(np.ceil(np.maximum(a["length"], np.abs(a["dyaw"]) * reach) / spacing).astype(int), 1)
     if only is not None:
         n = np.where(only, n, 1)

@@ -45,9 +45,9 @@ def _run(r: Replay) -> Verdict:
             r.flag(n, "overlap", gap, f"{a.machine} is busy until t={r.busy_until[a.machine]:.3f} s")
         spec = r.specs.get(a.machine)
         if isinstance(a, Move):
-            r.move(n, a)
+            arc = r.move(n, a)
             if isinstance(spec, LoaderSpec):
-                loader.move(r, n, a, spec)
+                loader.move(r, n, a, spec, arc)
         elif isinstance(a, Dig):
             backhoe.dig(r, n, a)
         elif isinstance(a, Dump):

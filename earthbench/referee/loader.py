@@ -94,7 +94,7 @@ def _placed(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return np.column_stack([x.ravel(), y.ravel()])
 
 
-def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float) -> tuple[float, float, float]:
+def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float, arc: dict[str, np.ndarray] | None = None) -> tuple[float, float, float]:
     """Largest height above ``base + max_step`` of the cells under the wheels along ``path[k, 4]``
     on the motion model's arcs (≤ 0: traversable; at least :data:`STEP_FLOOR`), and where (x, y).
 
@@ -103,7 +103,8 @@ def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path:
     of a cell apart (in the rectangle's every corner) are looked up, missing no cell. Arcs
     along which the rectangle's centre stays farther than its half-diagonal (and two cells)
     from every cell above ``base + max_step + STEP_FLOOR`` are skipped (a distance transform
-    of those cells bounds the distance along the whole arc from its two ends).
+    of those cells bounds the distance along the whole arc from its two ends). ``arc`` is
+    ``arcs(path)`` when the caller already has it.
     """
     path = np.asarray(path, dtype=float).reshape(-1, 4)
     h = terrain.resolution / 3
@@ -116,7 +117,7 @@ def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path:
     reach = reach_of(wheels0 - centre)
     r = terrain.resolution
     ny, nx = z.shape
-    a = arcs(path) if len(path) > 1 else None
+    a = (arcs(path) if arc is None else arc) if len(path) > 1 else None
     travel = a["length"] + np.abs(a["dyaw"]) * float(np.hypot(*centre)) if a is not None else np.zeros(0)
     pad = int(math.ceil((reach + (travel.max() if travel.size else 0.0)) / r)) + 3
     cyaw, syaw = np.cos(path[:, 3]), np.sin(path[:, 3])
@@ -133,7 +134,7 @@ def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path:
     if a is not None:
         near = (d[:-1] + d[1:] - travel) / 2 <= reach + 2 * r
         if near.any():
-            dense = dense_poses(path, h, reach_of(wheels0), only=near)
+            dense = dense_poses(path, h, reach_of(wheels0), only=near, arc=a)
             pts.append(_placed(edge, dense))
     pts_all = np.vstack(pts)
     hgt = cell_heights(terrain, z, pts_all) - base - spec.max_step
@@ -155,22 +156,21 @@ def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, 
 
 # -- rules ---------------------------------------------------------------------------------------
 
-def step(r: Replay, n: int, machine: str, spec: LoaderSpec, path: np.ndarray) -> None:
+def step(r: Replay, n: int, machine: str, spec: LoaderSpec, path: np.ndarray, arc: dict[str, np.ndarray] | None = None) -> None:
     base = loader_base_level(r.sc)
-    excess, x, y = wheel_step_excess(r.terrain, r.z, spec, path, base)
+    excess, x, y = wheel_step_excess(r.terrain, r.z, spec, path, base, arc)
     if excess > ABS_TOL:
         r.flag(n, "step", excess, f"{machine}'s wheels cross a cell {spec.max_step + excess:.3f} m above the base level {base:g} m at ({x:.2f}, {y:.2f}); traversable step {spec.max_step} m")
 
 
-def move(r: Replay, n: int, a: Move, spec: LoaderSpec) -> None:
+def move(r: Replay, n: int, a: Move, spec: LoaderSpec, arc: dict[str, np.ndarray]) -> None:
     p = np.array(a.path, dtype=float)
-    arc = arcs(p)
     k = int(np.argmin(arc["radius"]))
     radius = arc["radius"][k]
     if radius < spec.min_turning_radius * (1 - RATE_TOL) - ABS_TOL:
         what = "turns in place" if arc["chord"][k] <= ABS_TOL else f"turns on a {radius:.3f} m radius"
         r.flag(n, "turning_radius", spec.min_turning_radius - radius, f"{a.machine} {what} between samples {k} and {k + 1}; minimum {spec.min_turning_radius} m")
-    step(r, n, a.machine, spec, p)
+    step(r, n, a.machine, spec, p, arc)
 
 
 def charge(r: Replay, n: int, a: Charge) -> None:
@@ -198,7 +198,8 @@ def charge(r: Replay, n: int, a: Charge) -> None:
         r.flag(n, "outside_dig_area", max(out, ABS_TOL), f"{out:.4f} m² of the bucket's path lies outside the dig area")
     ex, ey, _ = a.end
     path = np.array([[a.t_start, x, y, yaw], [max(a.t_end, a.t_start + ABS_TOL), ex, ey, yaw]])
-    r.swept(n, a.machine, path)  # the outline reaches to the cutting edge: keep-out zones, map edge
+    charge_arc = arcs(path)
+    r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
     level = r.sc.site.floor if r.sc.site.floor is not None else loader_base_level(r.sc)
     cut = charge_along(r.terrain, r.z, spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket)
     if cut.full_at is not None:
@@ -206,7 +207,7 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     r.bucket += cut.volume
     r.removed += cut.volume
     r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity))
-    step(r, n, a.machine, spec, path)
+    step(r, n, a.machine, spec, path, charge_arc)
     r.travel[a.machine] += a.penetration
     r.pose[a.machine] = Pose(ex, ey, yaw)
 

@@ -107,6 +107,19 @@ def _polygons(corners: np.ndarray) -> np.ndarray:
     return shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
 
 
+def rectangles_touch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether the rectangles ``a[k, 4, 2]`` and ``b[k, 4, 2]`` overlap or touch (separating
+    axes: they are apart iff their projections are apart on one of their four edge normals)."""
+    apart = np.zeros(len(a), dtype=bool)
+    for r in (a, b):
+        for e in (1, 3):
+            axis = r[:, e] - r[:, 0]  # the rectangle's two edge directions are its normals too
+            pa = np.einsum("kij,kj->ki", a, axis)
+            pb = np.einsum("kij,kj->ki", b, axis)
+            apart |= (pa.max(axis=1) < pb.min(axis=1)) | (pb.max(axis=1) < pa.min(axis=1))
+    return ~apart
+
+
 def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray) -> np.ndarray:
     """Whether the bodies of machine ``a`` at ``poses_a[k, 3]`` (x, y, yaw) and ``b`` at
     ``poses_b[k, 3]`` (or one pose for all) touch: the footprint part of the clearance rule."""
@@ -115,7 +128,7 @@ def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray) -> 
     out = np.zeros(len(pa), dtype=bool)
     near = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]) < reach_of(a.body(0.0, 0.0, 0.0)) + reach_of(b.body(0.0, 0.0, 0.0))
     if near.any():
-        out[near] = shapely.intersects(_polygons(a.body(*pa[near].T)), _polygons(b.body(*pb[near].T)))
+        out[near] = rectangles_touch(a.body(*pa[near].T), b.body(*pb[near].T))
     return out
 
 
@@ -234,8 +247,8 @@ class Replay:
         )
 
     # -- motion ------------------------------------------------------------------------------
-    def move(self, n: int, a: Move) -> None:
-        """Check one move against the rules every machine shares."""
+    def move(self, n: int, a: Move) -> dict[str, np.ndarray]:
+        """Check one move against the rules every machine shares; returns its arcs."""
         spec = self.specs[a.machine]
         p = np.array(a.path, dtype=float)
         here = self.pose[a.machine]
@@ -256,16 +269,29 @@ class Replay:
         k = int(np.argmax(arc["lateral"]))
         if arc["lateral"][k] > spec.chord_tolerance:
             self.flag(n, "heading", arc["lateral"][k], f"no arc along the headings joins samples {k} and {k + 1}: {a.machine} slides {arc['lateral'][k]:.3f} m sideways; tolerance {spec.chord_tolerance} m")
-        self.swept(n, a.machine, p)
+        self.swept(n, a.machine, p, arc)
         self.travel[a.machine] += float(arc["length"].sum())
         self.pose[a.machine] = Pose(float(p[-1, 1]), float(p[-1, 2]), float(p[-1, 3]))
+        return arc
 
-    def swept(self, n: int, machine: str, path: np.ndarray) -> None:
+    def swept(self, n: int, machine: str, path: np.ndarray, arc: dict[str, np.ndarray] | None = None) -> None:
         """Keep-out zones and the map's edge for the machine's outline along ``path``."""
         if not self.keep_outs and self.sc.outside_open:
             return
         spec = self.specs[machine]
-        dense = dense_poses(path, self.spacing, reach_of(spec.outline(0.0, 0.0, 0.0)))
+        reach = reach_of(spec.outline(0.0, 0.0, 0.0))
+        only = None
+        if len(path) > 1:  # arcs whose outline stays clear of the map's edge and every zone
+            a = arcs(path) if arc is None else arc
+            travel = a["length"] + np.abs(a["dyaw"]) * reach
+            room = np.full(len(path), np.inf)
+            if not self.sc.outside_open:
+                xmin, xmax, ymin, ymax = self.terrain.extent
+                room = np.minimum.reduce([path[:, 1] - xmin, xmax - path[:, 1], path[:, 2] - ymin, ymax - path[:, 2]])
+            for ko in self.keep_outs:
+                room = np.minimum(room, shapely.distance(ko, shapely.points(path[:, 1:3])))
+            only = (room[:-1] + room[1:] - travel) / 2 <= reach + ABS_TOL
+        dense = dense_poses(path, self.spacing, reach, only=only, arc=None if len(path) < 2 else a)
         if not self.sc.outside_open:
             out = off_map_excess(self.sc, spec, dense[:, 1:4])
             k = int(np.argmax(out))
