@@ -92,9 +92,11 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     jj, ii, _ = cells
     before = r.z[jj, ii]
     vol = cut_along(r.terrain, r.z, a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity - r.bucket, cells).volume
-    cut = r.z[jj, ii] < before
-    jj, ii = jj[cut], ii[cut]
-    excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj, ii)
+    # no cut reaches below the undermining line while its level is at or above the tracks' ground
+    excess = -math.inf
+    if level < level_under - ABS_TOL:
+        cut = r.z[jj, ii] < before
+        excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj[cut], ii[cut])
     if excess > ABS_TOL:
         r.flag(n, "undermining", excess, f"the cut leaves ground {excess:.3f} m below the line falling {spec.undermine_slope:g} m per m from the tracks (ground under them {level_under:.3f} m)")
     r.bucket += vol
