@@ -36,11 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from earthbench.motion import wrap
+from earthbench.motion import dense_poses, wrap
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
 from earthbench.cut import charge_cut
 from earthbench.referee.loader import cell_heights, densify, loader_base_level, step_excess, wheel_step_excess
-from earthbench.referee.replay import bodies_touch, off_map_excess
+from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
 
 MARGIN = 0.995
@@ -357,11 +357,12 @@ def _clear(scenario: Scenario, z: np.ndarray, route: Route, base: float) -> bool
         return False
     if step_excess(scenario.terrain, z, xy, base, spec.max_step)[0] > -1e-3:  # the axle: a quick first test
         return False
-    if not scenario.outside_open and np.max(off_map_excess(scenario, spec, route.p[:, :3])) > -0.2:
-        return False
-    if bodies_touch(spec, route.p[:, :3], scenario.machines.truck, np.array([truck.x, truck.y, truck.yaw])).any():
-        return False
     path = np.column_stack([route.t, route.p[:, :3]])
+    dense = dense_poses(path, scenario.terrain.resolution / 2, reach_of(spec.outline(0.0, 0.0, 0.0)))[:, 1:4]  # as the referee samples
+    if not scenario.outside_open and np.max(off_map_excess(scenario, spec, dense)) > -0.05:
+        return False
+    if bodies_touch(spec, dense, scenario.machines.truck, np.array([truck.x, truck.y, truck.yaw]), margin=0.1).any():
+        return False
     return wheel_step_excess(scenario.terrain, z, spec, path, base)[0] <= -1e-3
 
 

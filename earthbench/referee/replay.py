@@ -107,28 +107,31 @@ def _polygons(corners: np.ndarray) -> np.ndarray:
     return shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
 
 
-def rectangles_touch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether the rectangles ``a[k, 4, 2]`` and ``b[k, 4, 2]`` overlap or touch (separating
-    axes: they are apart iff their projections are apart on one of their four edge normals)."""
+def rectangles_touch(a: np.ndarray, b: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Whether the rectangles ``a[k, 4, 2]`` and ``b[k, 4, 2]`` come closer than ``margin`` along
+    one of their four edge normals on all of them (separating axes: with ``margin`` 0, whether
+    they overlap or touch)."""
     apart = np.zeros(len(a), dtype=bool)
     for r in (a, b):
         for e in (1, 3):
             axis = r[:, e] - r[:, 0]  # the rectangle's two edge directions are its normals too
+            axis = axis / np.hypot(axis[:, :1], axis[:, 1:])
             pa = np.einsum("kij,kj->ki", a, axis)
             pb = np.einsum("kij,kj->ki", b, axis)
-            apart |= (pa.max(axis=1) < pb.min(axis=1)) | (pb.max(axis=1) < pa.min(axis=1))
+            apart |= (pa.max(axis=1) + margin < pb.min(axis=1)) | (pb.max(axis=1) + margin < pa.min(axis=1))
     return ~apart
 
 
-def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray) -> np.ndarray:
+def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray, margin: float = 0.0) -> np.ndarray:
     """Whether the bodies of machine ``a`` at ``poses_a[k, 3]`` (x, y, yaw) and ``b`` at
-    ``poses_b[k, 3]`` (or one pose for all) touch: the footprint part of the clearance rule."""
+    ``poses_b[k, 3]`` (or one pose for all) touch: the footprint part of the clearance rule.
+    The referee samples motion at half a cell, so a planner keeps a ``margin`` of that much."""
     pa = np.asarray(poses_a, dtype=float).reshape(-1, 3)
     pb = np.broadcast_to(np.asarray(poses_b, dtype=float).reshape(-1, 3), pa.shape)
     out = np.zeros(len(pa), dtype=bool)
-    near = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]) < reach_of(a.body(0.0, 0.0, 0.0)) + reach_of(b.body(0.0, 0.0, 0.0))
+    near = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]) < reach_of(a.body(0.0, 0.0, 0.0)) + reach_of(b.body(0.0, 0.0, 0.0)) + margin
     if near.any():
-        out[near] = rectangles_touch(a.body(*pa[near].T), b.body(*pb[near].T))
+        out[near] = rectangles_touch(a.body(*pa[near].T), b.body(*pb[near].T), margin)
     return out
 
 
