@@ -211,8 +211,8 @@ class ExcavatorSpec:
     min_dump_time: float = 2.0
     clearance: float = 3.5
     chord_tolerance: float = 0.05
-    track_length: float = _later(2.9)
-    track_width: float = _later(2.3)
+    track_length: float = _later(2.6)
+    track_width: float = _later(2.1)
     undermine_slope: float = _later(1.0)
     max_tilt: float = _later(0.35)
 
@@ -235,8 +235,8 @@ class TruckSpec:
     loading_radius: float = 1.0
     capacity: float = 10.0
     chord_tolerance: float = 0.05
-    length: float = _later(3.4)
-    width: float = _later(1.7)
+    length: float = _later(3.2)
+    width: float = _later(1.6)
 
     def outline(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
         """Corners ``[k, 4, 2]`` of the truck at each pose."""

@@ -107,7 +107,7 @@ def _bench_digs(depths: list[float]) -> Plan:
     e, base = sc.machines.excavator, sc.machines.excavator_pose
     truck = (sc.machines.truck_pose.x, sc.machines.truck_pose.y)
     acts, t, turn = [], 0.0, 0.0
-    contact = (base.x - 2.5, base.y)  # dragging east 0.5 m, to 0.55 m from the west end of the tracks
+    contact = (base.x - 2.5, base.y)  # dragging east 0.5 m, to 0.7 m from the west end of the tracks
     for d in depths:
         dt = min_dig_time(base, turn, contact, e) + 1e-6
         acts.append(Dig("excavator", t, t + dt, contact, 0.0, d, 0.5))
@@ -121,7 +121,7 @@ def _bench_digs(depths: list[float]) -> Plan:
 def test_digging_the_bench_down_beside_the_tracks_is_undermining():
     sc, shallow = _bench_digs([0.4])
     assert judge(sc, shallow).valid, judge(sc, shallow).violations
-    sc, deep = _bench_digs([0.4, 0.4, 0.4])  # 1.2 m down, 0.55 m from the tracks
+    sc, deep = _bench_digs([0.4] * 6)  # each level from the (partly cut) contact: about 1 m down, 0.7 m from the tracks
     v = judge(sc, deep)
     assert rules(v) == {"undermining"}
     assert all(x.action >= 2 for x in v.violations)
@@ -158,8 +158,9 @@ def test_a_truck_passing_through_the_excavator_between_samples_is_a_collision(an
     dur = (before + after) / 0.85
     sc = sc.replace(machines=dataclasses.replace(sc.machines, excavator_pose=e, truck_pose=Pose(a[0], a[1], angle)))
     acts = [Move("truck", ((0.0, a[0], a[1], angle), (dur, b[0], b[1], angle)))]
-    if exc_moves:  # the excavator drives along the same line, slowly the other way
-        acts.append(Move("excavator", ((0.0, e.x, e.y, 0.0), (dur, e.x - 0.1 * dur, e.y, 0.0))))
+    if exc_moves:  # the excavator reverses along the same line, slowly, against the truck
+        sc = sc.replace(machines=dataclasses.replace(sc.machines, excavator_pose=Pose(e.x, e.y, angle)))
+        acts.append(Move("excavator", ((0.0, e.x, e.y, angle), (dur, e.x - 0.05 * dur * ux, e.y - 0.05 * dur * uy, angle))))
     assert "collision" in rules(judge(sc, Plan(tuple(acts))))
 
 

@@ -112,7 +112,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.5.1"
+    version = "0.5.2"
     tracks = ("backhoe",)
     Config = Config
 

@@ -225,7 +225,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.3.2"
+    version = "0.3.3"
     tracks = ("backhoe",)
     Config = Config
 
