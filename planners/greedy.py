@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.motion import swing_time, turn_drive_turn
+from earthbench.motion import min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.cut import apply_cut, path_cells
@@ -183,7 +183,7 @@ class _Greedy:
     def dig(self, best: tuple[float, tuple[float, float], float, float]) -> None:
         _, contact, heading, depth = best
         e = self.exc
-        dur = swing_time(self.base, self.turn, contact, e) + e.min_stroke_time + _EPS_T
+        dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
         level = self.terrain.height_at(contact[0], contact[1], self.z) - depth
         self.bucket = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
         self.actions.append(Dig("excavator", self.t, self.t + dur, contact, heading, depth, e.max_drag_length))
@@ -193,7 +193,7 @@ class _Greedy:
     def dump(self) -> None:
         e = self.exc
         target = (self.truck.x, self.truck.y)
-        dur = swing_time(self.base, self.turn, target, e) + e.min_dump_time + _EPS_T
+        dur = min_dump_time(self.base, self.turn, target, e) + _EPS_T
         self.actions.append(Dump("excavator", self.t, self.t + dur))
         self.t += dur
         self.loaded += min(self.bucket, self.truck_spec.capacity - self.loaded)
