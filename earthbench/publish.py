@@ -46,6 +46,7 @@ import pandas as pd
 from metrics.aggregate import REASONS, RANKING_RULE, aggregate
 from metrics.profiles import cost_matrix, profile
 
+from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
 from .store import Store, load_runs
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -329,7 +330,8 @@ FIGURE_COLUMNS = ["scenario_digest", "solver", "reason", "success", "makespan_s"
 def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
     kind, base, args = job
-    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "terrain": terrain_figure}[kind]
+    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "terrain": terrain_figure,
+             "cost-growth": cost_growth_figure}[kind]
     return _save(maker(*args), Path(base))[2]
 
 
@@ -515,6 +517,8 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
         parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines()))}</div>')
         parts.append(html_table(s["rows"]))
+        if s.get("scale_rows"):
+            parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
         for cap, png in s["figures"]:
             data = base64.b64encode(png).decode()
             parts.append(f'<figure><img alt="{e(cap)}" src="data:image/png;base64,{data}"><figcaption>{e(cap)}</figcaption></figure>')
@@ -555,10 +559,14 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
-            if not figures:
-                continue
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
+            sec["scale_rows"], job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            if not figures:
+                continue
+            if job is not None:
+                jobs.append(job)
+                captions.append((sec, SCALE_CAPTION, Path(job[1])))
             cols = srun[[c for c in FIGURE_COLUMNS if c in srun]]
             for kind, cap in (("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
                               ("profiles", "Performance profiles: time per m³ and solve time (failures never solved)")):
@@ -606,6 +614,9 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
                   f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"])]
+        if s.get("scale_rows"):
+            lines += ["", "scale: cost against target volume, median [interquartile range] over seeds of the valid runs "
+                      "(growth: solve s/m³ over the smallest target's).", "", markdown_table(s["scale_rows"])]
         for cap, png, svg in s["md_figures"]:
             lines += [f"![{md_escape(cap)}]({png.as_posix()})", "", f"*{md_escape(cap)}* ([SVG]({svg.as_posix()}))", ""]
     return "\n".join(lines) + "\n"

@@ -131,6 +131,19 @@ class Heightmap:
         bot = zz[j0 + 1, i0] * (1 - tx) + zz[j0 + 1, i0 + 1] * tx
         return float(top * (1 - ty) + bot * ty)
 
+    def heights_at(self, x: np.ndarray, y: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`height_at` for arrays of points at once, with the same clamping and arithmetic."""
+        zz = self.z if z is None else z
+        ny, nx = zz.shape
+        fx = np.clip((np.asarray(x) - self.origin[0]) / self.resolution - 0.5, 0.0, nx - 1.0)
+        fy = np.clip((np.asarray(y) - self.origin[1]) / self.resolution - 0.5, 0.0, ny - 1.0)
+        i0 = np.minimum(fx.astype(int), nx - 2)
+        j0 = np.minimum(fy.astype(int), ny - 2)
+        tx, ty = fx - i0, fy - j0
+        top = zz[j0, i0] * (1 - tx) + zz[j0, i0 + 1] * tx
+        bot = zz[j0 + 1, i0] * (1 - tx) + zz[j0 + 1, i0 + 1] * tx
+        return top * (1 - ty) + bot * ty
+
     def contains(self, x: float, y: float) -> bool:
         xmin, xmax, ymin, ymax = self.extent
         return xmin <= x <= xmax and ymin <= y <= ymax

@@ -7,6 +7,13 @@ travel penalty) and the truck follows to a spot within dump reach, outside the d
 clear of the excavator. Every action is sequential: one machine acts at a time. Dig volumes
 are screened with a vectorised estimate and the best few confirmed with the referee's own cut
 model, so the planner's predicted volume equals the referee's.
+
+Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array
+operations (heights looked up for all contacts at once; only the strokes whose cut level or
+points a dig has changed estimated again; trial cuts made on the planner's grid and put back
+rather than on a copy of the map), and a relocation scores the stations from row-wise prefix
+sums of the material, one interval sum per grid row a station reaches, again only the stations
+within reach of what was dug since the last relocation.
 """
 
 from __future__ import annotations
@@ -18,11 +25,10 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.motion import min_dig_time, min_dump_time, turn_drive_turn
+from earthbench.cut import apply_cut, path_cells
+from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.cut import apply_cut, path_cells
-from earthbench.motion import ABS_TOL
 from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
@@ -78,6 +84,11 @@ class _Greedy:
         xs, ys = self.terrain.cell_centres()
         self.cx, self.cy = np.meshgrid(xs, ys)
         self.in_area = shapely.contains_xy(self.dig_area, self.cx, self.cy)
+        self._strokes: tuple[tuple[float, float], tuple[np.ndarray, ...]] | None = None
+        self._estimates: tuple[tuple[float, float], np.ndarray, np.ndarray] | None = None  # station, levels, volumes
+        self._cut_since: list[tuple[slice, slice]] = []  # grid windows dug since the estimates were made
+        self._stations: tuple[np.ndarray, np.ndarray] | None = None  # station grid, its volumes
+        self._dug_since: list[tuple[slice, slice]] = []  # grid windows dug since the stations were scored
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> Plan:
@@ -105,8 +116,16 @@ class _Greedy:
         )
 
     # -- digging -----------------------------------------------------------------------------
-    def candidates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Contact points (n×2), headings toward the base, and cut depths."""
+    def strokes(self) -> tuple[np.ndarray, ...]:
+        """The strokes open from the current base: contacts (n×2), headings toward the base,
+        the flat grid indices (n×m) of the points sampled across each bucket footprint, and the
+        row and column range of those points (4×n: first row, last row, first and last column).
+
+        Only geometry (reach, dig area, keep-outs), so it is worked out once per station.
+        """
+        key = (self.base.x, self.base.y)
+        if self._strokes is not None and self._strokes[0] == key:
+            return self._strokes[1]
         e, c = self.exc, self.cfg
         L = e.max_drag_length
         radii = np.arange(e.reach_min + L, e.reach_max + 1e-9, c.radial_step)
@@ -121,30 +140,19 @@ class _Greedy:
         xmin, xmax, ymin, ymax = self.terrain.extent
         keep = (p[:, 0] > xmin) & (p[:, 0] < xmax) & (p[:, 1] > ymin) & (p[:, 1] < ymax)
         p, h = p[keep], h[keep]
-        if len(p) == 0:
-            return p, h, np.zeros(0)
-        u = np.stack([np.cos(h), np.sin(h)], axis=1)
-        v = np.stack([-u[:, 1], u[:, 0]], axis=1) * (e.bucket_width / 2)
-        end = p + u * L
-        rings = np.stack([p + v, end + v, end - v, p - v], axis=1)
-        polys = shapely.polygons(rings)
-        ok = shapely.contains(self.dig_area, polys)
-        for ko in self.keep_outs:
-            ok &= ~shapely.intersects(ko, polys)
-        p, h = p[ok], h[ok]
-        zc = self._heights(p)
-        depth = np.minimum(e.max_cut_depth, zc - self.floor)
-        good = depth > 0.02
-        return p[good], h[good], depth[good]
-
-    def _heights(self, p: np.ndarray) -> np.ndarray:
-        return np.array([self.terrain.height_at(x, y, self.z) for x, y in p])
-
-    def estimate(self, p: np.ndarray, h: np.ndarray, depth: np.ndarray) -> np.ndarray:
-        """Vectorised volume estimate: excess above the cut level at points across the bucket."""
-        e = self.exc
+        if len(p):
+            u = np.stack([np.cos(h), np.sin(h)], axis=1)
+            v = np.stack([-u[:, 1], u[:, 0]], axis=1) * (e.bucket_width / 2)
+            end = p + u * L
+            rings = np.stack([p + v, end + v, end - v, p - v], axis=1)
+            polys = shapely.polygons(rings)
+            ok = shapely.contains(self.dig_area, polys)
+            for ko in self.keep_outs:
+                ok &= ~shapely.intersects(ko, polys)
+            p, h = p[ok], h[ok]
+        # the estimate's sample points: cell-sized steps along the drag and across the bucket
         r = self.terrain.resolution
-        along = np.arange(r / 2, e.max_drag_length, r)
+        along = np.arange(r / 2, L, r)
         across = np.arange(-e.bucket_width / 2 + r / 2, e.bucket_width / 2, r)
         A, C = np.meshgrid(along, across)
         A, C = A.ravel(), C.ravel()
@@ -155,30 +163,92 @@ class _Greedy:
         ny, nx = self.z.shape
         i = np.clip(((x - x0) / r).astype(int), 0, nx - 1)
         j = np.clip(((y - y0) / r).astype(int), 0, ny - 1)
-        level = self._heights(p) - depth
-        vol = np.maximum(self.z[j, i] - level[:, None], 0.0).sum(axis=1) * (r * r)
-        return np.minimum(vol, e.bucket_capacity)
+        box = np.stack([j.min(axis=1), j.max(axis=1), i.min(axis=1), i.max(axis=1)]) if len(p) else np.zeros((4, 0), int)
+        self._strokes = (key, (p, h, j * nx + i, box))
+        return self._strokes[1]
+
+    def candidates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The strokes worth a cut on today's terrain: contacts, headings, cut depths, cut levels
+        and estimated volumes (:meth:`estimate`)."""
+        p, h, cells, box = self.strokes()
+        zc = self.terrain.heights_at(p[:, 0], p[:, 1], self.z)
+        depth = np.minimum(self.exc.max_cut_depth, zc - self.floor)
+        level = zc - depth
+        est = self.estimate(cells, box, level)
+        good = depth > 0.02
+        return p[good], h[good], depth[good], level[good], est[good]
+
+    def estimate(self, cells: np.ndarray, box: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """Vectorised volume estimate: excess above the cut level at points across the bucket.
+
+        A stroke's estimate changes only when its cut level does or a dig has touched its
+        points, so between digs at one station only those strokes are estimated again.
+        """
+        key = (self.base.x, self.base.y)
+        if self._estimates is None or self._estimates[0] != key:
+            stale, vol = np.ones(len(level), bool), np.zeros(len(level))
+        else:
+            stale, vol = self._estimates[1] != level, self._estimates[2]
+            for rows, cols in self._cut_since:
+                stale |= (box[0] < rows.stop) & (box[1] >= rows.start) & (box[2] < cols.stop) & (box[3] >= cols.start)
+        self._cut_since.clear()
+        r = self.terrain.resolution
+        vol[stale] = np.maximum(np.take(self.z, cells[stale]) - level[stale, None], 0.0).sum(axis=1) * (r * r)
+        self._estimates = (key, level, vol)
+        return np.minimum(vol, self.exc.bucket_capacity)
 
     def best_dig(self, want: float) -> tuple[float, tuple[float, float], float, float] | None:
-        p, h, depth = self.candidates()
+        p, h, depth, level, est = self.candidates()
         if len(p) == 0:
             return None
-        est = self.estimate(p, h, depth)
         # prefer a full bucket, then (among equals) the stroke nearest the current swing
         order = np.argsort(-np.minimum(est, want * 1.05))[:6]
         best = None
         track_level = self.station()[0]
         for k in order:
-            trial = self.z.copy()
-            level = self.terrain.height_at(p[k, 0], p[k, 1], self.z) - depth[k]
-            vol = apply_cut(self.terrain, trial, tuple(p[k]), float(h[k]), self.exc.bucket_width, self.exc.max_drag_length, level, self.exc.bucket_capacity)
-            jj, ii, _ = path_cells(self.terrain, trial.shape, tuple(p[k]), float(h[k]), self.exc.bucket_width, self.exc.max_drag_length)
-            cut = trial[jj, ii] < self.z[jj, ii]
-            if undermining_excess(self.terrain, trial, self.exc, self.base, track_level, jj[cut], ii[cut]) > -ABS_TOL:
+            contact = (float(p[k, 0]), float(p[k, 1]))
+            if self.undermines(contact, float(h[k]), float(level[k]), track_level):
                 continue  # the referee's undermining rule
+            vol = self.trial_cut(contact, float(h[k]), float(level[k]))
             if best is None or vol > best[0] + 1e-9:
                 best = (vol, (float(p[k, 0]), float(p[k, 1])), float(h[k]), float(depth[k]))
         return best
+
+    def trial_cut(self, contact: tuple[float, float], heading: float, level: float) -> float:
+        """The referee's volume for one stroke: cut on the planner's grid, then the few cells
+        around the footprint put back, so confirming a candidate never copies the map."""
+        e = self.exc
+        rows, cols = self._window(contact, heading)
+        saved = self.z[rows, cols].copy()
+        vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
+        self.z[rows, cols] = saved
+        return vol
+
+    def undermines(self, contact: tuple[float, float], heading: float, level: float, track_level: float) -> bool:
+        """Whether the stroke breaks the referee's undermining rule (a trial cut, put back)."""
+        if level >= track_level:
+            return False  # nothing is cut below the tracks' ground
+        e = self.exc
+        rows, cols = self._window(contact, heading)
+        saved = self.z[rows, cols].copy()
+        jj, ii, _ = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
+        before = self.z[jj, ii]
+        apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
+        cut = self.z[jj, ii] < before
+        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
+        self.z[rows, cols] = saved
+        return excess > -ABS_TOL
+
+    def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
+        """Rows and columns of the grid holding every cell a stroke from ``contact`` may cut."""
+        e = self.exc
+        r, (x0, y0), (ny, nx) = self.terrain.resolution, self.terrain.origin, self.z.shape
+        ends_x = (contact[0], contact[0] + math.cos(heading) * e.max_drag_length)
+        ends_y = (contact[1], contact[1] + math.sin(heading) * e.max_drag_length)
+        pad = e.bucket_width / 2 + 2 * r  # apply_cut touches cells within width/2 + r of the stroke
+        cols = slice(max(int((min(ends_x) - pad - x0) // r), 0), min(int((max(ends_x) + pad - x0) // r) + 2, nx))
+        rows = slice(max(int((min(ends_y) - pad - y0) // r), 0), min(int((max(ends_y) + pad - y0) // r) + 2, ny))
+        return rows, cols
 
     def dig(self, best: tuple[float, tuple[float, float], float, float]) -> None:
         _, contact, heading, depth = best
@@ -186,6 +256,8 @@ class _Greedy:
         dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
         level = self.terrain.height_at(contact[0], contact[1], self.z) - depth
         self.bucket = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
+        self._cut_since.append(self._window(contact, heading))
+        self._dug_since.append(self._cut_since[-1])
         self.actions.append(Dig("excavator", self.t, self.t + dur, contact, heading, depth, e.max_drag_length))
         self.t += dur
         self.turn = math.atan2(contact[1] - self.base.y, contact[0] - self.base.x) - self.base.yaw
@@ -217,17 +289,64 @@ class _Greedy:
         return d - r <= self.exc.reach_max - 1e-3 and d + r >= self.exc.reach_min + 1e-3 and d >= self.exc.clearance + 0.05
 
     def reachable_volume(self, bases: np.ndarray) -> np.ndarray:
-        e = self.exc
-        excess = np.where(self.in_area, np.clip(self.z - self.floor, 0.0, e.max_cut_depth * 2), 0.0)
-        rows = np.nonzero(excess.ravel() > 1e-3)[0]
-        if rows.size == 0:
+        """Material (m³, up to two cut depths a cell) in the dig area whose cell centres lie in
+        each base's dig annulus, for all ``bases`` (n×2) at once.
+
+        Each grid row meets the annulus in at most two column intervals; row-wise prefix sums
+        of the material give each interval's sum in O(1), so a base costs one lookup per row
+        in reach rather than a pass over the whole map.
+        """
+        e, hm = self.exc, self.terrain
+        r, (x0, y0) = hm.resolution, hm.origin
+        r_in, r_out = e.reach_min + e.max_drag_length, e.reach_max
+        bx, by = bases[:, :1], bases[:, 1:]
+        # rows whose centre may lie within r_out of each base: (n bases × rows in reach)
+        j = np.floor((by - r_out - y0) / r).astype(int) + np.arange(int(math.ceil(2 * r_out / r)) + 2)
+        dy2 = (y0 + (j + 0.5) * r - by) ** 2
+        ny, nx = self.z.shape
+        rows = (j >= 0) & (j < ny) & (dy2 <= r_out**2)
+        if not rows.any():
             return np.zeros(len(bases))
-        x, y, w = self.cx.ravel()[rows], self.cy.ravel()[rows], excess.ravel()[rows] * self.terrain.cell_area
-        out = np.empty(len(bases))
-        for k, (bx, by) in enumerate(bases):
-            d = np.hypot(x - bx, y - by)
-            out[k] = w[(d >= e.reach_min + e.max_drag_length) & (d <= e.reach_max)].sum()
-        return out
+        band = slice(int(j[rows].min()), int(j[rows].max()) + 1)  # only the rows some base reaches
+        excess = np.where(self.in_area[band], np.clip(self.z[band] - self.floor, 0.0, e.max_cut_depth * 2), 0.0)
+        w = np.where(excess > 1e-3, excess * hm.cell_area, 0.0)
+        prefix = np.zeros((w.shape[0], nx + 1))
+        np.cumsum(w, axis=1, out=prefix[:, 1:])
+        jc = np.clip(j - band.start, 0, w.shape[0] - 1)
+
+        def span(half: np.ndarray, closed: bool) -> np.ndarray:
+            """Sum of the row's cells with centre within ``half`` of bx (closed or open)."""
+            lo = (bx - half - x0) / r - 0.5
+            hi = (bx + half - x0) / r - 0.5
+            i_lo = np.ceil(lo) if closed else np.floor(lo) + 1
+            i_hi = np.floor(hi) if closed else np.ceil(hi) - 1
+            i_lo = np.clip(i_lo, 0, nx).astype(int)
+            i_hi = np.clip(i_hi + 1, 0, nx).astype(int)  # exclusive end
+            return np.where(i_hi > i_lo, prefix[jc, i_hi] - prefix[jc, i_lo], 0.0)
+
+        outer = span(np.sqrt(np.maximum(r_out**2 - dy2, 0.0)), closed=True)
+        inner = np.where(dy2 < r_in**2, span(np.sqrt(np.maximum(r_in**2 - dy2, 0.0)), closed=False), 0.0)
+        return np.where(rows, outer - inner, 0.0).sum(axis=1)
+
+    def station_volumes(self, bases: np.ndarray) -> np.ndarray:
+        """:meth:`reachable_volume` of the station grid ``bases``, kept between relocations:
+        only the stations within reach of what was dug since are scored again, so a relocation
+        costs what the digs changed, not the size of the map."""
+        cached = self._stations
+        if cached is None or cached[0].shape != bases.shape or not np.array_equal(cached[0], bases):
+            vol = self.reachable_volume(bases)
+        else:
+            vol = cached[1]
+            if self._dug_since:
+                r, (x0, y0), reach = self.terrain.resolution, self.terrain.origin, self.exc.reach_max + self.terrain.resolution
+                rows = (min(w[0].start for w in self._dug_since), max(w[0].stop for w in self._dug_since))
+                cols = (min(w[1].start for w in self._dug_since), max(w[1].stop for w in self._dug_since))
+                near = ((bases[:, 0] >= x0 + cols[0] * r - reach) & (bases[:, 0] <= x0 + cols[1] * r + reach)
+                        & (bases[:, 1] >= y0 + rows[0] * r - reach) & (bases[:, 1] <= y0 + rows[1] * r + reach))
+                vol[near] = self.reachable_volume(bases[near])
+        self._dug_since.clear()
+        self._stations = (bases, vol)
+        return vol
 
     def relocate(self, visited: set[tuple[float, float]], stay: bool = False) -> bool:
         """Drive to a new station (or, with ``stay``, only bring the truck); False if none works."""
@@ -238,7 +357,7 @@ class _Greedy:
         s = self.cfg.station_step
         gx, gy = np.meshgrid(np.arange(xmin - pad, xmax + pad + 1e-9, s), np.arange(ymin - pad, ymax + pad + 1e-9, s))
         bases = np.stack([gx.ravel(), gy.ravel()], axis=1)
-        vol = self.reachable_volume(bases)
+        vol = self.station_volumes(bases)
         travel = np.hypot(bases[:, 0] - self.base.x, bases[:, 1] - self.base.y)
         score = vol - self.cfg.travel_penalty * travel
         for k in np.argsort(-score):
@@ -265,7 +384,11 @@ class _Greedy:
         for dist in (self.cfg.truck_distance, self.cfg.truck_distance + 1.0, self.exc.clearance + 0.3):
             for a in np.linspace(-math.pi, math.pi, 24, endpoint=False):
                 spots.append((base.x + dist * math.cos(a), base.y + dist * math.sin(a)))
-        outside = [p for p in spots if not self.dig_area.contains(Point(p)) and not any(ko.contains(Point(p)) for ko in self.keep_outs)]
+        x, y = np.array(spots).T
+        inside = shapely.contains_xy(self.dig_area, x, y)
+        for ko in self.keep_outs:
+            inside |= shapely.contains_xy(ko, x, y)
+        outside = [p for p, bad in zip(spots, inside) if not bad]
         return sorted(outside, key=lambda p: math.hypot(p[0] - self.truck.x, p[1] - self.truck.y))
 
     def _clear(self, a: tuple[float, float], b: tuple[float, float], static: Pose) -> bool:

@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from earthbench.errors import ScenarioError
 from earthbench.world import Heightmap
@@ -193,6 +192,8 @@ def fit_rbf(
     gram = np.kron(ay.T @ ay, ax.T @ ax)  # row-major w = vec(W[ny, nx])
     gram[np.diag_indices_from(gram)] += regularization * n_cells
     rhs = (ay.T @ z @ ax).reshape(-1)
+    import scipy.linalg  # here, not at import, so importing a planner stays cheap
+
     chol = scipy.linalg.cholesky(gram, lower=False)  # gram = Rᵀ R
     c = scipy.linalg.solve_triangular(chol, rhs, trans="T")
     if solver == "cvxpy":

@@ -47,3 +47,60 @@ def test_time_per_m3_never_beats_the_lower_bound(seed):
     m = evaluate(sc, plan, judge(sc, plan))
     assert m["time_per_m3"] >= lower_bound_time_per_m3(sc)
     assert m["time_per_m3_ratio"] >= 1.0
+
+
+# -- the vectorised scoring is the per-point computation it replaced -------------------------
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import numpy as np
+
+from earthbench.cut import apply_cut
+from planners.greedy import _Greedy, GreedyConfig
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-2.0, 14.0), st.floats(-2.0, 8.0)), min_size=1, max_size=30))
+def test_heights_at_is_height_at_for_every_point(points):
+    terrain = rbf(3, 1.0, n_bases=14).terrain
+    x, y = np.array(points).T
+    assert terrain.heights_at(x, y).tolist() == [terrain.height_at(a, b) for a, b in points]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.floats(-4.0, 16.0), st.floats(-4.0, 10.0)), min_size=1, max_size=8), st.integers(0, 4))
+def test_station_volumes_are_the_direct_sum_over_the_annulus(bases, seed):
+    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    e = g.exc
+    excess = np.where(g.in_area, np.clip(g.z - g.floor, 0.0, e.max_cut_depth * 2), 0.0)
+    w = np.where(excess > 1e-3, excess, 0.0) * g.terrain.cell_area
+    direct = []
+    for bx, by in bases:
+        d = np.hypot(g.cx - bx, g.cy - by)
+        direct.append(w[(d >= e.reach_min + e.max_drag_length) & (d <= e.reach_max)].sum())
+    assert g.reachable_volume(np.array(bases)) == pytest.approx(direct, rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
+    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    g.base = g.base.__class__(6.0, 3.0, 0.0)  # a station in the middle of the map
+    p, h, _, level, _ = g.candidates()
+    before = g.z.copy()
+    for k in range(0, len(p), max(len(p) // 40, 1)):
+        contact, e = (float(p[k, 0]), float(p[k, 1])), g.exc
+        on_copy = apply_cut(g.terrain, before.copy(), contact, float(h[k]), e.bucket_width, e.max_drag_length, float(level[k]), e.bucket_capacity)
+        assert g.trial_cut(contact, float(h[k]), float(level[k])) == on_copy
+        assert np.array_equal(g.z, before)
+
+
+@pytest.mark.parametrize("planner", ["greedy", "singh-cannon-backhoe"])
+def test_linear_planners_complete_a_large_scale_target(planner):
+    from earthbench import PLANNERS
+
+    sc = rbf(0, 64.0, n_bases=480, size=(48.0, 24.0), truck_capacity=80.0)
+    plan = PLANNERS.get(planner)().plan(sc)
+    v = judge(sc, plan)
+    assert v.valid, v.violations[:3]
+    assert evaluate(sc, plan, v)["volume_ratio"] >= 0.95

@@ -241,3 +241,19 @@ def test_fig11_digs_move_down_the_face_and_the_machine_moves_when_nothing_is_lef
     station = type(ses.base)(end[1], end[2], end[3])
     assert ses.best_dig(ses.coarse_plan(station, ses.v_min), 0, station, 0.0, ses.v_min)[1] is not None
     assert len(digs) > sum(1 for d in digs if d["station"] == 0)
+
+
+def test_station_convolution_is_the_direct_sum():
+    """The stations' reach scores: every output cell is the sum of the blocks under the kernel."""
+    from planners.singh_cannon.backhoe import _convolve_full
+
+    rng = np.random.default_rng(5)
+    blocks = rng.uniform(0.0, 1.0, (7, 11))
+    kernel = (rng.uniform(size=(5, 3)) > 0.4).astype(float)  # asymmetric, so a flipped kernel fails
+    out = _convolve_full(blocks, kernel)
+    assert out.shape == (11, 13)
+    for i in range(11):
+        for j in range(13):
+            want = sum(blocks[a, b] * kernel[i - a, j - b] for a in range(7) for b in range(11)
+                       if 0 <= i - a < 5 and 0 <= j - b < 3)
+            assert out[i, j] == pytest.approx(want, abs=1e-12)

@@ -22,7 +22,7 @@ PINNED = {
     "paper-extensive": ("7bcd71d54536530206b7fea12e231a6f55c8f0ab14406da31dfd52795f327caf", 40),
     "bench": ("7e0dffdf3e21c6384d1c8da2780a59918d75e64918212234d104925f6670f1a1", 20),
     "dem": ("5e856db285831e09db36da3d4bc7e9538095b4d270c183027760d14e1c684880", 20),
-    "scale": ("15c8dca18688c5dc9235bdfc53d61affe0da5d83c613413346a6d7a843d58f63", 15),
+    "scale": ("bba4c64802b31e045fa16718ded99996bd69f0cffc70bca0b93c9a88e828cbb0", 40),
     "standard": ("ee060f3ffea5a59bde3690940dabe22d47930d1fe85dc85a313d5a1d04d36b55", 110),
     "paper-separate-sweep": ("2b7c6f2a2ff0652b89206f0b399c5a4e90d6b4262b6f603a5bd050cd26b6bfa8", 10),
 }
@@ -69,6 +69,24 @@ def test_scale_targets_grow_with_area(suites):
         round(s.task.target_volume / ((s.terrain.extent[1]) * (s.terrain.extent[3])), 9) for s in suites["scale"].scenarios
     }
     assert per_area == {round(4.0 / 72.0, 9)}
+
+
+def test_scale_is_a_ladder_of_four_sizes_up_to_96_by_48_m(suites):
+    by_size: dict[tuple[float, float], list] = {}
+    for sc in suites["scale"].scenarios:
+        by_size.setdefault((sc.terrain.extent[1], sc.terrain.extent[3]), []).append(sc)
+    assert sorted(by_size) == [(12.0, 6.0), (24.0, 12.0), (48.0, 24.0), (96.0, 48.0)]
+    capacity = {12.0: 10.0, 24.0: 20.0, 48.0: 80.0, 96.0: 320.0}
+    for (lx, ly), scs in by_size.items():
+        assert sorted(sc.meta["seed"] for sc in scs) == list(range(10))
+        for sc in scs:
+            assert sc.terrain.z.shape == (round(ly / 0.05), round(lx / 0.05))
+            assert sc.meta["n_bases"] == round(30 * lx * ly / 72)
+            assert sc.machines.truck.capacity == capacity[lx]
+            # the paper's poses as offsets from the map's corners: the same drive onto every map
+            m = sc.machines
+            assert (m.excavator_pose.x, m.excavator_pose.y, m.truck_pose.x, m.truck_pose.y) == (lx + 1.0, ly + 1.2, 2.0, ly + 7.0)
+            assert sc.budget.wall_s == 600.0
 
 
 def test_standard_is_the_union_and_shares_digests(suites):

@@ -170,19 +170,6 @@ class Candidates:
         return k if q[k] > 0 else None
 
 
-def bilinear(terrain: Heightmap, z: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Vectorised :meth:`Heightmap.height_at` (same clamping and arithmetic)."""
-    ny, nx = z.shape
-    fx = np.clip((x - terrain.origin[0]) / terrain.resolution - 0.5, 0.0, nx - 1.0)
-    fy = np.clip((y - terrain.origin[1]) / terrain.resolution - 0.5, 0.0, ny - 1.0)
-    i0 = np.minimum(fx.astype(int), nx - 2)
-    j0 = np.minimum(fy.astype(int), ny - 2)
-    tx, ty = fx - i0, fy - j0
-    top = z[j0, i0] * (1 - tx) + z[j0, i0 + 1] * tx
-    bot = z[j0 + 1, i0] * (1 - tx) + z[j0 + 1, i0 + 1] * tx
-    return top * (1 - ty) + bot * ty
-
-
 class RadialLine:
     """The cells and workspace limits of one radial line (base, bearing) for the bucket width.
 
@@ -277,7 +264,7 @@ def evaluate(
     alpha = np.asarray(alpha, dtype=float)
     h = model.depth(alpha, spec)
     cx, cy = line.bx + line.ux * d, line.by + line.uy * d
-    level = bilinear(terrain, z, cx, cy) - h
+    level = terrain.heights_at(cx, cy, z) - h
     inner = line.inner_limit(d)
     drag_max = np.minimum(spec.max_drag_length, d - inner)
     ok = (d <= spec.reach_max + 1e-9) & (d >= spec.reach_min) & (drag_max >= model.min_drag)

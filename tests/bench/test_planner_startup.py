@@ -1,0 +1,32 @@
+"""Case start-up per built-in planner: a fresh interpreter importing the planner and making it,
+as a case process does before its solve starts. Goal (issue 18): ≤ 0.3 s each.
+
+Two baselines run next to them, so the planner's own share can be read off: the bare
+interpreter and the earthbench core (``import earthbench``: numpy, shapely, the referee).
+Run with ``python -m pytest tests/bench/test_planner_startup.py --benchmark-only``.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from importlib.metadata import entry_points
+
+import pytest
+
+BUILT_IN = sorted((e.name, e.value) for e in entry_points(group="earthbench.planners") if e.value.startswith("planners."))
+BASELINES = [("interpreter", "pass"), ("earthbench core", "import earthbench")]
+
+
+def _code(target: str) -> str:
+    module, _, attr = target.partition(":")
+    return f"import importlib; getattr(importlib.import_module({module!r}), {attr!r})()"
+
+
+@pytest.mark.parametrize(("what", "code"), BASELINES + [(name, _code(t)) for name, t in BUILT_IN],
+                         ids=[b[0] for b in BASELINES] + [name for name, _ in BUILT_IN])
+def test_startup(benchmark, what, code):
+    def start() -> int:
+        return subprocess.run([sys.executable, "-c", code], check=True).returncode
+
+    assert benchmark.pedantic(start, rounds=7, iterations=1, warmup_rounds=1) == 0
