@@ -15,7 +15,6 @@ import functools
 import math
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from ..cut import charge_along, footprint, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, loader_dump_excess, wrap
@@ -127,6 +126,8 @@ def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path:
     j0, j1 = max(j.min() - pad, 0), min(j.max() + pad + 1, ny)
     if i0 >= i1 or j0 >= j1 or not high[j0:j1, i0:i1].any():
         return STEP_FLOOR, float(path[0, 1]), float(path[0, 2])
+    from scipy.ndimage import distance_transform_edt  # only where a path nears high ground
+
     dist = distance_transform_edt(~high[j0:j1, i0:i1]) * r
     inside = (i >= i0) & (i < i1) & (j >= j0) & (j < j1)
     d = np.where(inside, dist[np.clip(j - j0, 0, j1 - j0 - 1), np.clip(i - i0, 0, i1 - i0 - 1)], 0.0)

@@ -503,6 +503,8 @@ class Session:
             tried += 1
             path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
             pose = Pose(path[-1][1], path[-1][2], path[-1][3])
+            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - 0.01:
+                continue  # the referee's tilt rule
             regions = self.coarse_plan(pose, v_min)
             idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
             if ch is None:
