@@ -1,32 +1,47 @@
-"""Merging results stores from several machines into one (``earthbench merge``).
+"""Merging results stores from several machines into one (``earthbench merge``), and the
+submission bundle that carries one planner's runs to another machine (``earthbench export``).
 
 Every input is checked before anything is written, and the merge is refused (nothing is
-written) when:
+written; a new output is not even created) when:
 
 * a run's key (scenario digest, planner, version, config hash) is already in the output or
   occurs in two inputs — a duplicate run would be counted twice;
 * a suite name has more than one digest across the output and the inputs (the suite file
   changed between machines), or a run is labelled with a suite digest that its store does
-  not know — those rows would be published under the wrong suite.
+  not know — those rows would be published under the wrong suite;
+* :func:`earthbench.verify.audit` finds a run that does not hold: its plan re-judged against
+  its stored scenario document gives other referee figures (unless ``rescore``, which merges
+  the re-judged figures instead), it claims a verdict without a plan, its scenario document
+  or suite does not reproduce its digest, or its threshold is not its suite's.
 
-Rows are then copied through the store's own API (:meth:`Store.register_suite`,
+Runs without a plan (timeout, memory, crashed, error) are merged with the reason the harness
+that ran them gave; nothing in a store can re-check it, and the merge counts them apart.
+Solve times, CPU times and memory are carried as measured, with the environment stamp of the
+machine that measured them.
+
+Rows are copied through the store's own API (:meth:`Store.register_suite`,
 :meth:`Store.record`), one transaction per run, so the output has the same schema, the same
 deduplicated environments, configurations and scenarios as a store written by
-``earthbench run``. Each scenario document is checked to reproduce its digest. What is not
-carried: ``rescored_at`` (the merged run counts as freshly recorded).
+``earthbench run``. What is not carried: ``rescored_at`` (the merged run counts as freshly
+recorded).
 """
 
 from __future__ import annotations
 
+import difflib
 import json
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+import os
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from .errors import StoreError
-from .runner import Case, CaseResult, PlannerRef
+from .harness.cases import Case, CaseResult, PlannerRef
 from .store import Store, _decompress
+from .verify import Judgement, audit
 
 
 class MergeError(StoreError):
@@ -54,9 +69,13 @@ class _SuiteRecord:
 
 @dataclass
 class MergeReport:
-    runs: int = 0
-    suites: int = 0
-    per_input: dict[str, int] = field(default_factory=dict)
+    runs: int = 0                                              #: runs written
+    suites: int = 0                                            #: suite versions new to the output
+    per_input: dict[str, int] = field(default_factory=dict)    #: runs written per input
+    agreed: int = 0                                            #: re-judged and equal to what was stored
+    rescored: int = 0                                          #: re-judged, differed, merged with the new figures
+    unjudged: Counter = field(default_factory=Counter)         #: runs without a plan, by reason (not re-checkable)
+    changes: list[str] = field(default_factory=list)           #: with rescore: each re-scored run and what differed
 
 
 def _suites(store: Store) -> list[_SuiteRecord]:
@@ -136,37 +155,153 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
     return case, res
 
 
-def merge(out_path: str | Path, in_paths: Sequence[str | Path]) -> MergeReport:
-    """Merge the stores ``in_paths`` into ``out_path`` (created if missing); see the module doc."""
+@contextmanager
+def _new_store(path: Path) -> Iterator[Store]:
+    """A store that appears at ``path`` only once it is complete: built beside it, then renamed.
+
+    A refusal or a failure half-way leaves no file behind (no empty database). Nobody reads
+    the file before it is complete, so its per-run transactions skip the disk sync; one
+    synced checkpoint makes it durable before the rename.
+    """
+    if not path.parent.is_dir():
+        raise MergeError(f"the folder {str(path.parent)!r} for {str(path)!r} does not exist; create it first")
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        with Store(tmp) as st:
+            st.db.execute("PRAGMA synchronous=OFF")
+            yield st
+            st.db.execute("PRAGMA synchronous=FULL")
+            st.db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        os.replace(tmp, path)
+    finally:
+        for p in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            p.unlink(missing_ok=True)
+
+
+def _copy(src: Store, rows: Sequence[Any], out: Store, judgements: dict[int, Judgement] | None = None,
+          scenarios: dict[str, Any] | None = None) -> int:
+    """Copy ``rows`` of ``src`` into ``out`` through :meth:`Store.record`; a run in ``judgements`` takes the re-judged figures.
+
+    ``scenarios``: the stored scenarios already read (and checked) by digest.
+    """
+    scenarios = dict(scenarios or {})
+    out.copy_scenarios(src, dict.fromkeys(r["scenario_digest"] for r in rows))
+    n = 0
+    for row in rows:
+        case, res = _case_and_result(src, row, scenarios)
+        j = (judgements or {}).get(row["id"])
+        if j is not None:
+            res = replace(res, reason=j.reason, metrics=j.metrics, violations=j.violations, error=j.error)
+        if out.record(case, res, plan_blob=row["plan"] if res.plan_json is not None else None):
+            n += 1
+    return n
+
+
+def _register(out: Store, suites: Sequence[_SuiteRecord]) -> int:
+    new = 0
+    for s in suites:
+        ver = out.suite_version(s.name)
+        if ver is None or ver["digest"] != s.digest:
+            new += 1
+        out.register_suite(s)
+    return new
+
+
+def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool = False) -> MergeReport:
+    """Merge the stores ``in_paths`` into ``out_path`` (created if missing); see the module doc.
+
+    Every incoming run is re-judged first; with ``rescore``, runs whose stored figures differ
+    are merged with the re-judged ones (counted in ``rescored``) instead of refusing the merge.
+    """
     if not in_paths:
         raise MergeError("name at least one input database")
+    out_path = Path(out_path)
     resolved = [Path(p).resolve() for p in in_paths]
-    if Path(out_path).resolve() in resolved:
+    if out_path.resolve() in resolved:
         raise MergeError(f"the output {str(out_path)!r} is also an input")
     if len(set(resolved)) != len(resolved):
         raise MergeError("an input database is named twice")
-    inputs = [Store(p, create=False) for p in in_paths]
+    if out_path.is_dir():
+        raise MergeError(f"the output {str(out_path)!r} is a directory, not a results database file")
+    inputs = [Store(p, read_only=True) for p in in_paths]
     try:
-        with Store(out_path) as out:
-            out.check_writable()
-            problems = check(out, inputs)
+        existing = Store(out_path, create=False) if out_path.exists() else None
+        try:
+            if existing is not None:
+                existing.check_writable()
+            problems = check(existing, inputs)
+            audits = [audit(src) for src in inputs]
+            for a in audits:
+                problems += a.problems(rescore=rescore)
             if problems:
-                raise MergeError("merge refused, nothing was written:\n  " + "\n  ".join(problems))
+                shown = problems[:20] + ([f"… and {len(problems) - 20} more"] if len(problems) > 20 else [])
+                raise MergeError("merge refused, nothing was written:\n  " + "\n  ".join(shown)
+                                 + ("" if rescore or not any(a.differ for a in audits) else
+                                    "\n  (runs whose stored figures differ from the re-judged ones merge with --rescore, "
+                                    "which replaces them)"))
             report = MergeReport()
-            for src in inputs:
-                for s in _suites(src):
-                    if out.suite_version(s.name) is None or out.suite_version(s.name)["digest"] != s.digest:
-                        report.suites += 1
-                    out.register_suite(s)
-                scenarios: dict[str, Any] = {}
-                n = 0
-                for row in src.db.execute("SELECT * FROM runs ORDER BY id"):
-                    case, res = _case_and_result(src, row, scenarios)
-                    if out.record(case, res):
-                        n += 1
-                report.per_input[str(src.path)] = n
-                report.runs += n
+            for a in audits:
+                report.agreed += a.agreed
+                report.rescored += len(a.differ)
+                report.changes += [f"{a.path}: {f}" for f in a.differ]
+                report.unjudged.update(a.unjudged)
+
+            def fill(out: Store) -> None:
+                for src, a in zip(inputs, audits):
+                    report.suites += _register(out, _suites(src))
+                    rows = src.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
+                    changed = {f.run_id: a.judgements[f.run_id] for f in a.differ if f.run_id in a.judgements}
+                    n = _copy(src, rows, out, changed, a.scenarios)
+                    report.per_input[str(src.path)] = n
+                    report.runs += n
+
+            if existing is not None:
+                fill(existing)
+            else:
+                with _new_store(out_path) as out:
+                    fill(out)
             return report
+        finally:
+            if existing is not None:
+                existing.close()
     finally:
         for s in inputs:
             s.close()
+
+
+def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[str]) -> MergeReport:
+    """Write a submission bundle: the runs of ``planners`` on ``suite`` with what verifying them needs.
+
+    The bundle is a new results store (runs with their plans, the scenario documents, the
+    planner configurations, the environments and the suite versions the runs are labelled
+    with), so ``merge`` takes it like any store and re-judges every plan in it.
+    """
+    out_path = Path(out_path)
+    if out_path.exists():
+        raise MergeError(f"{str(out_path)!r} already exists; export writes a new bundle (choose another name or remove it)")
+    if not planners:
+        raise MergeError("name the planner(s) to export with --planner")
+    with Store(db, read_only=True) as src:
+        ver = src.suite_version(suite)
+        if ver is None:
+            known = [r[0] for r in src.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+            close = difflib.get_close_matches(suite, known, n=3, cutoff=0.5)
+            raise MergeError(f"suite {suite!r} has no runs in {str(db)!r}" + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
+                             + f" Suites there: {', '.join(known) or '(none)'}")
+        stored = [r[0] for r in src.db.execute("SELECT DISTINCT planner FROM runs ORDER BY planner")]
+        for p in planners:
+            if p not in stored:
+                close = difflib.get_close_matches(p, stored, n=3, cutoff=0.5)
+                raise MergeError(f"planner {p!r} has no runs in {str(db)!r}" + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
+                                 + f" Planners there: {', '.join(stored) or '(none)'}")
+        members = {r[0] for r in src.db.execute("SELECT scenario_digest FROM suite_scenarios WHERE suite_id=?", (ver["id"],))}
+        rows = [r for r in sorted(src.query(planner=planners), key=lambda r: r["id"]) if r["scenario_digest"] in members]
+        if not rows:
+            raise MergeError(f"no runs of {', '.join(planners)} on suite {suite!r} (digest {ver['digest'][:12]}…) in {str(db)!r}")
+        labels = {(r["suite"], r["suite_digest"]) for r in rows} | {(ver["name"], ver["digest"])}
+        report = MergeReport()
+        with _new_store(out_path) as out:
+            report.suites = _register(out, [s for s in _suites(src) if (s.name, s.digest) in labels])
+            report.runs = _copy(src, rows, out)
+        report.per_input[str(db)] = report.runs
+        return report

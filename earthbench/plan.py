@@ -159,19 +159,27 @@ class Plan:
         return cls(actions, pred, info)
 
     @classmethod
-    def from_json(cls, text_or_path: str | Path) -> Plan:
-        text = str(text_or_path)
-        if not text.lstrip().startswith("{"):
-            path = Path(text_or_path)
-            if not path.is_file():
-                raise PlanFormatError(f"plan file {str(path)!r} not found")
-            text = path.read_text()
+    def from_json(cls, source: str | Path) -> Plan:
+        """A plan from JSON text (a ``str``) or from a file (a :class:`~pathlib.Path`).
+
+        A ``str`` is only ever text: a plan whose text happens to be a file name is judged as
+        that text, never as the file it names.
+        """
+        if isinstance(source, Path):
+            try:
+                source = source.read_text()
+            except FileNotFoundError:
+                raise PlanFormatError(f"plan file {str(source)!r} not found") from None
+            except (OSError, UnicodeDecodeError) as exc:
+                raise PlanFormatError(f"cannot read plan file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
         try:
-            return cls.from_dict(json.loads(text))
+            return cls.from_dict(json.loads(source))
         except json.JSONDecodeError as exc:
             raise PlanFormatError(f"plan is not valid JSON: {exc}") from None
         except RecursionError:
             raise PlanFormatError("plan JSON is nested too deeply") from None
+        except ValueError as exc:  # e.g. an integer too long to convert
+            raise PlanFormatError(f"plan is not valid JSON: {exc}") from None
 
 
 def _json_default(o: Any) -> Any:

@@ -10,7 +10,7 @@ import sys
 import time
 from typing import TextIO
 
-from .runner import REASONS, Case, CaseResult
+from .harness.cases import REASONS, Case, CaseResult
 
 
 def _clock(seconds: float) -> str:

@@ -4,7 +4,10 @@
 
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
   (:data:`metrics.aggregate.RANKING_RULE`), with a reproducibility stamp (project commits,
-  suite digest, CPU models and cores, run dates, generation date) and the figures;
+  suite digest, CPU models and cores, run dates, generation date), what each figure rests on
+  (referee figures re-judgeable from the stored plans; solve times from the machine named for
+  each planner, † on solve-time columns that mix machines; the latest ``earthbench verify``
+  spot re-timing of each planner version) and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
@@ -48,6 +51,7 @@ from metrics.profiles import cost_matrix, profile
 
 from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
 from .store import Store, load_runs
+from .verify import latest_spot_checks, machine_label
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
 FAILURE_COLUMNS = ("invalid", "timeout", "memory", "error", "crashed")
@@ -180,6 +184,14 @@ class Stamp:
     last: str
     generated: str
     n_models: int = 1
+    solve_machines: list[str] = field(default_factory=list)  #: per planner: the machines its solve times come from
+    spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
+    n_machines: int = 1
+
+    @property
+    def mixed(self) -> bool:
+        """Whether the table's solve times were measured on more than one machine."""
+        return self.n_machines > 1
 
     def lines(self) -> list[str]:
         commits = ", ".join(self.commits[:3]) + (f" and {len(self.commits) - 3} more" if len(self.commits) > 3 else "")
@@ -189,10 +201,32 @@ class Stamp:
             f"project commit: {commits or 'unknown'}",
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
+            PROVENANCE,
+            *(["† solve-time columns mix machines: compare those figures only between rows from the same machine"] if self.mixed else []),
         ]
 
+    def planner_lines(self) -> list[str]:
+        """Per planner: where its solve times come from, and its spot re-timings (text from the store)."""
+        return [*self.solve_machines, *(f"spot re-timing: {line}" for line in self.spot_checks)]
 
-def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str) -> Stamp:
+
+#: What each figure of a table rests on (stated in every stamp).
+PROVENANCE = ("provenance: success, volume and time-per-m³ figures are the referee's, recomputed from the stored plans "
+              "when stores are merged (`earthbench merge` re-judges every plan); solve times, CPU times and memory are "
+              "as measured on the machine that ran each case (below), and can only be spot-checked by rerunning "
+              "(`earthbench verify`)")
+
+
+def _machine_of(runs: pd.DataFrame) -> pd.Series:
+    """Each run's machine, labelled as :func:`earthbench.verify.machine_label` does."""
+    cols = {"hostname": "hostname", "cpu_model": "cpu_model", "cores": "cpu_cores"}
+    get = {k: (runs[c] if c in runs else pd.Series(None, index=runs.index)) for k, c in cols.items()}
+    return pd.Series([machine_label({k: (None if pd.isna(get[k].iloc[i]) else get[k].iloc[i]) for k in cols})
+                      for i in range(len(runs))], index=runs.index, dtype=object)
+
+
+def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = ()) -> Stamp:
+    """The stamp of one table; ``spot_checks`` (:class:`earthbench.verify.SpotCheck`) of its planners are listed."""
     def uniq(col: str) -> list[str]:
         return sorted({str(v) for v in runs[col].dropna()}) if col in runs else []
 
@@ -203,9 +237,24 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str) -> Stamp:
     digests = uniq("suite_digest")
     started, finished = uniq("started_at"), uniq("finished_at")
     thr = runs["threshold"].dropna()
+    timed = runs[runs["solve_time_s"].notna()] if "solve_time_s" in runs else runs.iloc[:0]
+    machine = _machine_of(timed)
+    solve_machines = []
+    for solver, g in machine.groupby(timed["solver"] if "solver" in timed else timed["planner"], sort=True):
+        where = "; ".join(f"{m} ({n} run{'s' if n != 1 else ''})" for m, n in g.value_counts().sort_index().items())
+        solve_machines.append(f"solve times of {solver}: {where}")
+    versions = set(zip(runs["planner"], runs["planner_version"])) if len(runs) else set()
+    spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
-                 max(1, len(uniq("cpu_model"))))
+                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()))
+
+
+def mark_mixed_solve_columns(rows: list[dict[str, Any]], mixed: bool) -> list[dict[str, Any]]:
+    """Headings of solve-time columns get a † when the table's solve times come from several machines."""
+    if not mixed:
+        return rows
+    return [{**r, "cells": [((h + " †") if h.startswith("Solve") else h, text, key) for h, text, key in r["cells"]]} for r in rows]
 
 
 # -- figures ---------------------------------------------------------------------------------------
@@ -416,7 +465,7 @@ def html_table(rows: list[dict[str, Any]], caption: str = "", cls: str = "sortab
 RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner"), ("reason", "Reason"),
                ("success", "Success"), ("volume_ratio", "Volume ratio"), ("time_per_m3", "Time per m³, s"),
                ("time_per_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
-               ("cpu_model", "CPU")]
+               ("cpu_model", "CPU"), ("hostname", "Host")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_m3", "time_per_m3_ratio", "solve_time_s"}
 
 
@@ -515,7 +564,7 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         anchor = "s-" + slug(f"{s['suite']}-{s['track']}")
         parts.append(f'<section id="{e(anchor)}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
-        parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines()))}</div>')
+        parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div>')
         parts.append(html_table(s["rows"]))
         if s.get("scale_rows"):
             parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
@@ -532,6 +581,20 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
 # -- the whole leaderboard ---------------------------------------------------------------------------
 
 
+#: Leading characters that make a spreadsheet read a text cell as a formula (or a DDE call).
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_safe(df: pd.DataFrame) -> pd.DataFrame:
+    """A copy whose text cells cannot run as formulas: a leading ``=``, ``+``, ``-``, ``@``, tab or
+    carriage return gets a ``'`` before it (a planner's error text or name is not ours to trust)."""
+    out = df.copy()
+    for col in out.columns:
+        if not (pd.api.types.is_numeric_dtype(out[col]) or pd.api.types.is_datetime64_any_dtype(out[col])):
+            out[col] = out[col].astype(object).map(lambda v: "'" + v if isinstance(v, str) and v.startswith(FORMULA_STARTS) else v)
+    return out
+
+
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
             workers: int | None = None) -> Published:
@@ -541,7 +604,6 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     """
     out = Path(out)
     fig_dir = out / "figures"
-    fig_dir.mkdir(parents=True, exist_ok=True)
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
     jobs: list[tuple[str, str, tuple[Any, ...]]] = []
@@ -549,19 +611,22 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
         summary = aggregate(runs, suite_sizes(store, runs["suite"].unique()))
+        spot_checks = latest_spot_checks(store)
         result.runs, result.summary = runs, summary
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
             ssum = summary[(summary["suite"] == suite) & (summary["track"] == track)]
+            st = stamp(srun, suite, track, generated, spot_checks)
             sec: dict[str, Any] = {
-                "suite": suite, "track": track, "rows": table_rows(ssum), "stamp": stamp(srun, suite, track, generated),
+                "suite": suite, "track": track, "rows": mark_mixed_solve_columns(table_rows(ssum), st.mixed), "stamp": st,
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
-            sec["scale_rows"], job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            scale_rows, job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
+            sec["scale_rows"] = mark_mixed_solve_columns(scale_rows, st.mixed) if scale_rows else scale_rows
             if not figures:
                 continue
             if job is not None:
@@ -587,14 +652,15 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
                     jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
+    fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
     for (sec, cap, path), png in zip(captions, render_all(jobs, workers)):
         png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
         result.files += [png_path, svg_path]
         sec["figures"].append((cap, png))
         sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
     runs_csv = runs.drop(columns=[c for c in ("packages",) if c in runs])
-    runs_csv.to_csv(out / "runs.csv", index=False)
-    summary.to_csv(out / "summary.csv", index=False)
+    spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
+    spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
     (out / "README.md").write_text(markdown_page(sections, generated))
     (out / "index.html").write_text(html_page(sections, generated))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
@@ -613,7 +679,8 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         lines.append("No runs in the store.")
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
-                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "", markdown_table(s["rows"])]
+                  f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "",
+                  *(f"- {md_escape(line)}" for line in s["stamp"].planner_lines()), "", markdown_table(s["rows"])]
         if s.get("scale_rows"):
             lines += ["", "scale: cost against target volume, median [interquartile range] over seeds of the valid runs "
                       "(growth: solve s/m³ over the smallest target's).", "", markdown_table(s["scale_rows"])]

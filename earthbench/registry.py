@@ -47,6 +47,9 @@ class Registry(Generic[T]):
                 continue
             try:
                 obj = ep.load()
+            except SystemExit as exc:  # an installed plugin must not end the process that loads it
+                self.failures[ep.name] = f"{ep.value}: called sys.exit({exc.code!r}) while being imported"
+                continue
             except Exception:  # noqa: BLE001 - one broken plugin must not hide the others
                 self.failures[ep.name] = f"{ep.value}: " + traceback.format_exc(limit=3).strip().splitlines()[-1]
                 continue
@@ -152,6 +155,9 @@ def load_plugin_file(path: str | Path) -> list[str]:
     before = set(PLANNERS.names())
     try:
         spec.loader.exec_module(module)
+    except SystemExit as exc:  # a plugin must not end the process that loads it
+        del sys.modules[mod_name]
+        raise PluginError(f"plugin file {p} called sys.exit({exc.code!r}) while being imported; a plugin must only define planners") from None
     except Exception as exc:  # noqa: BLE001
         del sys.modules[mod_name]
         raise PluginError(f"plugin file {p} failed to import: {type(exc).__name__}: {exc}") from exc

@@ -34,6 +34,7 @@ import zlib
 from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
+from urllib.parse import quote
 from typing import TYPE_CHECKING, Any
 
 from .errors import StoreError
@@ -42,7 +43,7 @@ from .world import Scenario
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from .runner import Case, CaseResult
+    from .harness.cases import Case, CaseResult
     from .suite import Suite
 
 SCHEMA_VERSION = 1
@@ -124,14 +125,20 @@ def _json(obj: Any) -> str:
 class Store:
     """An open results database. Use as a context manager; writes happen in :meth:`record`."""
 
-    def __init__(self, path: str | Path = DEFAULT_DB, *, timeout: float = 10.0, create: bool = True):
+    def __init__(self, path: str | Path = DEFAULT_DB, *, timeout: float = 10.0, create: bool = True, read_only: bool = False):
+        """``read_only`` opens an existing store without ever writing to its file (an input to verify)."""
         self.path = Path(path)
-        if not create and not self.path.exists():
+        self.read_only = read_only
+        if (read_only or not create) and not self.path.exists():
             raise StoreError(f"no results database at {str(self.path)!r}; run `earthbench run SUITE --db {self.path}` first")
         if self.path.is_dir():
             raise StoreError(f"{str(self.path)!r} is a directory, not a results database file")
         try:
-            self.db = sqlite3.connect(str(self.path), timeout=timeout, isolation_level=None)
+            # read-only; without a write-ahead log beside it (no writer, nothing to replay) the file is
+            # all there is, and `immutable` keeps SQLite from creating -wal/-shm files next to it
+            ro = "mode=ro" + ("" if Path(f"{self.path}-wal").exists() else "&immutable=1")
+            target = f"file:{quote(str(self.path.resolve()))}?{ro}" if read_only else str(self.path)
+            self.db = sqlite3.connect(target, timeout=timeout, isolation_level=None, uri=read_only)
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open results database {str(self.path)!r}: {exc}") from None
         self.db.row_factory = sqlite3.Row
@@ -157,7 +164,7 @@ class Store:
         app = self.db.execute("PRAGMA application_id").fetchone()[0]
         version = self.db.execute("PRAGMA user_version").fetchone()[0]
         tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if app == 0 and not tables:
+        if app == 0 and not tables and not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("BEGIN IMMEDIATE")
             try:
@@ -179,7 +186,8 @@ class Store:
                 f"results database {str(self.path)!r} has schema version {version}, newer than this earthbench "
                 f"understands ({SCHEMA_VERSION}); upgrade earthbench to use it (it was left untouched)"
             )
-        self.db.execute("PRAGMA journal_mode=WAL")
+        if not self.read_only:
+            self.db.execute("PRAGMA journal_mode=WAL")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
@@ -229,8 +237,11 @@ class Store:
         """The most recently registered version (id, digest, threshold, …) of a suite name."""
         return self.db.execute("SELECT * FROM suites WHERE name=? ORDER BY id DESC LIMIT 1", (name,)).fetchone()
 
-    def record(self, case: Case, result: CaseResult, *, replace: bool = False) -> bool:
-        """Store one finished case in one transaction. Returns False if it was already stored."""
+    def record(self, case: Case, result: CaseResult, *, replace: bool = False, plan_blob: bytes | None = None) -> bool:
+        """Store one finished case in one transaction. Returns False if it was already stored.
+
+        ``plan_blob``: ``result.plan_json`` as another store keeps it, copied without compressing it again (merge).
+        """
         if result.reason == "cancelled":
             raise ValueError("a cancelled case is never stored")
         sc = case.scenario
@@ -260,7 +271,7 @@ class Store:
                     **{c: (None if c not in m else (int(m[c]) if isinstance(m[c], bool) else m[c])) for c in METRIC_COLUMNS},
                     "metrics": _json(m) if result.metrics is not None else None,
                     "violations": _json(list(result.violations)),
-                    "plan": _compress(result.plan_json) if result.plan_json is not None else None,
+                    "plan": plan_blob if plan_blob is not None else _compress(result.plan_json) if result.plan_json is not None else None,
                     "error": result.error, "log_tail": result.log_tail, "exit_status": result.exit_status,
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
@@ -274,6 +285,21 @@ class Store:
                 if self.db.in_transaction:
                     self.db.execute("ROLLBACK")
                 raise
+        except sqlite3.OperationalError as exc:
+            raise StoreError(self._explain(exc)) from None
+
+    def copy_scenarios(self, src: Store, digests: Iterable[str]) -> None:
+        """Copy stored scenario documents from ``src`` as they are (no re-encoding), in one transaction.
+
+        For merging: the caller has checked that each document reproduces its digest.
+        """
+        rows = [r for d in digests
+                if (r := src.db.execute("SELECT digest, id, track, target_volume, doc FROM scenarios WHERE digest=?", (d,)).fetchone())]
+        try:
+            with self.db:
+                self.db.execute("BEGIN IMMEDIATE")
+                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
+                                    [tuple(r) for r in rows])
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 

@@ -63,9 +63,25 @@ from .world import TRACKS, Budget, Scenario
 SUITE_GROUP = "earthbench.suites"
 DEFAULT_THRESHOLD = 0.9
 
+#: The most cells a generated heightmap may have (e.g. 2,000 × 2,000); a family asking for more is refused
+#: when the suite is loaded, before anything is generated.
+MAX_CELLS = 4_000_000
 _TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include")
 _FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
+
+
+def suite_digest(members: Iterable[tuple[str, str]], threshold: float) -> str:
+    """A suite version's identity from its (scenario id, scenario digest) pairs and threshold.
+
+    A function of its own so a store can recompute the digest of a suite it only lists; the
+    threshold is read as a float, so ``1`` and ``1.0`` (as SQLite gives it back) are one suite.
+    """
+    h = hashlib.sha256()
+    for sid, d in sorted(members):
+        h.update(f"{sid}\t{d}\n".encode())
+    h.update(f"threshold\t{float(threshold)!r}\n".encode())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -123,11 +139,7 @@ class Suite:
     @cached_property
     def digest(self) -> str:
         """sha256 over the sorted (id, scenario digest) pairs and the success threshold."""
-        h = hashlib.sha256()
-        for sid, d in sorted((s.id, s.digest) for s in self.scenarios):
-            h.update(f"{sid}\t{d}\n".encode())
-        h.update(f"threshold\t{self.success_threshold!r}\n".encode())
-        return h.hexdigest()
+        return suite_digest(((s.id, s.digest) for s in self.scenarios), self.success_threshold)
 
     def select(self, seeds: Iterable[int] | None = None) -> tuple[Scenario, ...]:
         """The scenarios whose seed is in ``seeds`` (all when None)."""
@@ -170,12 +182,21 @@ def load_suite(name_or_path: str | Path) -> Suite:
     if text.endswith(".toml") or p.is_file() or "/" in text:
         if not p.is_file():
             raise SuiteError(f"suite file {text!r} not found")
-        return parse_suite(p.read_text(), path=str(p), default_name=p.stem)
+        return parse_suite(_read(p), path=str(p), default_name=p.stem)
     suites = known_suites()
     if text not in suites:
         raise UnknownNameError("suite", text, suites)
     f = suites[text]
-    return parse_suite(f.read_text(), path=str(f), default_name=text)
+    return parse_suite(_read(f), path=str(f), default_name=text)
+
+
+def _read(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise SuiteError(f"suite file {str(path)!r} is not UTF-8 text (is it a TOML file?)") from None
+    except OSError as exc:
+        raise SuiteError(f"cannot read suite file {str(path)!r}: {exc.strerror}") from None
 
 
 # -- parsing ---------------------------------------------------------------------------------------
@@ -225,16 +246,89 @@ def _targets(value: Any, where: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def _check_params(gen: Any, params: dict[str, Any], where: str) -> None:
+def _check_params(gen: Any, params: dict[str, Any], where: str, path: str) -> dict[str, Any]:
+    """Check a family's parameters against the generator's signature, before anything is generated.
+
+    Unknown names, values of the wrong type (by the parameter's annotation) and a grid of more
+    than :data:`MAX_CELLS` cells (``size`` / ``resolution``) are refused; a relative ``path``
+    resolves against the suite file's folder. Returns the parameters to generate with.
+    """
+    params = dict(params)
     try:
         sig = inspect.signature(gen)
     except (TypeError, ValueError):
-        return
+        return params
     ps = list(sig.parameters.values())
-    if any(p.kind is p.VAR_KEYWORD for p in ps):
-        return
-    names = [p.name for p in ps[2:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-    _unknown(params, names, f"{where} params")
+    if not any(p.kind is p.VAR_KEYWORD for p in ps):
+        names = [p.name for p in ps[2:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        _unknown(params, names, f"{where} params")
+    for key, value in params.items():
+        p = sig.parameters.get(key)
+        if p is not None and isinstance(p.annotation, str) and not _fits(value, p.annotation):
+            raise SuiteError(f"{where} params: {key} must be {p.annotation}, got {type(value).__name__} {value!r:.60}")
+    size = params.get("size", _default(sig, "size"))
+    res = params.get("resolution", _default(sig, "resolution"))
+    if isinstance(size, (list, tuple)) and len(size) == 2 and all(isinstance(v, (int, float)) for v in (*size, res or 0)) and res:
+        if res <= 0 or min(size) <= 0:
+            raise SuiteError(f"{where} params: size and resolution must be positive, got size {list(size)}, resolution {res}")
+        cells = math.ceil(size[0] / res) * math.ceil(size[1] / res)
+        if cells > MAX_CELLS:
+            raise SuiteError(f"{where} params: size {list(size)} m at resolution {res} m is {cells:.3g} cells, "
+                             f"over the limit of {MAX_CELLS:,} cells per heightmap")
+    if isinstance(params.get("path"), str) and path and not Path(params["path"]).is_absolute():
+        params["path"] = str((Path(path).parent / params["path"]).resolve())
+    return params
+
+
+def _default(sig: inspect.Signature, name: str) -> Any:
+    p = sig.parameters.get(name)
+    return None if p is None or p.default is p.empty else p.default
+
+
+def _fits(value: Any, annotation: str) -> bool:
+    """Whether a TOML value fits a parameter annotation such as ``float | tuple[float, float]``.
+
+    Understands int, float, str, bool, None and tuple/list of those; anything else passes.
+    """
+    parts = _split(annotation, "|")
+    for part in parts:
+        part = part.strip()
+        head, _, inner = part.partition("[")
+        inner = inner[:-1] if inner.endswith("]") else inner
+        if head == "int" and isinstance(value, int) and not isinstance(value, bool):
+            return True
+        if head == "float" and isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            return True
+        if head == "str" and isinstance(value, str):
+            return True
+        if head == "bool" and isinstance(value, bool):
+            return True
+        if head in ("tuple", "list") and isinstance(value, (list, tuple)):
+            if not inner:
+                return True
+            args = _split(inner, ",")
+            if head == "list" or (len(args) == 2 and args[1].strip() == "..."):
+                if all(_fits(v, args[0]) for v in value):
+                    return True
+            elif len(args) == len(value) and all(_fits(v, a) for v, a in zip(value, args)):
+                return True
+        if head not in ("int", "float", "str", "bool", "tuple", "list", "None"):
+            return True  # an annotation this check does not understand
+    return False
+
+
+def _split(text: str, sep: str) -> list[str]:
+    """Split on ``sep`` outside brackets."""
+    out, depth, cur = [], 0, ""
+    for ch in text:
+        depth += ch == "["
+        depth -= ch == "]"
+        if ch == sep and depth == 0:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return [*out, cur]
 
 
 def _included_families(names: Any, where: str, path: str, track: str, stack: tuple[str, ...]) -> list[Family]:
@@ -255,7 +349,7 @@ def _included_families(names: Any, where: str, path: str, track: str, stack: tup
             close = difflib.get_close_matches(name, list(suites), n=3, cutoff=0.5)
             hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
             raise SuiteError(f"{where}: include {name!r} is neither a known suite nor a file.{hint} Known suites: {', '.join(sorted(suites))}.")
-        sub = parse_suite(Path(file).read_text(), path=str(file), default_name=Path(file).stem, _stack=stack + (name,))
+        sub = parse_suite(_read(Path(file)), path=str(file), default_name=Path(file).stem, _stack=stack + (name,))
         if sub.track != track:
             raise SuiteError(f"{where}: included suite {sub.name!r} is a {sub.track!r} suite; this suite's track is {track!r}")
         out.extend(dataclasses.replace(f, name=f"{sub.name}.{f.name}") for f in sub.families)
@@ -287,8 +381,8 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         raise SuiteError(f"{where}: [budget] must be a table with {', '.join(_BUDGET_KEYS)}")
     _unknown(budget_doc, _BUDGET_KEYS, f"{where} [budget]")
     for k, v in budget_doc.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-            raise SuiteError(f"{where} [budget]: {k} must be a positive number, got {v!r}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 and math.isfinite(v)):
+            raise SuiteError(f"{where} [budget]: {k} must be a positive finite number, got {v!r}")
     if "cores" in budget_doc and not isinstance(budget_doc["cores"], int):
         raise SuiteError(f"{where} [budget]: cores must be an integer, got {budget_doc['cores']!r}")
     if "memory_mb" in budget_doc and not isinstance(budget_doc["memory_mb"], int):
@@ -323,8 +417,8 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         params = fd.get("params", {})
         if not isinstance(params, dict):
             raise SuiteError(f"{fwhere}: params must be a table")
-        _check_params(gen, params, fwhere)
-        families.append(Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), dict(params)))
+        params = _check_params(gen, params, fwhere, path)
+        families.append(Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params))
     if "include" in doc:
         families.extend(_included_families(doc["include"], where, path, track, _stack + (name,)))
     if len({f.name for f in families}) != len(families):

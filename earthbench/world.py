@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import difflib
+import functools
 import hashlib
 import json
 import math
@@ -194,6 +196,8 @@ class Site:
         )
         if self.floor is not None:
             object.__setattr__(self, "floor", float(self.floor))
+        if self.open_outside not in (None, True, False):
+            raise ScenarioError(f"site.open_outside must be true, false or absent, got {self.open_outside!r}")
 
 
 @dataclass(frozen=True)
@@ -407,9 +411,12 @@ class Scenario:
         d["terrain"].pop("z")
         return d
 
-    @property
+    @functools.cached_property
     def digest(self) -> str:
-        """sha256 over canonical JSON of the content and the heightmap's little-endian bytes."""
+        """sha256 over canonical JSON of the content and the heightmap's little-endian bytes.
+
+        Computed once per object (a scenario and its read-only heightmap never change).
+        """
         h = hashlib.sha256(_canonical(self._content()).encode())
         h.update(np.ascontiguousarray(self.terrain.z, dtype="<f8").tobytes())
         return h.hexdigest()
@@ -437,49 +444,97 @@ class Scenario:
         if d.get("schema", SCENARIO_SCHEMA) != SCENARIO_SCHEMA:
             raise ScenarioError(f"unsupported scenario schema {d.get('schema')!r}; expected {SCENARIO_SCHEMA!r}")
         try:
-            t = d["terrain"]
+            t = _section(d["terrain"], "terrain")
             z = t["z"]
             if isinstance(z, dict):
                 z = np.frombuffer(base64.b64decode(z["f8_base64"]), dtype="<f8").reshape(z["shape"])
             terrain = Heightmap(tuple(t["origin"]), t["resolution"], np.asarray(z, dtype=float))
-            s = d["site"]
+            s = _section(d["site"], "site")
             site = Site(tuple(s["dig_area"]), s.get("floor"), tuple(s.get("keep_outs", ())), s.get("open_outside"))
-            m = d["machines"]
+            m = _section(d["machines"], "machines")
             machines = Machines(
-                truck=TruckSpec(**m["truck"]),
-                truck_pose=Pose(**m["truck_pose"]),
-                excavator=ExcavatorSpec(**m["excavator"]) if m.get("excavator") else None,
-                excavator_pose=Pose(**m["excavator_pose"]) if m.get("excavator_pose") else None,
-                loader=LoaderSpec(**m["loader"]) if m.get("loader") else None,
-                loader_pose=Pose(**m["loader_pose"]) if m.get("loader_pose") else None,
+                truck=_checked(TruckSpec, m["truck"], "machines.truck"),
+                truck_pose=_checked(Pose, m["truck_pose"], "machines.truck_pose"),
+                excavator=_checked(ExcavatorSpec, m["excavator"], "machines.excavator") if m.get("excavator") else None,
+                excavator_pose=_checked(Pose, m["excavator_pose"], "machines.excavator_pose") if m.get("excavator_pose") else None,
+                loader=_checked(LoaderSpec, m["loader"], "machines.loader") if m.get("loader") else None,
+                loader_pose=_checked(Pose, m["loader_pose"], "machines.loader_pose") if m.get("loader_pose") else None,
             )
             return cls(
                 id=str(d["id"]),
                 terrain=terrain,
                 site=site,
                 machines=machines,
-                task=Task(**d["task"]),
+                task=_checked(Task, d["task"], "task"),
                 track=d.get("track", "backhoe"),
-                budget=Budget(**d.get("budget", {})),
+                budget=_checked(Budget, d.get("budget", {}), "budget"),
                 meta=dict(d.get("meta", {})),
             )
         except ScenarioError:
             raise
-        except (KeyError, TypeError, ValueError) as exc:
+        except KeyError as exc:
+            raise ScenarioError(f"malformed scenario document: the field {exc} is missing") from None
+        except (TypeError, ValueError) as exc:
             raise ScenarioError(f"malformed scenario document: {type(exc).__name__}: {exc}") from None
 
     @classmethod
-    def from_json(cls, text_or_path: str | Path) -> Scenario:
-        text = str(text_or_path)
-        if not text.lstrip().startswith("{"):
-            path = Path(text_or_path)
-            if not path.is_file():
-                raise ScenarioError(f"scenario file {str(path)!r} not found")
-            text = path.read_text()
+    def from_json(cls, source: str | Path) -> Scenario:
+        """A scenario from JSON text (a ``str``) or from a file (a :class:`~pathlib.Path`)."""
+        if isinstance(source, Path):
+            try:
+                source = source.read_text()
+            except FileNotFoundError:
+                raise ScenarioError(f"scenario file {str(source)!r} not found") from None
+            except (OSError, UnicodeDecodeError) as exc:
+                raise ScenarioError(f"cannot read scenario file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
         try:
-            return cls.from_dict(json.loads(text))
-        except json.JSONDecodeError as exc:
+            doc = json.loads(source)
+        except RecursionError:
+            raise ScenarioError("scenario JSON is nested too deeply") from None
+        except ValueError as exc:
             raise ScenarioError(f"scenario is not valid JSON: {exc}") from None
+        return cls.from_dict(doc)
+
+
+#: Numeric fields of a scenario document that may be 0 (every other spec or budget number must be > 0).
+_MAY_BE_ZERO = frozenset({
+    "reach_min", "clearance", "chord_tolerance", "max_step", "min_stroke_time", "min_dump_time",
+    "min_charge_time", "dump_reach", "bucket_offset",
+})
+
+
+def _section(doc: Any, path: str) -> dict[str, Any]:
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"scenario field {path} must be an object, got {type(doc).__name__}")
+    return doc
+
+
+def _checked(cls: type, doc: Any, path: str) -> Any:
+    """Build ``cls`` from one section of a scenario document, checking each field's type and range.
+
+    Poses may hold any finite numbers; every other number (specs, budget, task) must be finite
+    and positive (0 allowed for the fields in ``_MAY_BE_ZERO``); ``int`` fields take integers only.
+    """
+    doc = _section(doc, path)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for key, value in doc.items():
+        where = f"{path}.{key}"
+        f = fields.get(key)
+        if f is None:
+            close = difflib.get_close_matches(str(key), fields, n=1)
+            hint = f" (did you mean {path}.{close[0]}?)" if close else f"; its fields: {', '.join(fields)}"
+            raise ScenarioError(f"scenario field {where} is unknown{hint}")
+        kind = str(f.type)
+        if kind not in ("float", "int"):
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind == "int" and not isinstance(value, int)):
+            want = "an integer" if kind == "int" else "a number"
+            raise ScenarioError(f"scenario field {where} must be {want}, got {type(value).__name__} {value!r:.40}")
+        if not math.isfinite(value):
+            raise ScenarioError(f"scenario field {where} must be finite, got {value}")
+        if cls is not Pose and (value < 0 or (value == 0 and key not in _MAY_BE_ZERO)):
+            raise ScenarioError(f"scenario field {where} must be {'≥ 0' if key in _MAY_BE_ZERO else 'positive'}, got {value:g}")
+    return cls(**doc)
 
 
 def _to_plain(obj: Any) -> Any:

@@ -1,7 +1,7 @@
 """Stores of real runs for the publishing tests, written through the store's own API.
 
 Plans come from the greedy planner run in this process (its call timed as the harness
-would), judged by the referee through :func:`earthbench.runner.score`, and stored with
+would), judged by the referee through :func:`earthbench.harness.score`, and stored with
 :meth:`earthbench.store.Store.record`. Other "planners" reuse those plans cut short (so they
 load less) or fail without a plan, to give the tables and profiles something to separate.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from earthbench.plan import Plan
-from earthbench.runner import Case, CaseResult, PlannerRef, environment, score
+from earthbench.harness import Case, CaseResult, PlannerRef, environment, score
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite
 from planners.greedy import GreedyPlanner

@@ -10,7 +10,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from earthbench.runner import LocalExecutor, build_cases, make_slots, run_case, run_cases
+from earthbench.harness import LocalExecutor, build_cases, make_slots, run_case, run_cases
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
@@ -153,7 +153,7 @@ def test_progress_line_counts_reasons_and_gives_an_eta():
     import io
 
     from earthbench.progress import Progress
-    from earthbench.runner import CaseResult
+    from earthbench.harness import CaseResult
 
     (case,), _ = build_cases(tiny_suite(), ["greedy"])
     out = io.StringIO()
@@ -170,7 +170,7 @@ def test_progress_line_counts_reasons_and_gives_an_eta():
 def test_concurrent_cases_in_one_process_get_disjoint_slots():
     import threading
 
-    from earthbench.runner import SlotPool
+    from earthbench.harness import SlotPool
 
     pool = SlotPool([(0, 1), (2, 3)])
     held, now, clashes, lock = [], set(), [], threading.Lock()

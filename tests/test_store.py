@@ -8,7 +8,7 @@ import sqlite3
 import pytest
 
 from earthbench.errors import StoreError
-from earthbench.runner import Case, CaseResult, PlannerRef
+from earthbench.harness import Case, CaseResult, PlannerRef
 from earthbench.store import SCHEMA_VERSION, Store, load_runs
 from earthbench.suite import parse_suite
 

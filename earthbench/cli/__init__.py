@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 
 from ..errors import EarthbenchError
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
-COMMANDS = ["list_", "plan", "validate", "show", "suites", "run", "runs", "rescore", "new_planner", "leaderboard", "compare", "merge"]
+COMMANDS = ["list_", "plan", "validate", "show", "suites", "run", "runs", "rescore", "new_planner", "leaderboard", "compare", "merge", "export", "verify"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,6 +46,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("earthbench: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader left (`earthbench runs | head`): end quietly, as a pipe tool does
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so the interpreter's final flush does not complain
+        return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":

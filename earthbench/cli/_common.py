@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from ..registry import TERRAINS, load_plugin_file
 from ..world import Scenario
@@ -20,7 +21,7 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
 
 def load_scenario(args: argparse.Namespace) -> Scenario:
     if args.scenario:
-        return Scenario.from_json(args.scenario)
+        return Scenario.from_json(Path(args.scenario))
     params = {}
     for item in args.param:
         key, _, raw = item.partition("=")

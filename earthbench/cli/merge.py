@@ -1,29 +1,48 @@
 """``earthbench merge OUT.db IN.db…``: merge results stores gathered on several machines.
 
-Refuses (writing nothing) when a run is in two stores (same scenario digest, planner,
-version and config hash) or when a suite name has different digests in different stores;
-otherwise copies every suite, scenario, configuration, environment and run into OUT.db
-(created if missing) through the store's API, one transaction per run.
+Every incoming plan is judged again against the scenario document stored with it (whose
+digest is recomputed); the merge is refused, writing nothing, when any run's stored verdict
+or metrics differ from the re-judged ones (``--rescore`` merges the re-judged figures instead
+and says how many changed), when a run has a verdict but no plan, when a scenario or suite
+does not reproduce its digest, when a run is in two stores (same scenario digest, planner,
+version and config hash) or when a suite name has different digests in different stores.
+Runs without a plan (timeout, memory, crashed, error) are merged with the harness's reason,
+which cannot be re-checked. Solve times come from the machine that ran each case. An
+``earthbench export`` bundle is a store like any other. OUT.db is created if missing.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("merge", help="merge results databases, refusing duplicates and mismatched suite digests",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser("merge", help="merge results databases, re-judging every plan",
+                       description=__doc__.replace("``", "`"), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("out", metavar="OUT.db", help="database to merge into (created if missing)")
-    p.add_argument("inputs", nargs="+", metavar="IN.db", help="databases to merge")
+    p.add_argument("inputs", nargs="+", metavar="IN.db", help="databases or export bundles to merge")
+    p.add_argument("--rescore", action="store_true",
+                   help="merge runs whose stored figures differ with the re-judged figures instead of refusing")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     from ..merge import merge
 
-    report = merge(args.out, args.inputs)
+    report = merge(args.out, args.inputs, rescore=args.rescore)
+    for line in report.changes[:20]:
+        print(f"re-scored {line}", file=sys.stderr)
+    if len(report.changes) > 20:
+        print(f"re-scored … and {len(report.changes) - 20} more", file=sys.stderr)
     for path, n in report.per_input.items():
         print(f"{path}: {n} run(s)")
+    judged = report.agreed + report.rescored
+    print(f"re-judged {judged} plan(s): {report.agreed} agree with the stored figures"
+          + (f", {report.rescored} re-scored (stored figures replaced by the re-judged ones)" if args.rescore else ""))
+    if report.unjudged:
+        counts = ", ".join(f"{n} {r}" for r, n in sorted(report.unjudged.items()))
+        print(f"{sum(report.unjudged.values())} run(s) without a plan ({counts}) merged with the reason the harness gave; "
+              "it cannot be re-checked from a store")
     print(f"merged {report.runs} run(s) and {report.suites} new suite version(s) into {args.out}")
     return 0

@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def names(name: str) -> tuple[str, str, str]:
     """(distribution, module, class) names for a planner name."""
-    if not NAME_RE.match(name):
+    if not NAME_RE.fullmatch(name):
         raise EarthbenchError(f"planner name {name!r} must be lower case letters and digits, words joined by '-' or '_' (e.g. 'my-planner')")
     module = "earthbench_" + name.replace("-", "_")
     words = re.split(r"[-_]", name)
@@ -44,6 +44,8 @@ def write_package(name: str, directory: str | Path | None = None, *, force: bool
     """Write the package; returns its directory."""
     dist, module, cls = names(name)
     root = Path(directory or dist)
+    if root.exists() and not root.is_dir():
+        raise EarthbenchError(f"--dir {str(root)!r} is a file, not a folder; choose a new or empty folder")
     if root.exists() and any(root.iterdir()) and not force:
         raise EarthbenchError(f"{str(root)!r} already exists and is not empty; choose --dir or pass --force")
     files = {

@@ -2,7 +2,8 @@
 
 Only runs that returned a plan (reason ok or invalid, or error because the referee itself
 failed) are re-judged; their reason, metrics and violations are replaced, their solve times
-kept, and ``rescored_at`` is set. Each run is updated in its own transaction.
+kept, and ``rescored_at`` is set. Each run is updated in its own transaction. Re-judging is
+the same function ``earthbench merge`` uses to verify incoming runs.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..runner import score
 from ..store import Store
+from ..verify import rejudge
 from .run import default_db
 
 
@@ -25,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    changed = same = 0
+    changed = same = failed = 0
     with Store(args.db, create=False) as store:
         store.check_writable()
         rows = [r for r in store.query(suite=args.suite, planner=args.planner) if r["plan"] is not None]
@@ -34,17 +35,21 @@ def run(args: argparse.Namespace) -> int:
             digest = r["scenario_digest"]
             if digest not in scenarios:
                 scenarios[digest] = store.scenario(digest)
-            plan = store.plan_json(r["id"])
-            verdict, metrics = score(scenarios[digest], plan, r["threshold"])
-            metrics.update(solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
-            reason = "ok" if verdict.valid else "invalid"
+            judged = rejudge(scenarios[digest], store.plan_json(r["id"]), r["threshold"],
+                             solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
+            if judged.metrics is None:  # the referee failed on it: keep the row, say so
+                failed += 1
+                print(f"run {r['id']} {r['scenario_id']} × {r['planner']}: {judged.error.strip().splitlines()[-1]}", file=sys.stderr)
+                continue
+            metrics = judged.metrics
             before = (r["reason"], r["volume_ratio"], bool(r["success"]))
-            store.update_score(r["id"], reason, metrics, [v.to_dict() for v in verdict.violations])
-            if before != (reason, metrics["volume_ratio"], bool(metrics["success"])):
+            store.update_score(r["id"], judged.reason, metrics, judged.violations)
+            if before != (judged.reason, metrics["volume_ratio"], bool(metrics["success"])):
                 changed += 1
-                print(f"run {r['id']} {r['scenario_id']} × {r['planner']}: {before[0]} → {reason}, "
+                print(f"run {r['id']} {r['scenario_id']} × {r['planner']}: {before[0]} → {judged.reason}, "
                       f"volume ratio {before[1]} → {metrics['volume_ratio']:.4g}", file=sys.stderr)
             else:
                 same += 1
-    print(f"rescored {changed + same} run(s): {changed} changed, {same} unchanged")
-    return 0
+    print(f"rescored {changed + same} run(s): {changed} changed, {same} unchanged"
+          + (f"; the referee failed on {failed} (left as they were)" if failed else ""))
+    return 1 if failed else 0

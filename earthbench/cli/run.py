@@ -13,7 +13,7 @@ import signal
 import sys
 from typing import Any
 
-from ..runner import REASONS, LocalExecutor, build_cases, run_cases
+from ..harness import REASONS, LocalExecutor, build_cases, run_cases
 from ..store import DEFAULT_DB, Store, summary_rows
 from ..suite import load_suite, parse_seed_range
 from ._common import add_plugin_arg, load_plugins
@@ -134,9 +134,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def make_executor(args: argparse.Namespace, suite: Any) -> Any:
-    """The local executor, or a :class:`~earthbench.dask_executor.DaskExecutor` for ``--executor dask``."""
+    """The local executor, or a :class:`~earthbench.harness.dask_executor.DaskExecutor` for ``--executor dask``."""
     if (args.executor or ("dask" if args.scheduler else "local")) == "dask":
-        from ..dask_executor import DaskExecutor
+        from ..harness.dask_executor import DaskExecutor
         from ..errors import EarthbenchError
 
         try:

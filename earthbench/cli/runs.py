@@ -8,7 +8,7 @@ import json
 import math
 import sys
 
-from ..runner import REASONS
+from ..harness import REASONS
 from ..store import Store
 from .run import default_db
 

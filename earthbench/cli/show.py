@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..plan import Plan
 from ..referee import judge
@@ -26,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from ..figures import terrain_before_after
 
     scenario = load_scenario(args)
-    plan = Plan.from_json(args.plan) if args.plan else Plan()
+    plan = Plan.from_json(Path(args.plan)) if args.plan else Plan()
     verdict = judge(scenario, plan)
     fig = terrain_before_after(scenario, plan, verdict)
     fig.savefig(args.out, dpi=110)

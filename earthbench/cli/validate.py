@@ -29,11 +29,16 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from metrics import evaluate  # the built-in metrics package; extra metrics come from plugins
 
-    scenario = Scenario.from_json(args.scenario)
-    path = Path(args.plan)
-    if not path.is_file():
-        raise PlanFormatError(f"plan file {args.plan!r} not found")
-    text = path.read_text()
+    scenario = Scenario.from_json(Path(args.scenario))
+    # the argument is only ever a file: its content is judged as a plan, never followed as a path
+    try:
+        text = Path(args.plan).read_text()
+    except FileNotFoundError:
+        raise PlanFormatError(f"plan file {args.plan!r} not found") from None
+    except UnicodeDecodeError:
+        raise PlanFormatError(f"plan file {args.plan!r} is not UTF-8 text") from None
+    except OSError as exc:
+        raise PlanFormatError(f"cannot read plan file {args.plan!r}: {exc.strerror}") from None
     verdict = judge(scenario, text)  # a malformed document is an invalid verdict, not a crash
     plan = None if any(v.rule == "malformed" for v in verdict.violations) else Plan.from_json(text)
     metrics = evaluate(scenario, plan, verdict, args.threshold) if plan is not None else {}

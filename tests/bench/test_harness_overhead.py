@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.registry import load_plugin_file
-from earthbench.runner import build_cases, run_case
+from earthbench.harness import build_cases, run_case
 from earthbench.store import Store
 from earthbench.suite import load_suite
 

@@ -15,6 +15,8 @@ class KillsItsWorker(Planner):
     name = "t-kill-worker"
 
     def plan(self, scenario):
-        os.kill(os.getppid(), signal.SIGKILL)
+        import psutil
+
+        os.kill(psutil.Process(os.getppid()).ppid(), signal.SIGKILL)  # the case's warden's parent: the worker
         time.sleep(30)
         return Plan()

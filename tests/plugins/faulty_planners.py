@@ -107,7 +107,7 @@ class Probe(Planner):
             "omp": os.environ.get("OMP_NUM_THREADS"),
             "openblas": os.environ.get("OPENBLAS_NUM_THREADS"),
             "rlimit_as": resource.getrlimit(resource.RLIMIT_AS)[0],
-            "own_group": os.getpgid(0) == os.getpid(),
+            "own_group": os.getpgid(0) == os.getppid() == os.getsid(0),  # the warden leads its own session
         })
 
 

@@ -1,14 +1,14 @@
 """Run a suite's cases on a Dask distributed cluster (``earthbench run SUITE --executor dask``).
 
-:class:`DaskExecutor` implements the runner's :class:`~earthbench.runner.Executor` protocol.
-Each case is one Dask task that calls the very same :func:`~earthbench.runner.run_case` on a
-worker, so a case there gets what it gets locally: a fresh subprocess in its own process group,
+:class:`DaskExecutor` implements the runner's :class:`~earthbench.harness.Executor` protocol.
+Each case is one Dask task that calls the very same :func:`~earthbench.harness.run_case` on a
+worker, so a case there gets what it gets locally: a fresh process tree in its own session under its warden,
 CPU affinity on a slot of ``budget.cores`` cores, BLAS/OpenMP thread caps, ``RLIMIT_AS`` and
-the wall budget. The referee and the environment stamp (:func:`~earthbench.runner.environment`:
+the wall budget. The referee and the environment stamp (:func:`~earthbench.harness.environment`:
 hostname, CPU model, cores, OS, Python, packages, commits) are computed on the worker too, so
 each stored run records the machine that ran it. Results stream back as they finish
 (``distributed.as_completed``); only the client writes the store (in
-:func:`~earthbench.runner.run_cases`), so resume and ``--rerun`` work as with the local executor.
+:func:`~earthbench.harness.run_cases`), so resume and ``--rerun`` work as with the local executor.
 
 **Slots.** A worker machine with N cores runs floor(N / 2) cases at once. Two mechanisms
 enforce it:
@@ -20,7 +20,7 @@ enforce it:
   worker more cases than it has slots. A ``LocalCluster`` takes ``resources={"slots": K}``.
 * a host-wide slot pool that chooses the cores: before it starts the case subprocess, the
   task locks (``fcntl.flock``) one lock file per core of a free group of ``budget.cores``
-  cores from the worker's CPU affinity (the groups of :func:`~earthbench.runner.make_slots`).
+  cores from the worker's CPU affinity (the groups of :func:`~earthbench.harness.make_slots`).
   The lock files (``HOST-cpuN.lock``) live in ``$EARTHBENCH_SLOT_DIR`` (default
   ``<tmp>/earthbench-slots-<uid>``) and are shared by every worker process of the machine, so
   two workers on one host never pin cases to the same cores even if their ``slots`` add up to
@@ -28,7 +28,8 @@ enforce it:
   worker's locks.
 
 **Faults.** A worker lost mid-case (killed, out of memory, machine gone) kills its case
-subprocess with it (the child has ``PR_SET_PDEATHSIG``) and Dask runs the task again on another
+process tree with it (the case's warden has ``PR_SET_PDEATHSIG`` and ends every descendant; the
+case folder is removed by the next harness process on that machine) and Dask runs the task again on another
 worker; after ``distributed.scheduler.allowed-failures`` losses (default 3) the task fails
 with ``KilledWorker`` and the case is recorded as ``crashed``. A task that raises (e.g.
 earthbench cannot be imported on the worker) is recorded as ``error`` with the traceback.
@@ -57,8 +58,10 @@ import uuid
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from .errors import EarthbenchError
-from .runner import STARTUP_S, Case, CaseResult, make_slots, run_case
+from ..errors import EarthbenchError
+from .cases import Case, CaseResult
+from .sandbox import STARTUP_S, run_case
+from .slots import make_slots
 
 #: The Dask resource a worker declares (``--resources "slots=K"``) and each case task needs one of.
 RESOURCE = "slots"
@@ -175,13 +178,6 @@ def run_on_worker(case: Case, run_id: str, startup_s: float = STARTUP_S) -> Case
 
 
 # -- on the client -------------------------------------------------------------------------------
-
-
-def _failed(case: Case, reason: str, error: str) -> CaseResult:
-    from .runner import _now
-
-    now = _now()
-    return CaseResult(key=case.key, scenario_id=case.scenario.id, reason=reason, error=error, started_at=now, finished_at=now)
 
 
 class DaskExecutor:
@@ -328,17 +324,20 @@ class DaskExecutor:
         status = fut.status
         if status == "finished":
             try:
-                return fut.result()
+                res = fut.result()
             except Exception as exc:  # noqa: BLE001 - a result that cannot be fetched is the task's failure
-                return _failed(case, "error", f"the Dask task's result could not be fetched: {exc!r}")
+                return CaseResult.failure(case, "error", f"the Dask task's result could not be fetched: {exc!r}")
+            if not isinstance(res, CaseResult) or res.key != case.key:
+                return CaseResult.failure(case, "error", f"the Dask task returned {type(res).__qualname__} for another case, not this case's result")
+            return res
         if status == "error":
             exc = fut.exception()
             if isinstance(exc, self._distributed.KilledWorker):
-                return _failed(case, "crashed", f"the Dask workers running this case died repeatedly ({exc}); "
+                return CaseResult.failure(case, "crashed", f"the Dask workers running this case died repeatedly ({exc}); "
                                                 "it was given up after distributed.scheduler.allowed-failures tries")
             tb = fut.traceback()
             text = "".join(traceback.format_exception(type(exc), exc, tb)) if tb is not None else repr(exc)
-            return _failed(case, "error", "the Dask task failed on its worker:\n" + text)
+            return CaseResult.failure(case, "error", "the Dask task failed on its worker:\n" + text)
         return None  # cancelled or lost: not stored, a rerun picks it up
 
     def cancel(self) -> None:

@@ -1,0 +1,131 @@
+"""What the harness runs and what it reports: planner references, cases, results.
+
+These types are plain frozen dataclasses, picklable, so any executor can ship a case to where
+it runs and its result back; the store and the progress line read them and import nothing else
+of the harness.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from ..errors import PluginError
+from ..planner import Planner
+from ..registry import PLANNERS
+from ..world import Scenario
+
+#: Termination reasons of a stored case (``cancelled`` results are never stored).
+REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
+
+
+def utc_now() -> str:
+    """The time stamp of ``started_at``/``finished_at``: UTC, to the second."""
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+@dataclass(frozen=True)
+class PlannerRef:
+    """How a fresh process finds a planner class, plus the identity the store keys on.
+
+    ``source`` is ``module:qualname`` (importable in the child) or the path of a plugin file.
+    """
+
+    name: str
+    version: str
+    source: str
+    config: dict[str, Any] = field(hash=False, compare=False)
+    config_hash: str = ""
+    overrides: dict[str, Any] = field(default_factory=dict, hash=False, compare=False)
+    tracks: tuple[str, ...] = ("backhoe",)
+
+    @classmethod
+    def resolve(cls, name: str, overrides: dict[str, Any] | None = None) -> PlannerRef:
+        """Look ``name`` up in the registry and check ``overrides`` against its ``Config``."""
+        klass = PLANNERS.get(name)
+        overrides = dict(overrides or {})
+        probe = object.__new__(klass)  # the base initialiser only: a heavy subclass __init__ runs in the case
+        Planner.__init__(probe, **overrides)
+        return cls(
+            name=name,
+            version=str(klass.version),
+            source=_source_of(klass),
+            config=probe.config_dict,
+            config_hash=probe.config_hash,
+            overrides=overrides,
+            tracks=tuple(klass.tracks),
+        )
+
+
+def _source_of(klass: type) -> str:
+    mod = sys.modules.get(klass.__module__)
+    file = getattr(mod, "__file__", None)
+    if "<locals>" in klass.__qualname__:
+        raise PluginError(f"planner class {klass.__qualname__} is defined inside a function; define it at module level so a case process can import it")
+    if klass.__module__ == "__main__" or klass.__module__.startswith("earthbench_plugin_"):
+        if not file:
+            raise PluginError(f"planner {klass.name!r} is defined interactively; put it in a file and pass --plugin FILE.py")
+        return str(Path(file).resolve())
+    return f"{klass.__module__}:{klass.__qualname__}"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One (planner configuration, scenario) pair of a suite; ``key`` identifies its result."""
+
+    suite: str
+    suite_digest: str
+    threshold: float
+    scenario: Scenario
+    planner: PlannerRef
+    plugins: tuple[str, ...] = ()
+
+    @property
+    def key(self) -> tuple[str, str, str, str]:
+        """(scenario digest, planner, version, config hash): the resume key of the store."""
+        p = self.planner
+        return (self.scenario.digest, p.name, p.version, p.config_hash)
+
+    @property
+    def label(self) -> str:
+        return f"{self.scenario.id} × {self.planner.name}"
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """What happened in one case. ``metrics`` is None unless the planner returned a plan."""
+
+    key: tuple[str, str, str, str]
+    scenario_id: str
+    reason: str
+    solve_time_s: float | None = None
+    solve_cpu_s: float | None = None
+    startup_s: float | None = None
+    peak_rss_mb: float | None = None
+    metrics: dict[str, Any] | None = None
+    violations: tuple[dict[str, Any], ...] = ()
+    plan_json: str | None = None
+    error: str = ""
+    log_tail: str = ""
+    exit_status: int | None = None
+    cores: tuple[int, ...] = ()
+    started_at: str = ""
+    finished_at: str = ""
+    environment: dict[str, Any] = field(default_factory=dict)
+    #: What the case itself reported (its own timings): information only, never stored or trusted.
+    detail: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @classmethod
+    def failure(cls, case: Case, reason: str, error: str) -> CaseResult:
+        """The result of a case that failed outside its process (its executor, its worker)."""
+        now = utc_now()
+        return cls(key=case.key, scenario_id=case.scenario.id, reason=reason, error=error, started_at=now, finished_at=now)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.metrics and self.metrics.get("success"))
+
+

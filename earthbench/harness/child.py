@@ -1,0 +1,236 @@
+"""The inside of one case: a warden process and, under it, the planner's process.
+
+:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``. The bootstrap is plain
+Python that imports nothing of earthbench, numpy or the plugin; it becomes the case's
+*warden*:
+
+* it makes itself a child subreaper (``prctl(PR_SET_CHILD_SUBREAPER)``), so every descendant
+  of the case, also one that left the session (``setsid``) or was double-forked, is
+  re-parented to it rather than to init; with ``PR_SET_PDEATHSIG`` it hears of the
+  harness's death;
+* it pins the slot's cores and forks the *planner process*, which sets ``RLIMIT_AS`` and then
+  runs :func:`main` (the only place plugin code runs);
+* it reaps every descendant until the planner process has exited, then kills (SIGKILL) and
+  reaps whatever is left; SIGTERM (from the harness at a deadline, or as the harness dies)
+  ends the case the same way;
+* it writes on a pipe only it holds (the planner process closes it before any plugin code
+  runs) the planner process's pid at once, and at the end one report: the planner process's
+  exit status, and the kernel's accounting of
+  every reaped descendant (``getrusage(RUSAGE_CHILDREN)``: CPU seconds and peak resident
+  memory), so CPU and memory figures cover the case's own process tree and nothing else.
+
+The planner process talks to the harness over another inherited pipe, one JSON object per
+line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has read the
+scenario that the harness writes to its stdin in answer, ``{"event": "done", "outcome":
+"plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The harness
+validates every message and owns every time: it starts the wall budget when it hands over the
+scenario and stops it when the result arrives; ``detail`` (the child's own timings) is kept
+for information only. The child never judges its own plan.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import json
+import os
+import resource
+import sys
+import time
+import traceback
+from typing import Any
+
+
+def _cpu() -> float:
+    """Process CPU seconds (all threads) plus those of reaped child processes, µs resolution."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def load_planner_class(source: str, name: str) -> type:
+    """Import exactly the planner's code, without loading every registered plugin.
+
+    ``module:qualname`` is imported; a ``.py`` path is executed as a module and searched for
+    the Planner subclass called ``name``. (Loading the whole registry would import every
+    installed planner's dependencies into every case, seconds of start-up that have nothing
+    to do with the planner under test.)
+    """
+    from earthbench.planner import Planner
+    from earthbench.registry import PLANNERS
+
+    if source.endswith(".py"):
+        mod_name = f"earthbench_plugin_{os.path.splitext(os.path.basename(source))[0]}"
+        spec = importlib.util.spec_from_file_location(mod_name, source)
+        if spec is None or spec.loader is None:
+            raise ImportError(f"{source} is not an importable Python file")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        spec.loader.exec_module(module)
+        for obj in vars(module).values():
+            if isinstance(obj, type) and issubclass(obj, Planner) and obj.__module__ == mod_name and obj.name == name:
+                return obj
+        return PLANNERS.get(name)  # registered by a decorator under another class name
+    module_name, _, qual = source.partition(":")
+    obj: Any = importlib.import_module(module_name)
+    for part in qual.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def main(case_file: str, fd: int) -> None:
+    """Load the planner, say ``ready``, read the scenario from stdin, plan, send the result."""
+    out = os.fdopen(fd, "w", buffering=1)
+
+    def send(msg: dict[str, Any]) -> None:
+        out.write(json.dumps(msg) + "\n")
+        out.flush()
+
+    try:
+        with open(case_file) as f:
+            doc = json.load(f)
+        from earthbench.plan import Plan
+        from earthbench.world import Scenario
+
+        cls = load_planner_class(doc["source"], doc["name"])
+        overrides = doc.get("overrides", {})
+        del doc
+    except BaseException as exc:  # noqa: BLE001 - everything the planner's import can do is reported
+        outcome = "memory" if isinstance(exc, MemoryError) else "error"
+        send({"event": "done", "outcome": outcome, "error": "could not load the planner:\n" + traceback.format_exc()})
+        return
+
+    send({"event": "ready"})
+    outcome, error, plan = "plan", "", None
+    t0, c0 = time.perf_counter(), _cpu()
+    try:
+        scenario = Scenario.from_dict(json.load(sys.stdin))
+        planner = cls(**overrides)
+        plan = planner.plan(scenario)
+    except MemoryError:
+        plan = None
+        outcome, error = "memory", "MemoryError: the planner exceeded the memory budget\n" + _short_tb()
+    except BaseException as exc:  # noqa: BLE001 - SystemExit and KeyboardInterrupt too
+        plan = None
+        outcome, error = "error", _tb(exc)
+    finally:
+        wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    msg: dict[str, Any] = {"event": "done", "detail": {"solve_time_s": wall, "solve_cpu_s": cpu}}
+    if outcome == "plan":
+        if not isinstance(plan, Plan):
+            outcome = "error"
+            error = f"plan() returned {type(plan).__module__}.{type(plan).__qualname__}, not an earthbench.Plan"
+        else:
+            try:
+                msg["plan"] = plan.to_json()
+            except Exception as exc:  # noqa: BLE001
+                outcome, error = "error", "the plan could not be written as JSON:\n" + _tb(exc)
+    msg.update(outcome=outcome, error=error)
+    try:
+        send(msg)
+    except (TypeError, ValueError) as exc:  # e.g. a to_json() that returned something JSON cannot write
+        send({"event": "done", "outcome": "error", "error": "the plan could not be written as JSON:\n" + _tb(exc)})
+    out.close()
+
+
+def _tb(exc: BaseException) -> str:
+    return "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+
+
+def _short_tb() -> str:
+    try:
+        return traceback.format_exc(limit=-3)
+    except MemoryError:
+        return ""
+
+
+BOOTSTRAP = r"""
+import ctypes, json, os, resource, signal, sys
+case_file, msg_fd, report_fd, cores, mem, harness = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5]), int(sys.argv[6])
+try:
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):
+    prctl = None
+if prctl is not None:
+    prctl(36, 1)  # PR_SET_CHILD_SUBREAPER: orphans of the case come to the warden, not to init
+    prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG: the harness died -> end the case
+if os.getppid() != harness:
+    os._exit(70)
+cpus = [int(c) for c in cores.split(",") if c]
+if cpus and hasattr(os, "sched_setaffinity"):  # Linux; elsewhere only the thread caps apply
+    os.sched_setaffinity(0, cpus)
+warden = os.getpid()
+planner = os.fork()
+if planner == 0:
+    os.close(report_fd)
+    if prctl is not None:
+        prctl(1, int(signal.SIGKILL))
+    if os.getppid() != warden:
+        os._exit(70)
+    if mem > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+    from earthbench.harness.child import main
+    main(case_file, msg_fd)
+    sys.exit(0)
+os.close(msg_fd)
+os.write(report_fd, (json.dumps({"planner": planner}) + "\n").encode())
+devnull = os.open(os.devnull, os.O_RDONLY)
+os.dup2(devnull, 0)
+ending, orphans, status = False, 0, None
+
+def kill_children():
+    me = str(warden)
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open("/proc/" + name + "/stat", "rb") as f:
+                    ppid = f.read().rsplit(b")", 1)[1].split()[1]
+            except (OSError, IndexError):
+                continue
+            if ppid == me.encode():
+                try:
+                    os.kill(int(name), signal.SIGKILL)
+                except OSError:
+                    pass
+
+def alive_children():  # any child left? (reaps those already dead; /proc is scanned only if one lives)
+    while True:
+        try:
+            pid, st = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return False
+        if not pid:
+            return True
+        reaped(pid, st)
+
+def reaped(pid, st):
+    global status, ending, orphans
+    if pid == planner:
+        status, ending = st, True
+    else:
+        orphans += 1
+
+def on_term(signum, frame):
+    global ending
+    ending = True
+    kill_children()
+
+signal.signal(signal.SIGTERM, on_term)
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+while True:
+    try:
+        pid, st = os.waitpid(-1, 0)
+    except ChildProcessError:
+        break
+    reaped(pid, st)
+    if ending and alive_children():
+        kill_children()
+ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+report = {"status": None if status is None else os.waitstatus_to_exitcode(status),
+          "cpu_s": ru.ru_utime + ru.ru_stime, "maxrss_kb": ru.ru_maxrss, "others": orphans}
+try:
+    os.write(report_fd, (json.dumps(report) + "\n").encode())
+except OSError:  # the harness is gone
+    pass
+os._exit(0)
+"""
+"""Run as ``python -c BOOTSTRAP CASE_FILE MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID``."""

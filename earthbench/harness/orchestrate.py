@@ -1,0 +1,127 @@
+"""A suite run: build its cases, run what the store lacks, store each result as it arrives."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ..registry import PLANNERS
+from .cases import Case, PlannerRef
+from .local import Executor, LocalExecutor
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..progress import Progress
+    from ..store import Store
+    from ..suite import Suite
+
+
+@dataclass
+class RunReport:
+    """What one ``run_cases`` call did; ``interrupted`` is set when Ctrl-C ended it."""
+
+    planned: int = 0
+    skipped: int = 0
+    stored: int = 0
+    counts: dict[str, int] = field(default_factory=dict)
+    interrupted: bool = False
+
+
+def build_cases(
+    suite: Suite,
+    planners: Sequence[str] | None = None,
+    *,
+    plugins: Sequence[str] = (),
+    seeds: Iterable[int] | None = None,
+) -> tuple[list[Case], list[str]]:
+    """The cases of ``suite`` for ``planners`` (default: the suite's list, else every planner of its track).
+
+    Returns the cases and notes for the user (planners skipped because of their track).
+    """
+    notes: list[str] = []
+    explicit = bool(planners)
+    names = list(planners or suite.planners or [n for n, c in PLANNERS.items() if suite.track in c.tracks])
+    if not names:
+        notes.append(f"no registered planner supports the {suite.track!r} track")
+    refs = []
+    for name in dict.fromkeys(names):
+        ref = PlannerRef.resolve(name, suite.config.get(name))
+        if suite.track not in ref.tracks:
+            if explicit:
+                notes.append(f"planner {name!r} supports {', '.join(ref.tracks)}, not this suite's {suite.track!r} track: skipped")
+            continue
+        refs.append(ref)
+    for name in suite.config:
+        if name not in PLANNERS:
+            notes.append(f"the suite configures planner {name!r}, which is not registered: its [config.{name}] is unused")
+    plugin_paths = tuple(str(Path(p).resolve()) for p in plugins)
+    cases = [
+        Case(suite.name, suite.digest, suite.success_threshold, sc, ref, plugin_paths)
+        for sc in suite.select(seeds)
+        for ref in refs
+    ]
+    return cases, notes
+
+
+def run_cases(
+    cases: Sequence[Case],
+    store: Store,
+    executor: Executor,
+    *,
+    rerun: bool = False,
+    progress: Progress | None = None,
+) -> RunReport:
+    """Run every case not yet in ``store`` (all with ``rerun``) and store each as it finishes.
+
+    Only this function writes the store, one transaction per case, so an executor may run
+    cases anywhere. Ctrl-C (KeyboardInterrupt) cancels the cases in flight (nothing of them is
+    written), keeps every finished one and returns the report marked ``interrupted``.
+    """
+    report = RunReport(planned=len(cases))
+    done = set() if rerun else store.finished_keys()
+    by_key: dict[tuple[str, str, str, str], Case] = {}
+    for c in cases:  # one case per key: a scenario listed twice is run once
+        if c.key not in done:
+            by_key.setdefault(c.key, c)
+    todo = list(by_key.values())
+    report.skipped = len(cases) - len(todo)
+    if progress is not None:
+        progress.total = len(todo)
+        progress.start()
+    results = executor.run(todo)
+    try:
+        for res in results:
+            case = by_key[res.key]
+            if store.record(case, res, replace=rerun):
+                report.stored += 1
+            report.counts[res.reason] = report.counts.get(res.reason, 0) + 1
+            if progress is not None:
+                progress.update(case, res)
+    except KeyboardInterrupt:
+        report.interrupted = True
+    finally:
+        executor.cancel()
+        close = getattr(results, "close", None)
+        if close is not None:
+            close()
+        if progress is not None:
+            progress.close()
+    return report
+
+
+def run_suite(
+    suite: Suite,
+    store: Store,
+    executor: Executor | None = None,
+    *,
+    planners: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    seeds: Iterable[int] | None = None,
+    rerun: bool = False,
+    progress: Progress | None = None,
+) -> RunReport:
+    """The Python API of ``earthbench run``: register the suite in the store, run what is missing."""
+    cases, _ = build_cases(suite, planners, plugins=plugins, seeds=seeds)
+    store.register_suite(suite)
+    return run_cases(cases, store, executor or LocalExecutor(cores_per_case=suite.budget.cores), rerun=rerun, progress=progress)

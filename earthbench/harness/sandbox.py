@@ -1,0 +1,565 @@
+"""The sandbox: run one case in a fresh, fenced process tree and report what happened.
+
+A *case* is (planner with its configuration, scenario). :func:`run_case` is the unit of work:
+a pure function of a picklable :class:`Case` (and the CPU cores of its slot) returning a
+picklable :class:`CaseResult`, so any executor can ship it: the local executor runs slots on
+this machine; a distributed executor calls the same function on a worker and streams the
+results back to the client, which alone writes the store.
+
+What ``run_case`` enforces (the trust model is in the README, "What a plugin can influence"):
+
+* a fresh interpreter per case in its own session, under a warden process (see
+  :mod:`.child`) that is a child subreaper, so every descendant of the case, in any session,
+  ends with it; CPU affinity on the slot's cores and OMP/OpenBLAS/MKL/… thread caps, so numpy's
+  BLAS never sees more cores than the budget;
+* ``RLIMIT_AS`` = the budget's memory in the planner's process, set before anything is
+  imported; a ``MemoryError``, or death by a signal near the limit (by the peak of the case's
+  own process tree), is termination reason ``memory``;
+* every time on this process's monotonic clock: start-up (bounded by ``startup_s``) runs
+  until the case says it is ready; the wall budget and ``solve_time_s`` run from the moment
+  this process hands the scenario over until the result has arrived; ``solve_cpu_s`` is the
+  kernel's CPU accounting of the case's process tree over the same span (never negative);
+* every message validated: anything malformed, out of order or larger than
+  :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
+* the referee runs here, in the harness process, never inside the planner's process.
+
+Termination reasons: ``ok`` (a valid plan), ``invalid`` (the referee found violations),
+``timeout``, ``memory``, ``error`` (with the traceback or the protocol fault), ``crashed``
+(killed by a signal or exited without a result).
+"""
+
+from __future__ import annotations
+
+import functools
+import glob
+import json
+import os
+import selectors
+import shutil
+import signal
+import site
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import psutil
+
+from ..errors import EarthbenchError
+from .cases import Case, CaseResult, utc_now
+from .child import BOOTSTRAP
+from .environment import environment
+from .scoring import score
+from .slots import SlotPool
+
+#: Seconds a case may spend starting (interpreter, imports of the planner's code) before it is ready.
+STARTUP_S = 60.0
+#: Seconds the warden gets to end the case tree after SIGTERM before the harness kills it all.
+TERM_GRACE_S = 2.0
+#: Seconds a case may take to exit after it has sent its result.
+EXIT_GRACE_S = 5.0
+#: Fraction of the memory budget above which a death by signal counts as ``memory``.
+MEMORY_KILL_FRACTION = 0.9
+#: Bytes of the case's stdout/stderr kept with the result.
+LOG_TAIL = 4000
+#: The plan-size rule: the largest message (in practice, a plan's JSON) a case may send. A plan
+#: of about 350,000 actions fits; a larger one is refused as ``error`` with its own message, so
+#: a case can neither exhaust the harness's memory nor hold it parsing for minutes.
+MAX_RESULT_BYTES = 64 * 2**20
+#: Seconds between samples of the case tree's memory while it runs.
+SAMPLE_S = 0.25
+#: Seconds between samples of the whole tree (descendants of the planner too).
+TREE_SAMPLE_S = 1.0
+#: The environment variable that tags every process of a case (for the last-resort sweep).
+CASE_TAG = "EARTHBENCH_CASE"
+THREAD_VARS = (
+    "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS",
+)
+_DIR_PREFIX = "earthbench-case-"
+
+
+class HarnessError(EarthbenchError):
+    """This machine cannot run a case at all (e.g. the temp directory is full): the run stops."""
+
+
+def _child_env(cores: int, tag: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env[CASE_TAG] = tag
+    for var in THREAD_VARS:
+        env[var] = str(cores)
+    # the child sees the modules the harness sees (test modules, plugins added to sys.path), but
+    # the interpreter's own directories stay where its start-up puts them, after the stdlib
+    own = {os.path.realpath(d) for d in (*site.getsitepackages(), site.getusersitepackages())}
+    prefixes = tuple(os.path.realpath(p) + os.sep for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
+    paths = [
+        p for p in sys.path
+        if p and os.path.isdir(p) and os.path.realpath(p) not in own and not (os.path.realpath(p) + os.sep).startswith(prefixes)
+    ]
+    if env.get("PYTHONPATH"):
+        paths.append(env["PYTHONPATH"])
+    env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _case_dir() -> str:
+    """A fresh case folder, named by this process's pid so a later harness can clear it if we die."""
+    _clear_stale_case_dirs()
+    try:
+        return tempfile.mkdtemp(prefix=f"{_DIR_PREFIX}{os.getpid()}-")
+    except OSError as exc:
+        raise HarnessError(f"cannot create a case folder in {tempfile.gettempdir()}: {exc.strerror}; "
+                           "free space there or point TMPDIR elsewhere") from None
+
+
+@functools.lru_cache(maxsize=1)
+def _clear_stale_case_dirs() -> None:
+    """Once per process: remove case folders left by a harness (or Dask worker) that was killed."""
+    for path in glob.glob(os.path.join(tempfile.gettempdir(), _DIR_PREFIX + "*-*")):
+        pid = os.path.basename(path)[len(_DIR_PREFIX):].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not psutil.pid_exists(int(pid)):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def run_case(
+    case: Case,
+    cores: Sequence[int] | None = None,
+    *,
+    stop: threading.Event | None = None,
+    startup_s: float = STARTUP_S,
+) -> CaseResult:
+    """Run one case in a fresh process tree on ``cores``.
+
+    Without ``cores`` the case waits for a free slot of a process-wide :class:`SlotPool`, so
+    concurrent calls in one process (threads of a distributed worker) never share cores.
+
+    Never raises for anything the planner does; raises :class:`HarnessError` when this
+    machine cannot run a case (no space for the case folder). ``stop`` (set by an executor on
+    Ctrl-C) ends the case early; the result then has reason ``"cancelled"`` and must not be
+    stored.
+    """
+    budget = case.scenario.budget
+    if cores is None:  # e.g. on a distributed worker: take a free slot of this process's pool
+        with SlotPool.shared(budget.cores).slot() as slot:
+            return run_case(case, slot, stop=stop, startup_s=startup_s)
+    cores = tuple(cores)
+    started_at = utc_now()
+    tmp = _case_dir()
+    try:
+        case_file = os.path.join(tmp, "case.json")
+        try:
+            with open(case_file, "w") as f:
+                json.dump({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides}, f)
+            log = open(os.path.join(tmp, "log.txt"), "wb")
+        except OSError as exc:
+            raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+        scenario = json.dumps(case.scenario.to_dict()).encode()
+        mr, mw = os.pipe()
+        rr, rw = os.pipe()
+        mem = int(budget.memory_mb) * 1024 * 1024
+        tag = os.path.basename(tmp)
+        t_spawn = time.monotonic()
+        try:
+            proc = subprocess.Popen(
+                [sys.executable, "-c", BOOTSTRAP, case_file, str(mw), str(rw), ",".join(map(str, cores)), str(mem), str(os.getpid())],
+                stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, pass_fds=(mw, rw),
+                cwd=tmp, env=_child_env(len(cores), tag), start_new_session=True,
+            )
+        except BaseException:
+            os.close(mr)
+            os.close(rr)
+            raise
+        finally:
+            os.close(mw)
+            os.close(rw)
+            log.close()
+        try:
+            out = _Supervisor(proc, mr, rr, scenario, tag, budget.wall_s, startup_s, stop, t_spawn).run()
+        finally:
+            os.close(mr)
+            os.close(rr)
+        with open(os.path.join(tmp, "log.txt"), "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - LOG_TAIL))
+            log_tail = f.read().decode(errors="replace")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return _result(case, out, cores, started_at, log_tail)
+
+
+@dataclass
+class _Outcome:
+    """What the supervisor saw; every time here is from the harness's monotonic clock."""
+
+    t_spawn: float
+    startup_s: float
+    t_ready: float | None = None
+    t_done: float | None = None
+    t_end: float | None = None
+    cpu_ready: float = 0.0
+    done: dict[str, Any] | None = None
+    fault: str = ""
+    timed_out: bool = False
+    cancelled: bool = False
+    status: int | None = None
+    report: dict[str, Any] | None = None
+    peak_vms_mb: float = 0.0
+    peak_rss_mb: float = 0.0
+
+    @property
+    def solve_time_s(self) -> float | None:
+        if self.t_ready is None:
+            return None
+        return max(0.0, (self.t_done if self.t_done is not None else self.t_end or self.t_ready) - self.t_ready)
+
+    @property
+    def solve_cpu_s(self) -> float | None:
+        if self.t_ready is None or self.report is None:
+            return None
+        return max(0.0, float(self.report["cpu_s"]) - self.cpu_ready)  # tick-resolution sample vs µs accounting
+
+    @property
+    def maxrss_mb(self) -> float | None:
+        if self.report is not None:
+            return float(self.report["maxrss_kb"]) / 1024.0
+        return self.peak_rss_mb or None
+
+
+class _Supervisor:
+    """Hands the scenario over, reads and validates the case's messages, enforces the deadlines."""
+
+    def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
+                 wall_s: float, startup_s: float, stop: threading.Event | None, t_spawn: float):
+        self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
+        self.wall_s, self.stop = wall_s, stop
+        self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s)
+        self.deadline = t_spawn + startup_s
+        self.buf = bytearray()
+        self.scanned = 0
+        self.writer: threading.Thread | None = None
+        self.next_sample = 0.0
+        self.next_tree_sample = t_spawn + TREE_SAMPLE_S
+        self.planner: psutil.Process | None = None
+        self.report_buf = bytearray()
+        try:
+            self.warden: psutil.Process | None = psutil.Process(proc.pid)
+        except psutil.Error:
+            self.warden = None
+
+    def run(self) -> _Outcome:
+        o = self.o
+        sel = selectors.DefaultSelector()
+        sel.register(self.msg_fd, selectors.EVENT_READ)
+        os.set_blocking(self.msg_fd, False)
+        eof = False
+        try:
+            while not o.fault:
+                now = time.monotonic()
+                if self.stop is not None and self.stop.is_set():
+                    o.cancelled = True
+                    break
+                if now >= self.deadline:
+                    o.timed_out = o.done is None
+                    break
+                if now >= self.next_sample:
+                    self._sample(now)
+                    self.next_sample = now + SAMPLE_S
+                if not eof:
+                    if sel.select(timeout=min(self.deadline - now, 0.25)):
+                        eof = self._read()
+                else:
+                    time.sleep(0.005)
+                if self._reaped():
+                    while not eof and not o.fault and sel.select(timeout=0.05):  # what is still in the pipe
+                        eof = self._read()
+                    break
+        finally:
+            sel.close()
+            o.t_end = time.monotonic()
+            if o.status is None:  # still running: past a deadline, a fault, or cancelled
+                self._end()
+            self._read_report()
+            if self.writer is not None:
+                self.writer.join(timeout=1.0)
+        return o
+
+    # -- messages ------------------------------------------------------------------------------
+    def _read(self) -> bool:
+        """Read what the pipe holds; scan only the new bytes for line ends (linear in the size)."""
+        chunk, eof = bytearray(), False
+        while len(chunk) < 1 << 24:  # drain what is there (up to 16 MB) before scanning it
+            try:
+                part = os.read(self.msg_fd, 1 << 20)
+            except BlockingIOError:
+                break
+            if not part:
+                eof = True
+                break
+            chunk += part
+        self.buf += chunk
+        while not self.o.fault:
+            nl = self.buf.find(b"\n", self.scanned)
+            if nl < 0:
+                self.scanned = len(self.buf)
+                if len(self.buf) > MAX_RESULT_BYTES:
+                    self.o.fault = _too_large(len(self.buf))
+                break
+            line = bytes(self.buf[:nl])
+            del self.buf[: nl + 1]
+            self.scanned = 0
+            if len(line) > MAX_RESULT_BYTES:
+                self.o.fault = _too_large(len(line))
+            elif line.strip():
+                self._handle(line)
+        if eof and self.buf.strip() and not self.o.fault:
+            self.o.fault = "the case's last message is not terminated by a newline"
+        return eof
+
+    def _handle(self, line: bytes) -> None:
+        o = self.o
+        try:
+            msg = json.loads(line)
+        except ValueError as exc:
+            o.fault = f"the case sent a message that is not JSON ({exc})"
+            return
+        event = msg.get("event") if isinstance(msg, dict) else None
+        if o.done is not None:
+            o.fault = "the case sent a message after its result"
+        elif event == "ready" and o.t_ready is None:
+            self._hand_over()
+        elif event == "ready":
+            o.fault = "the case said 'ready' twice"
+        elif event == "done":
+            problem = _check_done(msg, o.t_ready is not None)
+            if problem:
+                o.fault = problem
+            else:
+                o.t_done = time.monotonic()
+                o.done = msg
+                self.deadline = o.t_done + EXIT_GRACE_S
+        else:
+            o.fault = f"the case sent a message that is not an earthbench message: {_clip(line)}"
+
+    def _hand_over(self) -> None:
+        """The planner's code is loaded: start the clock and give the case its scenario."""
+        o = self.o
+        o.t_ready = time.monotonic()
+        o.cpu_ready = self._tree_cpu()
+        self.deadline = o.t_ready + self.wall_s
+        stdin, data = self.proc.stdin, self.scenario
+
+        def write() -> None:
+            try:
+                stdin.write(data)
+                stdin.close()
+            except OSError:  # the case ended (or closed its stdin) before reading it all
+                pass
+
+        self.writer = threading.Thread(target=write, name="earthbench-scenario", daemon=True)
+        self.writer.start()
+
+    # -- the process tree ----------------------------------------------------------------------
+    def _tree(self) -> list[psutil.Process]:
+        try:
+            return self.warden.children(recursive=True) if self.warden is not None else []
+        except psutil.Error:
+            return []
+
+    def _planner(self) -> psutil.Process | None:
+        """The planner's process, by the pid its warden reported (no scan of the process table)."""
+        if self.planner is None:
+            self._read_report_pipe()
+            first = self.report_buf.split(b"\n", 1)[0]
+            try:
+                self.planner = psutil.Process(int(json.loads(first)["planner"]))
+            except (ValueError, KeyError, TypeError, psutil.Error):
+                return None
+        return self.planner
+
+    def _tree_cpu(self) -> float:
+        """CPU seconds the case's processes have used so far (the warden's own excluded, as in its report).
+
+        The planner's process (with its reaped children) is read directly; only if its pid is
+        not known is the whole tree scanned.
+        """
+        planner = self._planner()
+        total = 0.0
+        for p in [planner] if planner is not None else self._tree():
+            try:
+                t = p.cpu_times()
+            except psutil.Error:
+                continue
+            total += t.user + t.system + t.children_user + t.children_system
+        return total
+
+    def _sample(self, now: float) -> None:
+        """Address space (what RLIMIT_AS caps) and resident memory, as we wait: the planner's process
+        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table)."""
+        if now >= self.next_tree_sample:
+            procs = self._tree()
+            self.next_tree_sample = now + TREE_SAMPLE_S
+        else:
+            planner = self._planner()
+            procs = [planner] if planner is not None else []
+        rss = 0.0
+        for p in procs:
+            try:
+                m = p.memory_info()
+            except psutil.Error:
+                continue
+            self.o.peak_vms_mb = max(self.o.peak_vms_mb, m.vms / 2**20)
+            rss += m.rss / 2**20
+        self.o.peak_rss_mb = max(self.o.peak_rss_mb, rss)
+
+    def _reaped(self, block: bool = False) -> bool:
+        try:
+            pid, status, _ = os.wait4(self.proc.pid, 0 if block else os.WNOHANG)
+        except ChildProcessError:
+            pid, status = self.proc.pid, 0
+        if not pid:
+            return False
+        self.o.status = os.waitstatus_to_exitcode(status)
+        self.proc.returncode = self.o.status
+        return True
+
+    def _end(self) -> None:
+        """Ask the warden to end the tree; if it does not within the grace, kill every process we find."""
+        try:
+            os.kill(self.proc.pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+        end = time.monotonic() + TERM_GRACE_S
+        while time.monotonic() < end:
+            if self._reaped():
+                return
+            time.sleep(0.01)
+        for p in self._tree():  # the warden is stopped or gone astray: do its job
+            try:
+                p.kill()
+            except psutil.Error:
+                pass
+        try:
+            os.kill(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self._reaped(block=True)
+
+    def _read_report_pipe(self) -> None:
+        try:
+            os.set_blocking(self.report_fd, False)
+            while chunk := os.read(self.report_fd, 1 << 16):
+                self.report_buf += chunk
+        except OSError:  # nothing more yet (BlockingIOError) or the pipe is gone
+            pass
+
+    def _read_report(self) -> None:
+        """The warden's final report, if it wrote one; without it, sweep for processes tagged with this case."""
+        self._read_report_pipe()
+        for line in bytes(self.report_buf).splitlines()[1:2]:
+            try:
+                rep = json.loads(line)
+            except ValueError:
+                break
+            if isinstance(rep, dict) and all(isinstance(rep.get(k), (int, float)) for k in ("cpu_s", "maxrss_kb")):
+                self.o.report = rep
+                if isinstance(rep.get("status"), int) and self.o.status == 0:
+                    self.o.status = rep["status"]  # the planner process's own exit status
+                return
+        _sweep(self.tag)
+
+
+def _sweep(tag: str) -> None:
+    """Kill every process of ours that carries the case's tag (the warden died before its job was done)."""
+    me = os.getuid()
+    for p in psutil.process_iter(["uids"]):
+        try:
+            if p.info["uids"] and p.info["uids"].real == me and p.environ().get(CASE_TAG) == tag:
+                p.kill()
+        except psutil.Error:
+            continue
+
+
+def _check_done(msg: dict[str, Any], ready: bool) -> str:
+    """Why a result message is malformed, or '' when it is well formed."""
+    outcome = msg.get("outcome")
+    if outcome not in ("plan", "error", "memory"):
+        return f"the case's result has outcome {_clip(outcome)}, not one of plan, error, memory"
+    if not isinstance(msg.get("error", ""), str):
+        return f"the case's result has an error text of type {type(msg['error']).__name__}, not a string"
+    if not isinstance(msg.get("detail", {}), dict):
+        return "the case's result has a detail that is not an object"
+    if outcome == "plan":
+        if not ready:
+            return "the case sent a plan before it said it was ready"
+        if not isinstance(msg.get("plan"), str):
+            return f"the case's result has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
+    return ""
+
+
+def _too_large(n: int) -> str:
+    return (f"the case's result is over the plan-size limit: more than {MAX_RESULT_BYTES / 2**20:.0f} MB of JSON "
+            f"(read {n / 2**20:.0f} MB before it was refused)")
+
+
+def _clip(value: Any, n: int = 120) -> str:
+    text = value.decode(errors="replace") if isinstance(value, bytes) else repr(value)
+    return text if len(text) <= n else text[:n] + "…"
+
+
+_MEMORY_WORDS = ("std::bad_alloc", "MemoryError", "Cannot allocate memory", "out of memory", "Unable to allocate")
+
+
+def _mentions_memory(text: str) -> bool:
+    """An allocation failure inside a C/C++ extension shows up only as text (or an abort)."""
+    tail = text[-2000:]
+    return any(w in tail for w in _MEMORY_WORDS)
+
+
+def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
+    budget = case.scenario.budget
+    times = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
+    common: dict[str, Any] = dict(
+        key=case.key, scenario_id=case.scenario.id, cores=cores, started_at=started_at, finished_at=utc_now(),
+        log_tail=log_tail, exit_status=o.status, peak_rss_mb=o.maxrss_mb,
+        startup_s=(o.t_ready - o.t_spawn) if o.t_ready is not None else None,
+        environment=environment(case.planner.source),
+        detail=dict(o.done.get("detail") or {}) if o.done else {},
+    )
+    if o.cancelled and o.done is None:
+        return CaseResult(reason="cancelled", error="the run was interrupted", **common)
+    if o.fault:
+        return CaseResult(reason="error", error=o.fault + "; the case was ended", **times, **common)
+    if o.done is None:
+        if o.timed_out:
+            if o.t_ready is not None:
+                msg = f"the planner ran past its wall budget of {budget.wall_s:g} s and was ended"
+            else:
+                msg = f"the case did not reach the planner call within {o.startup_s:g} s of start-up"
+            return CaseResult(reason="timeout", error=msg, **times, **common)
+        st = o.status
+        how = f"killed by {signal.Signals(-st).name}" if st is not None and st < 0 else f"exited with status {st}"
+        near = MEMORY_KILL_FRACTION * budget.memory_mb
+        if (o.maxrss_mb or 0) >= near or o.peak_vms_mb >= near or _mentions_memory(log_tail):
+            return CaseResult(reason="memory", error=f"the case process {how} near its memory budget of {budget.memory_mb} MB "
+                              f"(peak {o.maxrss_mb or 0:.0f} MB resident, {o.peak_vms_mb:.0f} MB address space seen)", **times, **common)
+        return CaseResult(reason="crashed", error=f"the case process {how} without a result", **times, **common)
+    d = o.done
+    if d["outcome"] in ("error", "memory"):
+        reason = "memory" if d["outcome"] == "memory" or _mentions_memory(d.get("error", "")) else "error"
+        return CaseResult(reason=reason, error=d.get("error", ""), **times, **common)
+    plan_json = d["plan"]
+    try:
+        verdict, metrics = score(case.scenario, plan_json, case.threshold)
+    except Exception:  # noqa: BLE001 - a referee bug must not lose the plan; `earthbench rescore` can retry
+        return CaseResult(reason="error", error="the referee failed on this plan:\n" + traceback.format_exc(), plan_json=plan_json, **times, **common)
+    metrics.update(times)
+    return CaseResult(
+        reason="ok" if verdict.valid else "invalid", metrics=metrics,
+        violations=tuple(v.to_dict() for v in verdict.violations), plan_json=plan_json, **times, **common,
+    )

@@ -1,0 +1,410 @@
+"""Checking a results store against the referee: re-judging, audits and spot re-timing.
+
+A store is a file anyone can edit, so nothing in it is trusted because it is there. What can
+be checked is checked:
+
+* **Referee and metric figures** (reason ok/invalid, success, every metric, the violations)
+  are recomputed from the stored plan and the stored scenario document by :func:`rejudge`,
+  the one re-judging function (``earthbench rescore``, ``merge`` and ``verify`` all call it).
+* **Scenario and suite digests** are recomputed from the stored documents and members, never
+  read from a digest column.
+* **Solve times, CPU times and memory** come from the machine that ran the case and cannot be
+  recomputed from a store; :func:`spot_check` reruns a seeded sample of cases on this machine
+  and reports how far those figures agree.
+
+A run without a plan whose reason is ``timeout``, ``memory``, ``crashed`` or ``error`` carries
+no referee figures to verify; its reason is the word of the harness that ran it and cannot be
+re-checked here. :func:`audit` counts such runs (``unjudged``) and lets them through only when
+they claim nothing else (no success, no metrics, no violations). A run stored ``ok`` or
+``invalid`` without a plan claims a verdict nobody can check, and is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import sqlite3
+import statistics
+import traceback
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any
+
+from .errors import EarthbenchError, StoreError
+from .store import METRIC_COLUMNS, Store, _decompress
+from .suite import suite_digest
+from .world import Scenario
+
+#: Float round-off allowed between a stored figure and the re-judged one.
+REL_TOL = 1e-9
+ABS_TOL = 1e-9
+#: Metrics only the harness measures: carried from the machine that ran the case, never re-judged.
+HARNESS_METRICS = ("solve_time_s", "solve_cpu_s")
+#: Reasons that carry a referee verdict, hence need a stored plan.
+JUDGED_REASONS = ("ok", "invalid")
+
+
+class VerifyError(EarthbenchError):
+    """A store whose runs cannot be re-checked here (planner not installed, no runs to sample)."""
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """The referee's findings on one stored plan, in the shape the store keeps them."""
+
+    reason: str
+    metrics: dict[str, Any] | None
+    violations: tuple[dict[str, Any], ...]
+    error: str = ""
+
+    @property
+    def success(self) -> bool:
+        return bool(self.metrics and self.metrics.get("success"))
+
+
+def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
+    """The core scoring entry point (referee verdict and every metric), called from this one place."""
+    from .harness import score
+
+    return score(scenario, plan_json, threshold)
+
+
+def rejudge(scenario: Scenario, plan_json: str, threshold: float, *,
+            solve_time_s: float | None = None, solve_cpu_s: float | None = None) -> Judgement:
+    """Judge a stored plan again; the harness's solve times are carried in as they were measured.
+
+    A referee failure is an ``error`` judgement with its traceback, as when the case first ran.
+    """
+    try:
+        verdict, metrics = _score(scenario, plan_json, threshold)
+    except Exception:  # noqa: BLE001 - a referee bug is reported on the run, never a crash
+        return Judgement("error", None, (), "the referee failed on this plan:\n" + traceback.format_exc())
+    metrics.update(solve_time_s=solve_time_s, solve_cpu_s=solve_cpu_s)
+    return Judgement("ok" if verdict.valid else "invalid", metrics, tuple(v.to_dict() for v in verdict.violations))
+
+
+# -- comparing stored figures with re-judged ones -----------------------------------------------
+
+
+def same(a: Any, b: Any) -> bool:
+    """Equal up to float round-off (NaN equals NaN, ±inf only itself), recursively in lists and dicts."""
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        x, y = float(a), float(b)
+        if math.isnan(x) or math.isnan(y):
+            return math.isnan(x) and math.isnan(y)
+        return x == y or math.isclose(x, y, rel_tol=REL_TOL, abs_tol=ABS_TOL)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def _show(v: Any) -> str:
+    return f"{v:.6g}" if isinstance(v, float) else repr(v)
+
+
+def differences(row: Any, judged: Judgement) -> list[str]:
+    """What a stored run claims that the re-judged plan does not (empty when they agree).
+
+    ``row`` is a ``runs`` row; every referee figure is compared: the reason, the success
+    column, each metric in the JSON and in its own column, and the violations.
+    """
+    out: list[str] = []
+    if row["reason"] != judged.reason:
+        out.append(f"reason {row['reason']} (re-judged {judged.reason})")
+    if bool(row["success"]) != judged.success:
+        out.append(f"success {bool(row['success'])} (re-judged {judged.success})")
+    try:
+        stored = json.loads(row["metrics"]) if row["metrics"] else None
+    except ValueError:
+        stored = "unreadable"
+    fresh = judged.metrics
+    if not isinstance(stored, dict) or fresh is None:
+        if not (stored is None and fresh is None):
+            out.append(f"metrics {'none' if stored is None else 'unreadable' if not isinstance(stored, dict) else 'stored'} "
+                       f"(re-judged {'none' if fresh is None else 'present'})")
+    else:
+        for k in sorted((stored.keys() | fresh.keys()) - set(HARNESS_METRICS)):
+            if k not in fresh:
+                out.append(f"metric {k} = {_show(stored[k])} is not computed by this earthbench")
+            elif k not in stored:
+                out.append(f"metric {k} missing (re-judged {_show(fresh[k])})")
+            elif not same(stored[k], fresh[k]):
+                out.append(f"metric {k} {_show(stored[k])} (re-judged {_show(fresh[k])})")
+    for c in METRIC_COLUMNS:
+        want = None if fresh is None else fresh.get(c)
+        if not same(row[c], want):
+            out.append(f"column {c} {_show(row[c])} (re-judged {_show(want)})")
+    try:
+        violations = json.loads(row["violations"] or "[]")
+    except ValueError:
+        violations = "unreadable"
+    if not same(violations, list(judged.violations)):
+        n = len(violations) if isinstance(violations, list) else "unreadable"
+        out.append(f"violations {n} stored (re-judged {len(judged.violations)}: "
+                   f"{', '.join(sorted({v['rule'] for v in judged.violations})) or 'none'})")
+    return out
+
+
+# -- auditing a whole store ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One run (or one suite) that does not hold, and why."""
+
+    run_id: int | None
+    label: str
+    what: str
+
+    def __str__(self) -> str:
+        return (f"run {self.run_id} ({self.label}): " if self.run_id is not None else f"{self.label}: ") + self.what
+
+
+@dataclass
+class Audit:
+    """The outcome of re-checking every run of a store (:func:`audit`)."""
+
+    path: str
+    agreed: int = 0                                                #: re-judged and equal to what is stored
+    differ: list[Finding] = field(default_factory=list)            #: stored figures differ from the re-judged ones
+    broken: list[Finding] = field(default_factory=list)            #: cannot be verified at all (never mergeable)
+    unjudged: Counter = field(default_factory=Counter)             #: runs without a plan, by reason (harness's word)
+    judgements: dict[int, Judgement] = field(default_factory=dict)  #: by run id, every run re-judged
+    scenarios: dict[str, Scenario] = field(default_factory=dict)    #: by digest, every stored scenario that reproduces it
+
+    def problems(self, *, rescore: bool = False) -> list[str]:
+        """Every reason to refuse this store; with ``rescore``, differing figures are not one."""
+        out = [f"{self.path}: {f}" for f in self.broken]
+        if not rescore:
+            out += [f"{self.path}: {f}" for f in self.differ]
+        return out
+
+
+def _label(row: Any) -> str:
+    return f"{row['scenario_id']} × {row['planner']} {row['planner_version']}"
+
+
+def _check_suites(store: Store, audit: Audit) -> None:
+    """Each stored suite version's digest, recomputed from its members and threshold."""
+    for s in store.db.execute("SELECT id, name, digest, threshold FROM suites ORDER BY id"):
+        members = [(m[0], m[1]) for m in store.db.execute(
+            "SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (s["id"],))]
+        got = suite_digest(members, s["threshold"])
+        if got != s["digest"]:
+            audit.broken.append(Finding(None, f"suite {s['name']}", f"the stored digest {s['digest'][:12]}… is not the one its "
+                                        f"{len(members)} scenarios and threshold give ({got[:12]}…)"))
+
+
+def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str]:
+    """Each stored scenario by digest, or the reason it cannot be used (digest recomputed from the document)."""
+    out: dict[str, Scenario | str] = {}
+    for d in digests:
+        row = store.db.execute("SELECT doc FROM scenarios WHERE digest=?", (d,)).fetchone()
+        if row is None:
+            out[d] = f"its scenario {d[:12]}… is not stored"
+            continue
+        try:
+            sc = Scenario.from_json(_decompress(row[0]))
+        except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
+            out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
+            continue
+        out[d] = sc if sc.digest == d else (f"its stored scenario document does not reproduce the digest {d[:12]}… "
+                                            f"(it gives {sc.digest[:12]}…): the scenario was edited")
+    return out
+
+
+def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
+    """Re-check every run of ``store`` (or the given ``runs`` rows); writes nothing."""
+    result = Audit(str(store.path))
+    _check_suites(store, result)
+    if rows is None:
+        rows = store.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
+    suites = {(s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")}
+    members = {(m[0], m[1]) for m in store.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
+    scenarios = _scenarios(store, {r["scenario_digest"] for r in rows})
+    result.scenarios = {d: sc for d, sc in scenarios.items() if isinstance(sc, Scenario)}
+    for r in rows:
+        label = _label(r)
+        suite = suites.get((r["suite"], r["suite_digest"]))
+        if suite is not None and not same(suite[1], r["threshold"]):
+            result.broken.append(Finding(r["id"], label, f"threshold {r['threshold']!r} is not its suite's ({suite[1]!r})"))
+            continue
+        if suite is not None and (suite[0], r["scenario_digest"]) not in members:
+            result.broken.append(Finding(r["id"], label, f"its scenario is not a member of suite {r['suite']} {r['suite_digest'][:12]}…"))
+            continue
+        sc = scenarios[r["scenario_digest"]]
+        if isinstance(sc, str):
+            result.broken.append(Finding(r["id"], label, sc))
+            continue
+        if r["plan"] is None:
+            if r["reason"] in JUDGED_REASONS:
+                result.broken.append(Finding(r["id"], label, f"stored {r['reason']} without a plan: its verdict cannot be verified"))
+            elif r["success"] or r["metrics"] is not None or any(r[c] is not None for c in METRIC_COLUMNS) \
+                    or (r["violations"] or "[]") != "[]":
+                result.broken.append(Finding(r["id"], label, f"stored {r['reason']} without a plan, yet it carries referee figures"))
+            else:
+                result.unjudged[r["reason"]] += 1
+            continue
+        try:
+            plan = _decompress(r["plan"])
+        except Exception:  # noqa: BLE001 - an edited blob
+            result.broken.append(Finding(r["id"], label, "its stored plan cannot be decompressed"))
+            continue
+        judged = rejudge(sc, plan, r["threshold"], solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
+        result.judgements[r["id"]] = judged
+        diff = differences(r, judged)
+        if r["reason"] == "error" and judged.reason == "error":
+            diff = []  # the referee fails on it here too: an error either way (its traceback may differ)
+        if diff:
+            result.differ.append(Finding(r["id"], label, "; ".join(diff)))
+        else:
+            result.agreed += 1
+    return result
+
+
+# -- spot re-timing -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SpotCheck:
+    """One planner's sample, rerun here: do its referee figures agree, how do its solve times compare?"""
+
+    planner: str
+    version: str
+    config_hash: str
+    run_ids: tuple[int, ...]
+    agree: int
+    ratios: tuple[float, ...]          #: solve time here / stored solve time, per run with both
+    disagreements: tuple[str, ...]
+    machine: str                        #: where the sample was rerun
+    stored_machines: tuple[str, ...]    #: where the stored runs had run
+    checked_at: str
+
+    @property
+    def n(self) -> int:
+        return len(self.run_ids)
+
+    @property
+    def ratio_median(self) -> float | None:
+        return statistics.median(self.ratios) if self.ratios else None
+
+    def line(self) -> str:
+        r = self.ratios
+        ratio = (f"solve time here / stored: median {self.ratio_median:.2f} ({min(r):.2f}–{max(r):.2f})" if r
+                 else "no solve times to compare")
+        return (f"{self.planner} {self.version}: {self.n} run(s) rerun on {self.machine} ({self.checked_at}); "
+                f"referee figures agree {self.agree}/{self.n}; {ratio}")
+
+
+def machine_label(env: dict[str, Any] | Any) -> str:
+    """A machine as readers know it: hostname, CPU model, cores."""
+    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a sqlite3.Row
+    host, cpu, cores = get("hostname"), get("cpu_model"), get("cores")
+    return f"{host or 'unknown host'} ({cpu or 'unknown CPU'}" + (f", {cores} cores)" if cores else ")")
+
+
+def _ref_for(row: Any, config: dict[str, Any]):
+    """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
+    from .harness import PlannerRef
+
+    ref = PlannerRef.resolve(row["planner"], config)
+    if ref.version != row["planner_version"]:
+        raise VerifyError(f"planner {row['planner']!r} {ref.version} is installed, but the runs to re-time are of version "
+                          f"{row['planner_version']}; install that version to re-time them")
+    if ref.config_hash != row["config_hash"]:
+        raise VerifyError(f"planner {row['planner']!r} {ref.version} gives configuration hash {ref.config_hash[:8]} for the "
+                          f"stored configuration, not the stored {row['config_hash'][:8]}: its Config changed without a version bump")
+    return ref
+
+
+def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None, planners: Sequence[str] = (),
+               jobs: int | None = None, executor: Any = None) -> list[SpotCheck]:
+    """Rerun ``n`` seeded random runs of ``store`` on this machine; one :class:`SpotCheck` per planner.
+
+    Every sampled planner must be installed at the stored version and configuration; the
+    scenarios are the stored documents (their digests recomputed). Writes nothing.
+    """
+    from .harness import Case, LocalExecutor, environment
+
+    if n < 1:
+        raise VerifyError("--sample must be at least 1")
+    rows = sorted(store.query(suite=suite, planner=planners or None), key=lambda r: r["id"])
+    if not rows:
+        raise VerifyError(f"no runs to re-time in {str(store.path)!r}" + (f" for suite {suite!r}" if suite else "")
+                          + (f" and planner(s) {', '.join(planners)}" if planners else ""))
+    sample = random.Random(seed).sample(rows, min(n, len(rows)))
+    scenarios = _scenarios(store, {r["scenario_digest"] for r in sample})
+    cases, refs = [], {}
+    for r in sample:
+        sc = scenarios[r["scenario_digest"]]
+        if isinstance(sc, str):
+            raise VerifyError(f"run {r['id']} ({_label(r)}): {sc}")
+        key = (r["planner"], r["planner_version"], r["config_hash"])
+        if key not in refs:
+            cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
+            refs[key] = _ref_for(r, json.loads(cfg[0]) if cfg else {})
+        cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key]))
+    by_key = {c.key: r for c, r in zip(cases, sample)}
+    fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
+    here = machine_label(environment())
+    stored_env = {e["id"]: machine_label(e) for e in store.db.execute("SELECT id, hostname, cpu_model, cores FROM environments")}
+    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    out = []
+    for key in refs:
+        runs = [(c, by_key[c.key]) for c in cases if (c.planner.name, c.planner.version, c.planner.config_hash) == key]
+        agree, ratios, bad = 0, [], []
+        for case, row in runs:
+            res = fresh.get(case.key)
+            if res is None:
+                bad.append(f"run {row['id']}: no result")
+                continue
+            judged = Judgement(res.reason, res.metrics, tuple(res.violations))
+            diff = differences(row, judged) if res.reason in JUDGED_REASONS or row["reason"] in JUDGED_REASONS \
+                else ([] if res.reason == row["reason"] else [f"reason {row['reason']} (rerun {res.reason})"])
+            if diff:
+                bad.append(f"run {row['id']} ({row['scenario_id']}): " + "; ".join(diff))
+            else:
+                agree += 1
+            if row["solve_time_s"] and res.solve_time_s is not None:
+                ratios.append(res.solve_time_s / row["solve_time_s"])
+        out.append(SpotCheck(key[0], key[1], key[2], tuple(r["id"] for _, r in runs), agree, tuple(ratios), tuple(bad), here,
+                             tuple(sorted({stored_env.get(r["environment_id"], "unknown machine") for _, r in runs})), now))
+    return sorted(out, key=lambda s: (s.planner, s.version, s.config_hash))
+
+
+_SPOT_TABLE = """CREATE TABLE IF NOT EXISTS spot_checks (
+    id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, planner_version TEXT NOT NULL,
+    config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, ratios TEXT NOT NULL,
+    disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL)"""
+
+
+def record_spot_checks(store: Store, checks: Iterable[SpotCheck]) -> None:
+    """Keep a spot check in the store it sampled, so the leaderboard's stamp can show it (one transaction)."""
+    try:
+        with store.db:
+            store.db.execute("BEGIN IMMEDIATE")
+            store.db.execute(_SPOT_TABLE)
+            store.db.executemany(
+                "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
+                "disagreements, machine, stored_machines) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                [(c.checked_at, c.planner, c.version, c.config_hash, json.dumps(c.run_ids), c.agree, json.dumps(c.ratios),
+                  json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines)) for c in checks])
+    except sqlite3.OperationalError as exc:
+        raise StoreError(store._explain(exc)) from None
+
+
+def latest_spot_checks(store: Store) -> list[SpotCheck]:
+    """The most recent spot check of each planner version and configuration (none if never checked)."""
+    if not store.db.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='spot_checks'").fetchone():
+        return []
+    rows = store.db.execute(
+        "SELECT * FROM spot_checks WHERE id IN (SELECT MAX(id) FROM spot_checks GROUP BY planner, planner_version, config_hash) "
+        "ORDER BY planner, planner_version, config_hash").fetchall()
+    return [SpotCheck(r["planner"], r["planner_version"], r["config_hash"], tuple(json.loads(r["run_ids"])), r["agree"],
+                      tuple(json.loads(r["ratios"])), tuple(json.loads(r["disagreements"])), r["machine"],
+                      tuple(json.loads(r["stored_machines"])), r["checked_at"]) for r in rows]
