@@ -1,34 +1,44 @@
 """Paired comparison of two planner configurations on shared scenarios (``earthbench compare``).
 
-For a planner author checking a change: runs of configuration A and of configuration B are
-paired by scenario digest (same terrain, task and budget). For each metric, over the pairs
-where both values are finite, the table gives both medians, the median and mean of the
-differences ``B − A``, and the two-sided Wilcoxon signed-rank test (``scipy.stats.wilcoxon``,
-zero differences dropped; p = 1 when every difference is zero). Success is compared with an
-exact McNemar test (a binomial test on the pairs where exactly one of the two succeeded).
+For a planner author checking a change, or CI guarding one: runs of configuration A and of
+configuration B are paired by scenario digest (same terrain, task and budget). For each
+metric, over the pairs where both values are finite, the table gives both medians, the effect
+size — the median of the differences ``B − A`` with its 95 % bootstrap interval — the mean
+difference, and the two-sided Wilcoxon signed-rank test (:func:`earthbench.stats.wilcoxon_p`,
+zero differences dropped). The p-values are Holm-adjusted across the metrics of the table
+(family-wise error ≤ alpha), and the verdict uses the adjusted value. Success is compared
+with an exact McNemar test (not part of the Holm family: it is its own question).
 
-A verdict says whether B is better or worse at the chosen significance level, by the
-metric's direction (:data:`DIRECTION`). Solve times from different CPU models are flagged.
+A verdict says whether B is better or worse at the chosen level, by the metric's direction
+(:data:`DIRECTION`). When n pairs cannot reach alpha at all (the exact signed-rank test's
+smallest two-sided p is 2 / 2ⁿ: 0.125 for 4 pairs), the report says so rather than leaving
+"no significant difference" to be read as "no difference". Solve times from different CPU
+models are flagged.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from .errors import EarthbenchError
+from .stats import bootstrap_ci, holm, mcnemar_p, min_wilcoxon_p, wilcoxon_p
 
 #: +1 where higher is better, −1 where lower is better.
 DIRECTION = {
     "volume_ratio": +1, "loaded_volume": +1, "mean_bucket_fill": +1,
+    "time_per_target_m3": -1, "time_per_target_m3_ratio": -1, "time_to_target_s": -1, "overshoot_m3": -1,
     "time_per_m3": -1, "time_per_m3_ratio": -1, "makespan_s": -1, "solve_time_s": -1, "solve_cpu_s": -1,
     "travel_m": -1, "digs": -1, "peak_rss_mb": -1,
 }
-DEFAULT_METRICS = ("volume_ratio", "time_per_m3", "time_per_m3_ratio", "makespan_s", "solve_time_s", "solve_cpu_s",
-                   "digs", "mean_bucket_fill", "travel_m")
+DEFAULT_METRICS = ("volume_ratio", "time_per_target_m3", "time_per_target_m3_ratio", "time_per_m3", "overshoot_m3",
+                   "makespan_s", "solve_time_s", "solve_cpu_s", "digs", "mean_bucket_fill", "travel_m")
+#: The name ``--fail-on-regression`` takes for the McNemar comparison of success.
+SUCCESS = "success"
 
 
 class CompareError(EarthbenchError):
@@ -92,21 +102,21 @@ class Comparison:
     table: pd.DataFrame
     success: dict[str, float]
     cpu_note: str = ""
+    alpha: float = 0.05
+    notes: list[str] = field(default_factory=list)
+
+    def regressions(self, metrics: tuple[str, ...]) -> list[str]:
+        """The metrics among ``metrics`` (``success`` included) on which B is significantly worse."""
+        worse = set(self.table.loc[self.table["verdict"] == "B worse", "metric"]) if len(self.table) else set()
+        s = self.success
+        if s["p_value"] < self.alpha and s["rate_b"] < s["rate_a"]:
+            worse.add(SUCCESS)
+        return [m for m in metrics if m in worse]
 
 
 def _label(runs: pd.DataFrame) -> str:
     r = runs.iloc[0]
     return f"{r['planner']} {r['planner_version']} [{str(r['config_hash'])[:8]}]"
-
-
-def _wilcoxon(d: np.ndarray) -> tuple[float, float]:
-    from scipy.stats import wilcoxon
-
-    nz = d[d != 0]
-    if len(nz) == 0:
-        return 0.0, 1.0
-    res = wilcoxon(nz, zero_method="wilcox", alternative="two-sided")
-    return float(res.statistic), float(res.pvalue)
 
 
 def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT_METRICS, alpha: float = 0.05) -> Comparison:
@@ -128,35 +138,23 @@ def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT
         ok = np.isfinite(x) & np.isfinite(y)
         n = int(ok.sum())
         d = y[ok] - x[ok]
-        stat, p = _wilcoxon(d) if n else (math.nan, math.nan)
-        sign = DIRECTION.get(m, 0)
-        med = float(np.median(d)) if n else math.nan
-        if not n or math.isnan(p):
-            verdict = "no pairs"
-        elif p >= alpha:
-            verdict = "no significant difference"
-        elif sign == 0:
-            verdict = "B higher" if med > 0 or (med == 0 and d.mean() > 0) else "B lower"
-        else:
-            better = (np.sign(med if med != 0 else d.mean()) * sign) > 0
-            verdict = "B better" if better else "B worse"
+        stat, p = wilcoxon_p(d) if n else (math.nan, math.nan)
+        lo, hi = bootstrap_ci(d, "median") if n else (math.nan, math.nan)
         rows.append({
-            "metric": m, "pairs": n, "dropped": int(len(shared) - n),
+            "metric": m, "pairs": n, "nonzero": int((d != 0).sum()), "dropped": int(len(shared) - n),
             "median_a": float(np.median(x[ok])) if n else math.nan, "median_b": float(np.median(y[ok])) if n else math.nan,
-            "median_diff": med, "mean_diff": float(d.mean()) if n else math.nan,
-            "wilcoxon_w": stat, "p_value": p, "verdict": verdict,
+            "median_diff": float(np.median(d)) if n else math.nan, "median_diff_lo": lo, "median_diff_hi": hi,
+            "mean_diff": float(d.mean()) if n else math.nan, "wilcoxon_w": stat, "p_value": p,
         })
+    table = pd.DataFrame(rows, columns=["metric", "pairs", "nonzero", "dropped", "median_a", "median_b", "median_diff",
+                                        "median_diff_lo", "median_diff_hi", "mean_diff", "wilcoxon_w", "p_value"])
+    table["p_holm"] = holm(table["p_value"].tolist()) if len(table) else []
+    table["verdict"] = [_verdict(r, alpha) for r in table.itertuples()]
     sa = a1["success"].fillna(False).astype(bool).to_numpy()
     sb = b1["success"].fillna(False).astype(bool).to_numpy()
-    only_a, only_b = int((sa & ~sb).sum()), int((~sa & sb).sum())
-    if only_a + only_b:
-        from scipy.stats import binomtest
-
-        p_s = float(binomtest(only_b, only_a + only_b, 0.5).pvalue)
-    else:
-        p_s = 1.0
-    success = {"both": int((sa & sb).sum()), "only_a": only_a, "only_b": only_b, "neither": int((~sa & ~sb).sum()),
-               "rate_a": float(sa.mean()), "rate_b": float(sb.mean()), "p_value": p_s}
+    success = {"both": int((sa & sb).sum()), "only_a": int((sa & ~sb).sum()), "only_b": int((~sa & sb).sum()),
+               "neither": int((~sa & ~sb).sum()), "rate_a": float(sa.mean()), "rate_b": float(sb.mean()),
+               "p_value": mcnemar_p(sa, sb)}
     note = ""
     if "cpu_model" in a1 and "cpu_model" in b1:
         ca, cb = set(a1["cpu_model"].dropna()), set(b1["cpu_model"].dropna())
@@ -164,33 +162,84 @@ def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT
             note = (f"solve times come from different CPU models (A: {', '.join(sorted(ca)) or '?'}; "
                     f"B: {', '.join(sorted(cb)) or '?'}): their differences mix planner and machine")
     return Comparison(_label(a), _label(b), len(shared), int(a["scenario_digest"].nunique() - len(shared)),
-                      int(b["scenario_digest"].nunique() - len(shared)), pd.DataFrame(rows), success, note)
+                      int(b["scenario_digest"].nunique() - len(shared)), table, success, note, alpha,
+                      _power_notes(table, alpha))
 
 
-def format_comparison(c: Comparison, alpha: float = 0.05) -> str:
-    """A plain-text report of a :class:`Comparison`."""
+def _verdict(r: Any, alpha: float) -> str:
+    if not r.pairs or math.isnan(r.p_holm):
+        return "no pairs"
+    if r.p_holm >= alpha:
+        return "no significant difference"
+    sign = DIRECTION.get(r.metric, 0)
+    toward = r.median_diff if r.median_diff != 0 else r.mean_diff
+    if sign == 0:
+        return "B higher" if toward > 0 else "B lower"
+    return "B better" if toward * sign > 0 else "B worse"
+
+
+def _power_notes(table: pd.DataFrame, alpha: float) -> list[str]:
+    """Say where n pairs can never reach alpha (after the Holm factor of the table's size)."""
+    m = max(int(table["p_value"].notna().sum()), 1)
+    by_n: dict[int, list[str]] = {}
+    for r in table.itertuples():
+        if r.pairs and min_wilcoxon_p(int(r.nonzero)) * m >= alpha:
+            by_n.setdefault(int(r.nonzero), []).append(str(r.metric))
+    return [f"{', '.join(names)}: with {n} non-zero pair(s) the smallest possible p is {min_wilcoxon_p(n):.3g}"
+            + (f" (× {m} metrics for Holm)" if m > 1 else "")
+            + f", never below α = {alpha:g}: no difference can be significant here; compare on more scenarios"
+            for n, names in sorted(by_n.items())]
+
+
+def _cells(c: Comparison) -> tuple[list[str], list[list[str]]]:
     def f(v: float) -> str:
         if v is None or (isinstance(v, float) and math.isnan(v)):
             return "–"
         return f"{v:.4g}"
 
-    lines = [f"A: {c.label_a}", f"B: {c.label_b}",
-             f"{c.pairs} shared scenario(s); {c.only_a} only in A, {c.only_b} only in B (not compared)", ""]
-    s = c.success
-    lines.append(f"success: A {100 * s['rate_a']:.0f}%, B {100 * s['rate_b']:.0f}% — both {s['both']}, only A {s['only_a']}, "
-                 f"only B {s['only_b']}, neither {s['neither']}; exact McNemar p = {s['p_value']:.3g}")
-    lines.append("")
-    head = ["metric", "pairs", "median A", "median B", "median B−A", "mean B−A", "Wilcoxon p", f"verdict (α = {alpha:g})"]
-    table = [head]
+    head = ["metric", "pairs", "median A", "median B", "median B−A [95% CI]", "mean B−A", "Wilcoxon p", "Holm p",
+            f"verdict (α = {c.alpha:g})"]
+    body = []
     for r in c.table.itertuples():
-        table.append([r.metric, f"{r.pairs}" + (f" (−{r.dropped})" if r.dropped else ""), f(r.median_a), f(r.median_b),
-                      f(r.median_diff), f(r.mean_diff), f(r.p_value), r.verdict])
+        effect = f(r.median_diff) + ("" if math.isnan(r.median_diff_lo) else f" [{f(r.median_diff_lo)}, {f(r.median_diff_hi)}]")
+        body.append([r.metric, f"{r.pairs}" + (f" (−{r.dropped})" if r.dropped else ""), f(r.median_a), f(r.median_b),
+                     effect, f(r.mean_diff), f(r.p_value), f(r.p_holm), r.verdict])
+    return head, body
+
+
+def _lines(c: Comparison) -> tuple[list[str], str, list[str]]:
+    s = c.success
+    head = [f"A: {c.label_a}", f"B: {c.label_b}",
+            f"{c.pairs} shared scenario(s); {c.only_a} only in A, {c.only_b} only in B (not compared)"]
+    succ = (f"success: A {100 * s['rate_a']:.0f}%, B {100 * s['rate_b']:.0f}% — both {s['both']}, only A {s['only_a']}, "
+            f"only B {s['only_b']}, neither {s['neither']}; exact McNemar p = {s['p_value']:.3g}")
+    tail = ["(−n: pairs dropped because a value is missing or infinite, e.g. no plan or nothing loaded; "
+            "p-values Holm-adjusted across the metrics of the table; the interval is a 95 % bootstrap interval)"]
+    tail += [f"warning: {n}" for n in c.notes]
+    if c.cpu_note:
+        tail.append(f"note: {c.cpu_note}")
+    return head, succ, tail
+
+
+def format_comparison(c: Comparison, alpha: float | None = None, fmt: str = "text") -> str:
+    """A report of a :class:`Comparison`: plain text, or Markdown (``fmt="markdown"``, e.g. for a CI comment)."""
+    if alpha is not None:
+        c.alpha = alpha
+    head, body = _cells(c)
+    top, succ, tail = _lines(c)
+    if fmt == "markdown":
+        from .publish import md_escape
+
+        lines = [f"- {md_escape(t)}" for t in top] + ["", md_escape(succ), "",
+                 "| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 2) + "---|"]
+        lines += ["| " + " | ".join(md_escape(x) for x in row) + " |" for row in body]
+        return "\n".join(lines + [""] + [md_escape(t) for t in tail])
+    table = [head, *body]
     widths = [max(len(row[i]) for row in table) for i in range(len(head))]
+    lines = [*top, "", succ, ""]
     for n, row in enumerate(table):
-        lines.append("  ".join(cell.ljust(w) if i in (0, 7) else cell.rjust(w) for i, (cell, w) in enumerate(zip(row, widths))).rstrip())
+        lines.append("  ".join(cell.ljust(w) if i in (0, len(head) - 1) else cell.rjust(w)
+                               for i, (cell, w) in enumerate(zip(row, widths))).rstrip())
         if n == 0:
             lines.append("  ".join("-" * w for w in widths))
-    lines.append("(−n: pairs dropped because a value is missing or infinite, e.g. no plan or nothing loaded)")
-    if c.cpu_note:
-        lines.append(f"note: {c.cpu_note}")
-    return "\n".join(lines)
+    return "\n".join(lines + tail)

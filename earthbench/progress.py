@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import TextIO
 
 from .harness.cases import REASONS, Case, CaseResult
@@ -23,11 +24,13 @@ def _clock(seconds: float) -> str:
 class Progress:
     """Counts finished cases by reason; the ETA is the mean time per case so far × cases left."""
 
-    def __init__(self, total: int, *, stream: TextIO | None = None, live: bool | None = None, quiet: bool = False):
+    def __init__(self, total: int, *, stream: TextIO | None = None, live: bool | None = None, quiet: bool = False,
+                 run_id: Callable[[Case], int | None] | None = None):
         self.total = total
         self.stream = stream or sys.stderr
         self.live = self.stream.isatty() if live is None else live
         self.quiet = quiet
+        self.run_id = run_id  # the stored run of a case, for a pointer to `earthbench runs --id N`
         self.counts = {r: 0 for r in REASONS}
         self.done = 0
         self.t0 = time.monotonic()
@@ -52,8 +55,17 @@ class Progress:
             return
         t = f"{result.solve_time_s:.2f} s" if result.solve_time_s is not None else "–"
         detail = f"{case.label}: {result.reason} ({t})"
-        if result.reason in ("error", "crashed", "memory", "timeout") and result.error:
+        if result.reason == "invalid" and result.violations:
+            first = result.violations[0]
+            where = "plan" if first.get("action") is None else f"action {first['action']}"
+            more = len(result.violations) - 1
+            detail += f" — {first['rule']} at {where}: {str(first.get('message', ''))[:120]}"
+            detail += f" (+{more} more)" if more else ""
+        elif result.reason in ("error", "crashed", "memory", "timeout") and result.error:
             detail += " — " + result.error.strip().splitlines()[-1][:160]
+        rid = self.run_id(case) if self.run_id is not None and result.reason != "ok" else None
+        if rid is not None:
+            detail += f"; see: earthbench runs --id {rid}"
         if self.live:
             self.stream.write("\r\x1b[K" + detail + "\n" + self.line() + "\x1b[K")
         else:

@@ -3,23 +3,30 @@
 :func:`publish` writes, for every suite in the store (or the ones asked for):
 
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
-  (:data:`metrics.aggregate.RANKING_RULE`), with a reproducibility stamp (project commits,
-  suite digest, CPU models and cores, run dates, generation date), what each figure rests on
-  (referee figures re-judgeable from the stored plans; solve times from the machine named for
-  each planner, † on solve-time columns that mix machines; the latest ``earthbench verify``
-  spot re-timing of each planner version) and the figures;
+  (:data:`earthbench.aggregate.RANKING_RULE`: the latest version of each planner, shared ranks
+  where paired tests cannot separate neighbours), with a reproducibility stamp (project
+  commits, suite digest, CPU models and cores, run dates, generation date), what each figure
+  rests on (referee figures re-judgeable from the stored plans; solve times from the machine
+  named for each planner, † on solve-time columns that mix machines; the latest
+  ``earthbench verify`` spot re-timing of each planner version); under it one table per family
+  and per target, a history table of older versions, and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
-* ``summary.csv`` — :func:`metrics.aggregate.aggregate` of those runs;
+* ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
+  ``scope`` = suite | family | target and ``group``), medians and rates with 95 % bootstrap intervals;
 * ``index.html`` — one self-contained page: inline CSS, a small inline script (allowed by a
-  content-security policy hash, so no other script can run), tables that sort on a click
-  and the figures as ``data:`` URIs; no network resource. Every string from the store (and
-  so from a plugin) is escaped with :func:`html.escape`;
+  content-security policy hash, so no other script can run), tables that sort on a click,
+  filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
+  and wrap their headings to fit the window, links to the CSVs, the figures as ``data:`` URIs
+  and the replay viewer of :mod:`earthbench.replay`; no network resource. Every string from
+  the store (and so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
-  Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per m³ and over solve
-  time; solve-time profiles are drawn per CPU model when the runs come from several), and
+  Fig. 7a), ``*-profiles`` (Dolan–Moré performance profiles over time per target m³ and over
+  solve time; solve-time profiles are drawn per CPU model when the runs come from several),
+  ``*-families`` (the time-per-target-m³ profile of each family), ``*-history-PLANNER`` (for a
+  planner with several versions: success rate and median time per target m³ by version), and
   ``*-terrain-PLANNER`` (terrain before and after, with machine paths and digs, for one case
   per planner: the scenario most planners have a plan for; its stored plan is judged again
   with :func:`earthbench.referee.judge` on the scenario the store keeps under the run's digest.
@@ -46,11 +53,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from metrics.aggregate import REASONS, RANKING_RULE, aggregate
-from metrics.profiles import cost_matrix, profile
+from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text, latest_versions
+from .profiles import cost_matrix, profile
 
 from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
-from .store import Store, load_runs
+from .store import Store, load_runs, suite_members
 from .verify import latest_spot_checks, machine_label
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -90,16 +97,6 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
     runs = pd.concat(frames, ignore_index=True)
     runs["solver"] = solver_labels(runs)
     return runs
-
-
-def suite_sizes(store: Store, names: Iterable[str]) -> dict[str, int]:
-    """Suite name → scenario count of its most recently registered version (as ``load_runs`` uses)."""
-    out = {}
-    for name in names:
-        ver = store.suite_version(name)
-        if ver is not None:
-            out[name] = store.db.execute("SELECT COUNT(*) FROM suite_scenarios WHERE suite_id=?", (ver["id"],)).fetchone()[0]
-    return out
 
 
 def load_runs_empty() -> pd.DataFrame:
@@ -145,29 +142,58 @@ def slug(text: str) -> str:
 
 
 def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
-    """Display values (text) and sort keys (numbers) of one table's rows, in rank order."""
+    """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
+
+    Medians and the success rate carry their 95 % bootstrap interval in brackets.
+    """
     rows = []
     for _, r in summary.iterrows():
         vr = _f(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else f" ± {_f(r['volume_ratio_sd'])}")
-        tpm = _f(r["time_per_m3_median"], ".1f") + (
-            "" if pd.isna(r["time_per_m3_q1"]) else f" ({_f(r['time_per_m3_q1'], '.1f')}–{_f(r['time_per_m3_q3'], '.1f')})")
         rows.append({
+            "attrs": {"planner": str(r["planner"]), "version": str(r["planner_version"])},
             "cells": [
-                ("Rank", str(r["rank"]), r["rank"]),
+                ("Rank", str(r["rank_label"]), r["rank"]),
                 ("Planner", str(r["planner"]), None),
                 ("Version", str(r["planner_version"]), None),
                 ("Config", str(r["config_hash"])[:8], None),
                 ("Runs", f"{r['runs']}/{r['of']}", r["runs"]),
-                ("Success", f"{100 * r['success_rate']:.0f}%", r["success_rate"]),
+                ("Success", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
+                 r["success_rate"]),
                 ("Volume ratio (mean ± SD)", vr, r["volume_ratio_mean"]),
-                ("Time per m³, s (median, IQR)", tpm, r["time_per_m3_median"]),
-                ("× lower bound", _f(r["time_per_m3_ratio_median"], ".2f"), r["time_per_m3_ratio_median"]),
-                ("Solve s (median)", _f(r["solve_time_median"], ".2f"), r["solve_time_median"]),
+                ("Overshoot m³ (mean)", _f(r["overshoot_m3_mean"], ".2f"), r["overshoot_m3_mean"]),
+                ("Time per target m³, s (median)",
+                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
+                 r["time_per_target_m3_median"]),
+                ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
+                                          r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
+                ("Time per m³, s (median)", _f(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
+                ("Solve s (median)", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
+                 r["solve_time_median"]),
                 ("Solve s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
                 *((reason, str(r[f"n_{reason}"]), r[f"n_{reason}"]) for reason in FAILURE_COLUMNS),
             ]
         })
     return rows
+
+
+def section_tables(summary: pd.DataFrame, all_versions: bool = False) -> dict[str, Any]:
+    """One suite and track's tables: the main rows, one table per family and per target (the same
+    configurations), and the history (older versions) unless ``all_versions`` ranks them all."""
+    shown = summary if all_versions else summary[summary["latest"].astype(bool)]
+    main = shown[shown["scope"] == "suite"]
+    keep = set(zip(main["planner"], main["planner_version"].astype(str), main["config_hash"]))
+    def mine(df: pd.DataFrame) -> pd.DataFrame:
+        mask = [k in keep for k in zip(df["planner"], df["planner_version"].astype(str), df["config_hash"])]
+        return df.loc[np.array(mask, dtype=bool)]
+    breakdowns = []
+    for scope, word in (("family", "Family"), ("target", "Target")):
+        parts = mine(shown[shown["scope"] == scope])
+        if parts["group"].nunique() > 1:  # one family (or target) would repeat the suite's table
+            for group, g in parts.groupby("group", sort=True):
+                breakdowns.append((f"{word} {group}", table_rows(g)))
+    history = summary[(summary["scope"] == "suite") & ~summary["latest"].astype(bool)] if not all_versions else summary.iloc[:0]
+    return {"rows": table_rows(main), "breakdowns": breakdowns,
+            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"))}
 
 
 @dataclass
@@ -281,19 +307,31 @@ def volume_time_figure(runs: pd.DataFrame, title: str):
     fig, ax = plt.subplots(figsize=(7, 4.8), constrained_layout=True)
     have = runs[runs["reason"].isin(["ok", "invalid"]) & runs["makespan_s"].notna()] if "makespan_s" in runs else runs.iloc[:0]
     colours = _colours(runs["solver"].unique())
+    from matplotlib.lines import Line2D
+
+    handles = []
     for solver, g in have.groupby("solver"):
         c = colours[solver]
         ok = g["reason"] == "ok"
         succ = ok & g["success"].astype(bool)
-        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, label=mpl_text(solver))
-        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c)
-        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=18, color=c, marker="x")
+        ax.scatter(g.loc[succ, "makespan_s"], g.loc[succ, "loaded_volume"], s=18, color=c, zorder=2)
+        ax.scatter(g.loc[ok & ~succ, "makespan_s"], g.loc[ok & ~succ, "loaded_volume"], s=18, facecolors="none", edgecolors=c, zorder=2)
+        # invalid runs: large, drawn over every valid point so none hides under them
+        ax.scatter(g.loc[~ok, "makespan_s"], g.loc[~ok, "loaded_volume"], s=70, color=c, marker="X", edgecolors="k",
+                   linewidths=0.6, zorder=4)
+        # the legend marker says what the planner has: a filled dot only when some run succeeded
+        counts = {"success": int(succ.sum()), "below threshold": int((ok & ~succ).sum()), "invalid": int((~ok).sum())}
+        kinds = [k for k, n in counts.items() if n]
+        marker = {"success": dict(marker="o", color=c), "below threshold": dict(marker="o", mfc="none", mec=c, color=c),
+                  "invalid": dict(marker="X", color=c, mec="k")}[kinds[0]]
+        handles.append(Line2D([], [], ls="none", ms=7, **marker,
+                              label=mpl_text(f"{solver} ({', '.join(f'{counts[k]} {k}' for k in kinds)})")))
     ax.set_xlabel("total time of the plan (makespan), s")
     ax.set_ylabel("loaded volume, m³")
-    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ×: invalid", fontsize=9)
+    ax.set_title(mpl_text(title) + "\nfilled: success; hollow: valid, below threshold; ✕: invalid (drawn on top)", fontsize=9)
     ax.grid(alpha=0.3)
     if len(have):
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(handles=handles, fontsize=7, loc="best")
     else:
         ax.text(0.5, 0.5, "no plans stored", ha="center", va="center", transform=ax.transAxes)
     return fig
@@ -307,6 +345,9 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
         y = np.append(rho[solver].to_numpy(), rho[solver].to_numpy()[-1] if len(taus) else 0.0)
         ax.step(x, y, where="post", color=colours.get(solver), label=mpl_text(solver))
     ax.set_xscale("log", base=2)
+    from matplotlib.ticker import FuncFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))  # τ = 1, 2, 4, … rather than 2⁰, 2¹, 2²
     ax.set_xlim(1, right)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel(xlabel)
@@ -316,15 +357,15 @@ def _draw_profile(ax, rho: pd.DataFrame, colours: dict[str, Any], xlabel: str, t
 
 
 def profiles_figure(runs: pd.DataFrame, title: str):
-    """Performance profiles over time per m³ and over solve time (one panel per CPU model)."""
+    """Performance profiles over time per target m³ and over solve time (one panel per CPU model)."""
     plt = _plt()
     colours = _colours(runs["solver"].unique())
     models = sorted(runs["cpu_model"].fillna("unknown CPU").unique()) if "cpu_model" in runs else ["unknown CPU"]
     fig, axes = plt.subplots(1, 1 + len(models), figsize=(5.2 * (1 + len(models)), 4.2), constrained_layout=True, squeeze=False)
     axes = axes[0]
     solvers = sorted(runs["solver"].unique())
-    c = cost_matrix(runs, "time_per_m3").reindex(columns=solvers, fill_value=np.inf)
-    _draw_profile(axes[0], profile(c), colours, "τ (time per m³ within τ × the best)", "time per m³")
+    c = cost_matrix(runs, PRIMARY).reindex(columns=solvers, fill_value=np.inf)
+    _draw_profile(axes[0], profile(c), colours, "τ (time per target m³ within τ × the best)", "time per target m³")
     cpu = runs["cpu_model"].fillna("unknown CPU") if "cpu_model" in runs else pd.Series("unknown CPU", index=runs.index)
     for ax, model in zip(axes[1:], models):
         sub = runs[cpu == model]  # only the planners that ran on this CPU model are compared here
@@ -333,6 +374,46 @@ def profiles_figure(runs: pd.DataFrame, title: str):
         _draw_profile(ax, profile(c), colours, "τ (solve time within τ × the best)", label)
     axes[0].legend(fontsize=7, loc="lower right")
     fig.suptitle(mpl_text(title) + " — failures count as never solved", fontsize=10)
+    return fig
+
+
+def families_figure(runs: pd.DataFrame, title: str):
+    """One performance-profile panel per family over time per target m³ (families differ twofold in scale)."""
+    plt = _plt()
+    colours = _colours(runs["solver"].unique())
+    solvers = sorted(runs["solver"].unique())
+    families = sorted(runs["family"].fillna("?").astype(str).unique())
+    fig, axes = plt.subplots(1, len(families), figsize=(4.6 * len(families), 4.0), constrained_layout=True, squeeze=False)
+    for ax, fam in zip(axes[0], families):
+        sub = runs[runs["family"].fillna("?").astype(str) == fam]
+        c = cost_matrix(sub, PRIMARY).reindex(columns=solvers, fill_value=np.inf)
+        _draw_profile(ax, profile(c), colours, "τ (within τ × the best)", f"{fam} ({sub['scenario_digest'].nunique()} scenarios)")
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(mpl_text(title) + " — time per target m³ by family; failures count as never solved", fontsize=10)
+    return fig
+
+
+def history_figure(rows: pd.DataFrame, title: str):
+    """Success rate and median time per target m³ (95 % intervals) across one planner's versions."""
+    from .aggregate import _version_key
+
+    plt = _plt()
+    rows = rows.assign(_k=rows["planner_version"].map(_version_key)).sort_values(["_k", "config_hash"], kind="mergesort")
+    labels = [f"{v}" + (f"\n[{str(h)[:8]}]" if (rows["planner_version"] == v).sum() > 1 else "")
+              for v, h in zip(rows["planner_version"], rows["config_hash"])]
+    x = np.arange(len(rows))
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
+    for ax, (col, lo, hi, scale, ylabel) in zip(axes, (
+            ("success_rate", "success_rate_lo", "success_rate_hi", 100.0, "success rate, %"),
+            ("time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", 1.0, "time per target m³, s (median)"))):
+        y = rows[col].to_numpy(dtype=float) * scale
+        err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
+        ax.errorbar(x, y, yerr=np.nan_to_num(np.abs(err)), fmt="o-", capsize=3)
+        ax.set_xticks(x, [mpl_text(t) for t in labels], fontsize=8)
+        ax.set_xlabel("version")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    fig.suptitle(mpl_text(title) + " — by version, 95 % bootstrap intervals", fontsize=10)
     return fig
 
 
@@ -372,35 +453,53 @@ def terrain_figure(scenario_json: str, plan_json: str, title: str):
 
 
 #: Columns the run figures read (the frame shipped to a figure worker).
-FIGURE_COLUMNS = ["scenario_digest", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
-                  "solve_time_s", "cpu_model"]
+FIGURE_COLUMNS = ["scenario_digest", "family", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
+                  PRIMARY, "solve_time_s", "cpu_model"]
 
 
 def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
     kind, base, args = job
-    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "terrain": terrain_figure,
-             "cost-growth": cost_growth_figure}[kind]
+    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "families": families_figure,
+             "history": history_figure, "terrain": terrain_figure, "cost-growth": cost_growth_figure}[kind]
     return _save(maker(*args), Path(base))[2]
 
 
-def render_all(jobs: list[tuple[str, str, tuple[Any, ...]]], workers: int | None = None) -> list[bytes]:
-    """Render figure jobs, in parallel worker processes when there are several cores (fork on Linux)."""
-    import multiprocessing as mp
-    import os
+class Renderer:
+    """Figure jobs drawn in parallel worker processes (fork on Linux) while the caller goes on, e.g.
+    computing the tables' bootstrap intervals; in this process when there is one core."""
 
-    n = min(len(jobs), workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-    if n <= 1 or "fork" not in mp.get_all_start_methods():
-        return [_render(j) for j in jobs]
-    from concurrent.futures import ProcessPoolExecutor
+    def __init__(self, workers: int | None = None):
+        import multiprocessing as mp
+        import os
 
-    plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
-    warm = plt.figure()
-    warm.text(0.5, 0.5, "m³ τ ρ")
-    warm.canvas.draw()
-    plt.close(warm)
-    with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork")) as pool:
-        return list(pool.map(_render, jobs))
+        n = workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+        self._jobs: list[tuple[str, str, tuple[Any, ...]]] = []
+        self._futures: list[Any] = []
+        self._pool = None
+        if n > 1 and "fork" in mp.get_all_start_methods():
+            from concurrent.futures import ProcessPoolExecutor
+
+            plt = _plt()  # load fonts and the mathtext parser once, before the workers fork
+            warm = plt.figure()
+            warm.text(0.5, 0.5, "m³ τ ρ")
+            warm.canvas.draw()
+            plt.close(warm)
+            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"))
+
+    def add(self, job: tuple[str, str, tuple[Any, ...]]) -> None:
+        self._jobs.append(job)
+        if self._pool is not None:
+            self._futures.append(self._pool.submit(_render, job))
+
+    def results(self) -> list[bytes]:
+        """The PNG of every job, in the order added (waits for the workers, then shuts them down)."""
+        if self._pool is None:
+            return [_render(j) for j in self._jobs]
+        try:
+            return [f.result() for f in self._futures]
+        finally:
+            self._pool.shutdown()
 
 
 def _save(fig, base: Path) -> tuple[Path, Path, bytes]:
@@ -456,23 +555,29 @@ def html_table(rows: list[dict[str, Any]], caption: str = "", cls: str = "sortab
         for _, text, key in r["cells"]:
             k = _sortkey(key)
             tds.append(f'<td data-v="{e(k)}">{e(text)}</td>' if key is not None else f"<td>{e(text)}</td>")
-        body.append("<tr>" + "".join(tds) + "</tr>")
+        attrs = "".join(f' data-{k}="{e(v)}"' for k, v in r.get("attrs", {}).items())
+        body.append(f"<tr{attrs}>" + "".join(tds) + "</tr>")
     cap = f"<caption>{e(caption)}</caption>" if caption else ""
     return (f'<div class="wrap"><table class="{cls}">{cap}<thead><tr>{head}</tr></thead><tbody>\n' + "\n".join(body)
             + "\n</tbody></table></div>")
 
 
+#: Row attributes the page's filters match (``data-KEY`` on each row) → the runs column they come from.
+FILTERS = {"family": "family", "planner": "planner", "version": "planner_version"}
+
 RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner"), ("reason", "Reason"),
-               ("success", "Success"), ("volume_ratio", "Volume ratio"), ("time_per_m3", "Time per m³, s"),
-               ("time_per_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
+               ("success", "Success"), ("volume_ratio", "Volume ratio"),
+               ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
+               ("time_per_target_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
                ("cpu_model", "CPU"), ("hostname", "Host")]
-_NUMERIC_RUN = {"id", "volume_ratio", "time_per_m3", "time_per_m3_ratio", "solve_time_s"}
+_NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_time_s"}
 
 
 def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
     cols = [(c, h) for c, h in RUN_COLUMNS if c in runs]
     out = []
     data = {c: runs[c].tolist() for c, _ in cols}
+    filters = {k: runs[c].astype(str).tolist() for k, c in FILTERS.items() if c in runs}
     for i in range(len(runs)):
         cells = []
         for c, h in cols:
@@ -484,15 +589,20 @@ def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
                 cells.append((h, "yes" if bool(v) else "no", 1.0 if bool(v) else 0.0))
             else:
                 cells.append((h, "" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v), None))
-        out.append({"cells": cells})
+        out.append({"cells": cells, "attrs": {k: v[i] for k, v in filters.items()}})
     return out
 
 
 _CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem auto;max-width:1200px;padding:0 1rem;color:#222}
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5rem auto;max-width:1800px;padding:0 1rem;color:#222}
 h1{font-size:1.6rem}h2{font-size:1.25rem;margin-top:2.5rem;border-bottom:1px solid #ccc}
-table{border-collapse:collapse;margin:1rem 0;font-size:.85rem}
-th,td{border:1px solid #ddd;padding:.25rem .5rem;text-align:right;white-space:nowrap}
+table{border-collapse:collapse;margin:1rem 0;font-size:.8rem}
+th,td{border:1px solid #ddd;padding:.2rem .35rem;text-align:right}
+th{white-space:normal;vertical-align:bottom;min-width:3.2em}td{white-space:normal}
+td:nth-child(2),td:nth-child(3){white-space:normal;overflow-wrap:anywhere;min-width:6em}
+.filters{display:flex;flex-wrap:wrap;gap:.3rem 1rem;font-size:.85rem;margin:.6rem 0}
+tr.hidden{display:none}
+@media (max-width:900px){body{margin:.5rem;padding:0 .25rem}table{font-size:.72rem}th,td{padding:.15rem .2rem}}
 td:nth-child(2),td:nth-child(3),th:nth-child(2),th:nth-child(3){text-align:left}
 th{background:#f3f3f3;cursor:pointer;user-select:none}
 th[aria-sort=ascending]::after{content:" ▲"}th[aria-sort=descending]::after{content:" ▼"}
@@ -538,13 +648,75 @@ _JS = """
   document.querySelectorAll('table.sortable th').forEach(function (th) {
     th.addEventListener('click', function () { sortBy(th); });
   });
+  // filters: a row shows when every chosen value matches its data-KEY attribute
+  document.querySelectorAll('.filters').forEach(function (bar) {
+    var section = bar.closest('section');
+    function apply() {
+      var want = {};
+      bar.querySelectorAll('select').forEach(function (s) { if (s.value) want[s.getAttribute('data-key')] = s.value; });
+      section.querySelectorAll('table.sortable tbody tr').forEach(function (tr) {
+        var show = Object.keys(want).every(function (k) { return !tr.hasAttribute('data-' + k) || tr.getAttribute('data-' + k) === want[k]; });
+        tr.classList.toggle('hidden', !show);
+      });
+    }
+    bar.querySelectorAll('select').forEach(function (s) { s.addEventListener('change', apply); });
+  });
 })();
 """
 
 
-def html_page(sections: list[dict[str, Any]], generated: str) -> str:
+_BREAKDOWN_NOTE = ("the same configurations on one family or one target of the suite, ranked by the same rule "
+                   "within it (the success rate is over that part's scenarios)")
+_HISTORY_NOTE = "older versions of the ranked planners, not ranked (`--all-versions` ranks every version)"
+
+
+def markdown_more_tables(sec: dict[str, Any]) -> list[str]:
+    """The breakdowns (one table per family and per target) and the history table under a suite's table."""
+    lines: list[str] = []
+    if sec.get("breakdowns"):
+        lines += [f"### Breakdowns: {_BREAKDOWN_NOTE}", ""]
+        for heading, rows in sec["breakdowns"]:
+            lines += [f"#### {md_escape(heading)}", "", markdown_table(rows)]
+    if sec.get("history"):
+        lines += [f"### History: {_HISTORY_NOTE}", "", markdown_table(sec["history"])]
+    return lines
+
+
+def html_more_tables(sec: dict[str, Any]) -> str:
+    """:func:`markdown_more_tables` for the page."""
     e = html.escape
-    script_hash = base64.b64encode(hashlib.sha256(_JS.encode()).digest()).decode()
+    parts = []
+    if sec.get("breakdowns"):
+        parts.append(f"<h3>Breakdowns</h3><p class=\"rule\">{e(_BREAKDOWN_NOTE)}.</p>")
+        for heading, rows in sec["breakdowns"]:
+            parts.append(f"<h4>{e(heading)}</h4>" + html_table(rows))
+    if sec.get("history"):
+        parts.append(f"<h3>History</h3><p class=\"rule\">{e(_HISTORY_NOTE.replace('`', ''))}.</p>" + html_table(sec["history"]))
+    return "\n".join(parts)
+
+
+def filter_bar(sec: dict[str, Any]) -> str:
+    """Selects for the values of each filter key seen in a section's rows."""
+    e = html.escape
+    values: dict[str, set[str]] = {k: set() for k in FILTERS}
+    for r in sec["rows"] + sec["run_rows"]:
+        for k, v in r.get("attrs", {}).items():
+            values.setdefault(k, set()).add(v)
+    parts = []
+    for k, vs in values.items():
+        if len(vs) > 1:
+            opts = "".join(f'<option value="{e(v)}">{e(v)}</option>' for v in sorted(vs))
+            parts.append(f'<label>{e(k.capitalize())} <select data-key="{e(k)}"><option value="">all</option>{opts}</select></label>')
+    return f'<div class="filters">Filter: {"".join(parts)}</div>' if parts else ""
+
+
+def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") -> str:
+    """The self-contained page; ``viewer`` is the replay section (:func:`earthbench.replay.viewer_section`)."""
+    from .replay import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
+
+    e = html.escape
+    script = _JS + REPLAY_SCRIPT
+    script_hash = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
     csp = (f"default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'sha256-{script_hash}'; "
            "base-uri 'none'; form-action 'none'")
     parts = [
@@ -553,10 +725,12 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         f'<meta http-equiv="Content-Security-Policy" content="{e(csp)}">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         "<title>earthbench leaderboard</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<style>{_CSS}{REPLAY_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f"<p>Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. "
-        "Invalid plans are counted, never ranked. Tables: <code>summary.csv</code>; every run: <code>runs.csv</code>.</p>",
+        "Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate). "
+        'Invalid plans are counted, never ranked. Tables: <a href="summary.csv">summary.csv</a>; every run: '
+        '<a href="runs.csv">runs.csv</a>.' + (' Replays: <a href="#replay">below</a>.' if viewer else "") + "</p>",
     ]
     if not sections:
         parts.append("<p>No runs in the store.</p>")
@@ -565,7 +739,9 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f'<section id="{e(anchor)}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
         parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div>')
+        parts.append(filter_bar(s))
         parts.append(html_table(s["rows"]))
+        parts.append(html_more_tables(s))
         if s.get("scale_rows"):
             parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
         for cap, png in s["figures"]:
@@ -574,7 +750,8 @@ def html_page(sections: list[dict[str, Any]], generated: str) -> str:
         parts.append(f"<details><summary>All {len(s['run_rows'])} runs of this table</summary>")
         parts.append(html_table(s["run_rows"], cls="sortable runs"))
         parts.append("</details></section>")
-    parts.append(f"<script>{_JS}</script></body></html>")
+    parts.append(viewer)
+    parts.append(f"<script>{script}</script></body></html>")
     return "\n".join(parts) + "\n"
 
 
@@ -597,29 +774,32 @@ def spreadsheet_safe(df: pd.DataFrame) -> pd.DataFrame:
 
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
-            workers: int | None = None) -> Published:
+            workers: int | None = None, replays: int = 20, all_versions: bool = False) -> Published:
     """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
 
-    ``workers``: processes drawing the figures (default: one per core this process may use).
+    ``workers``: processes drawing the figures (default: one per core this process may use);
+    ``replays``: how many runs the page's replay viewer embeds (0: none);
+    ``all_versions``: rank every stored version, not only each planner's latest.
     """
+    from .replay import viewer_section
+
     out = Path(out)
     fig_dir = out / "figures"
     generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
-    jobs: list[tuple[str, str, tuple[Any, ...]]] = []
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
-        summary = aggregate(runs, suite_sizes(store, runs["suite"].unique()))
+        fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
+        renderer = Renderer(workers) if figures else None
+        latest = latest_versions(runs)
         spot_checks = latest_spot_checks(store)
-        result.runs, result.summary = runs, summary
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
-            ssum = summary[(summary["suite"] == suite) & (summary["track"] == track)]
             st = stamp(srun, suite, track, generated, spot_checks)
             sec: dict[str, Any] = {
-                "suite": suite, "track": track, "rows": mark_mixed_solve_columns(table_rows(ssum), st.mixed), "stamp": st,
+                "suite": suite, "track": track, "stamp": st,
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
             }
             sections.append(sec)
@@ -627,19 +807,24 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
             title = f"suite {suite}, {track}"
             scale_rows, job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
             sec["scale_rows"] = mark_mixed_solve_columns(scale_rows, st.mixed) if scale_rows else scale_rows
-            if not figures:
+            if renderer is None:
                 continue
             if job is not None:
-                jobs.append(job)
+                renderer.add(job)
                 captions.append((sec, SCALE_CAPTION, Path(job[1])))
-            cols = srun[[c for c in FIGURE_COLUMNS if c in srun]]
-            for kind, cap in (("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
-                              ("profiles", "Performance profiles: time per m³ and solve time (failures never solved)")):
+            keep = [(suite, track, p, str(v)) in latest for p, v in zip(srun["planner"], srun["planner_version"])]
+            shown = srun if all_versions else srun[keep]
+            cols = shown[[c for c in FIGURE_COLUMNS if c in shown]]
+            kinds = [("volume-time", "Loaded volume against total time per run (as in the STL-TAMP paper, Fig. 7a)"),
+                     ("profiles", "Performance profiles: time per target m³ and solve time (failures never solved)")]
+            if shown["family"].nunique() > 1:
+                kinds.append(("families", "Performance profiles of time per target m³, one panel per family"))
+            for kind, cap in kinds:
                 path = fig_dir / f"{base}-{kind}"
-                jobs.append((kind, str(path), (cols, title)))
+                renderer.add((kind, str(path), (cols, title)))
                 captions.append((sec, cap, path))
             if terrain:
-                for _, run in sample_runs(srun).iterrows():
+                for _, run in sample_runs(shown).iterrows():
                     digest = run["scenario_digest"]
                     if digest not in scenarios:
                         sc = store.scenario(digest)
@@ -650,10 +835,28 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                         scenarios[digest] = sc.to_json()
                     plan = store.plan_json(int(run["id"]))
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
-                    jobs.append(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
+                    renderer.add(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
-    fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
-    for (sec, cap, path), png in zip(captions, render_all(jobs, workers)):
+        viewer = viewer_section(store, runs, replays)
+        # the tables (bootstrap intervals, paired tests) while the workers draw
+        summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
+                            all_versions=all_versions)
+        result.runs, result.summary = runs, summary
+        for sec in sections:
+            ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
+            tables = section_tables(ssum, all_versions)
+            mixed = sec["stamp"].mixed
+            sec.update(rows=mark_mixed_solve_columns(tables["rows"], mixed),
+                       breakdowns=[(h, mark_mixed_solve_columns(r, mixed)) for h, r in tables["breakdowns"]],
+                       history=mark_mixed_solve_columns(tables["history"], mixed))
+            if renderer is None:
+                continue
+            base = slug(f"{sec['suite']}-{sec['track']}")
+            for planner, hist in _histories(ssum):
+                path = fig_dir / f"{base}-history-{slug(planner)}"
+                renderer.add(("history", str(path), (hist, f"{planner} on suite {sec['suite']}")))
+                captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
+    for (sec, cap, path), png in zip(captions, renderer.results() if renderer else []):
         png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
         result.files += [png_path, svg_path]
         sec["figures"].append((cap, png))
@@ -662,17 +865,25 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
     spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
     (out / "README.md").write_text(markdown_page(sections, generated))
-    (out / "index.html").write_text(html_page(sections, generated))
+    (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
     return result
+
+
+def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
+    """(planner, its suite-scope rows) for every planner of a table with more than one version."""
+    rows = summary[summary["scope"] == "suite"]
+    return [(str(p), g) for p, g in rows.groupby("planner", sort=True) if g["planner_version"].nunique() > 1]
 
 
 def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     lines = ["# earthbench leaderboard", "",
              f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-             "`–` means no value (no valid run). Columns: runs stored / scenarios in the suite; success rate over the "
-             "suite's scenarios (a scenario without a run is a failure); volume ratio over valid runs; "
-             "time per m³ over valid runs that loaded something, with its ratio to the scenario's lower bound; "
+             "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate). Columns: runs "
+             "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
+             "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
+             "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
+             "with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
              "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
              "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).", ""]
     if not sections:
@@ -680,7 +891,8 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
                   f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "",
-                  *(f"- {md_escape(line)}" for line in s["stamp"].planner_lines()), "", markdown_table(s["rows"])]
+                  *(f"- {md_escape(line)}" for line in s["stamp"].planner_lines()), "", markdown_table(s["rows"]),
+                  *markdown_more_tables(s)]
         if s.get("scale_rows"):
             lines += ["", "scale: cost against target volume, median [interquartile range] over seeds of the valid runs "
                       "(growth: solve s/m³ over the smallest target's).", "", markdown_table(s["scale_rows"])]

@@ -143,7 +143,7 @@ SCALE_CAPTION = "Cost growth: solve time per m³ and time per m³ against the ta
 
 def scale_section(runs: pd.DataFrame, figure_base: str, title: str) -> tuple[list[dict[str, Any]], tuple | None]:
     """For a size ladder: the ``scale`` table's rows and the cost-growth figure job for
-    :func:`earthbench.publish.render_all`; for any other suite, ``([], None)``."""
+    :class:`earthbench.publish.Renderer`; for any other suite, ``([], None)``."""
     if not is_size_ladder(runs):
         return [], None
     return scale_rows(scale_summary(runs)), ("cost-growth", figure_base, (runs[SCALE_COLUMNS], title))

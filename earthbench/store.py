@@ -38,6 +38,7 @@ from urllib.parse import quote
 from typing import TYPE_CHECKING, Any
 
 from .errors import StoreError
+from .scoring import is_success
 from .world import Scenario
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -407,7 +408,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``family``, ``seed``, ``track``, ``target_volume``, ``planner``, ``planner_version``,
     ``config_hash``, ``config`` (JSON text), ``reason`` (ok | invalid | timeout | memory |
     error | crashed), ``success`` (bool), ``threshold``, ``solve_time_s``, ``solve_cpu_s``,
-    ``startup_s``, ``peak_rss_mb``, then every metric of :func:`metrics.evaluate` — ``valid``,
+    ``startup_s``, ``peak_rss_mb``, then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
     ``n_violations`` (the metric ``violations``, renamed), ``loaded_volume``,
     ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
     ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
@@ -456,7 +457,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
                 continue
             d.update(suite=ver["name"], suite_digest=ver["digest"], scenario_id=m["scenario_id"], family=m["family"],
                      seed=m["seed"], threshold=ver["threshold"])
-            d["success"] = bool(metrics.get("valid") and metrics.get("volume_ratio", 0.0) >= ver["threshold"])
+            d["success"] = is_success(metrics.get("valid"), metrics.get("volume_ratio"), ver["threshold"])
         for k, v in metrics.items():
             k = "n_violations" if k == "violations" else k
             if k in ("success", "solve_time_s", "solve_cpu_s", "target_volume"):
@@ -472,39 +473,28 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     return df.infer_objects()
 
 
-def summary_rows(store: Store, suite: str, planners: Iterable[str] | None = None) -> list[dict[str, Any]]:
-    """Per (planner, version, config) counts and central values over a suite's scenarios.
+def suite_members(db: str | Path | Store, suites: Iterable[str]) -> pd.DataFrame:
+    """The scenarios of each suite's most recently run version: ``suite``, ``scenario_digest``,
+    ``scenario_id``, ``family``, ``target_volume`` (the denominators of every aggregate)."""
+    import pandas as pd
 
-    ``success`` is the fraction of the suite's scenarios solved (a scenario without a run
-    counts as a failure, as in the leaderboard); ``runs``/``of`` show the coverage.
-    """
-    import statistics
-
-    ver, members = _suite_view(store, suite)
-    keep = set(planners) if planners is not None else None
-    groups: dict[tuple[str, str, str], list[sqlite3.Row]] = {}
-    for r in store.db.execute(
-        "SELECT planner, planner_version, config_hash, scenario_digest, reason, valid, volume_ratio, time_per_m3, solve_time_s "
-        "FROM runs ORDER BY planner, planner_version, config_hash"
-    ):
-        if r["scenario_digest"] in members and (keep is None or r["planner"] in keep):
-            groups.setdefault((r["planner"], r["planner_version"], r["config_hash"]), []).append(r)
-    out = []
-    for (name, version, chash), rows in groups.items():
-        counts: dict[str, int] = {}
-        for r in rows:
-            counts[r["reason"]] = counts.get(r["reason"], 0) + 1
-        ok = [r for r in rows if r["reason"] == "ok"]
-        vr = [r["volume_ratio"] for r in rows if r["volume_ratio"] is not None]
-        tpm = [r["time_per_m3"] for r in ok if r["time_per_m3"] is not None and math.isfinite(r["time_per_m3"])]
-        st = [r["solve_time_s"] for r in rows if r["solve_time_s"] is not None]
-        success = sum(1 for r in ok if r["volume_ratio"] is not None and r["volume_ratio"] >= ver["threshold"])
-        out.append({
-            "planner": name, "version": version, "config_hash": chash, "runs": len(rows), "of": len(members),
-            "success": success / len(members), "counts": counts,  # a missing run counts as a failure
-            "volume_ratio_mean": statistics.fmean(vr) if vr else None,
-            "volume_ratio_sd": statistics.stdev(vr) if len(vr) > 1 else None,
-            "time_per_m3_median": statistics.median(tpm) if tpm else None,
-            "solve_time_median": statistics.median(st) if st else None,
-        })
-    return out
+    store = db if isinstance(db, Store) else Store(db, create=False)
+    try:
+        rows = []
+        for name in suites:
+            ver = store.suite_version(name)
+            if ver is None:
+                continue
+            for r in store.db.execute(
+                "SELECT m.scenario_digest, m.scenario_id, m.family, s.target_volume FROM suite_scenarios m "
+                "LEFT JOIN scenarios s ON s.digest = m.scenario_digest WHERE m.suite_id=?", (ver["id"],)
+            ):
+                target = r[3]
+                if target is None:  # no run stored yet: the id's documented tail, SUITE/FAMILY/sSEED/vTARGET
+                    tail = r[1].rsplit("/v", 1)
+                    target = float(tail[1]) if len(tail) == 2 and tail[1].replace(".", "", 1).isdigit() else None
+                rows.append((name, r[0], r[1], r[2], target))
+    finally:
+        if not isinstance(db, Store):
+            store.close()
+    return pd.DataFrame(rows, columns=["suite", "scenario_digest", "scenario_id", "family", "target_volume"])

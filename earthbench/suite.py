@@ -58,10 +58,11 @@ from pathlib import Path
 from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
+from .scoring import DEFAULT_SUCCESS_THRESHOLD
 from .world import TRACKS, Budget, Scenario
 
 SUITE_GROUP = "earthbench.suites"
-DEFAULT_THRESHOLD = 0.9
+DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
 
 #: The most cells a generated heightmap may have (e.g. 2,000 × 2,000); a family asking for more is refused
 #: when the suite is loaded, before anything is generated.

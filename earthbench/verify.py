@@ -67,7 +67,7 @@ class Judgement:
 
 def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
     """The core scoring entry point (referee verdict and every metric), called from this one place."""
-    from .harness import score
+    from .scoring import score
 
     return score(scenario, plan_json, threshold)
 

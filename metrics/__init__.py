@@ -1,10 +1,10 @@
-"""Per-run metrics, lower bounds and (later) aggregation over suites.
+"""The built-in metric plugin (entry point ``earthbench.metrics: core``) and the lower bounds it uses.
 
 Metrics are measured by the referee and the harness, never taken from a planner's claims.
 Each metric plugin is a callable ``(scenario, plan, verdict) -> dict[str, float]`` registered
-in the ``earthbench.metrics`` entry-point group; :func:`evaluate` merges them all.
+in the ``earthbench.metrics`` entry-point group; :func:`earthbench.scoring.evaluate` merges them all.
 """
 
-from .run import DEFAULT_SUCCESS_THRESHOLD, core_metrics, evaluate, lower_bound_time_per_m3
+from .run import core_metrics, lower_bound_time_per_m3, time_to_target
 
-__all__ = ["DEFAULT_SUCCESS_THRESHOLD", "core_metrics", "evaluate", "lower_bound_time_per_m3"]
+__all__ = ["core_metrics", "lower_bound_time_per_m3", "time_to_target"]

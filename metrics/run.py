@@ -1,4 +1,13 @@
-"""The metrics of one run (DESIGN §4).
+"""The built-in metric plugin ``core``: the metrics of one run, from the referee's verdict.
+
+``time_to_target_s`` — the time at which the truck holds what the plan counts for: the end of
+the first dump at which the referee's cumulative loaded volume (``Verdict.load_curve``) reaches
+``min(loaded, target)``. ``time_per_target_m3`` divides it by that volume. Unlike
+``time_per_m3`` (makespan / loaded), loading past the target cannot lower it: volume beyond the
+target is not counted, and the dumps that put it there end after the target was reached. When
+the plan loads exactly the target it equals ``time_per_m3`` minus any time after the last
+dump (none for a plan that ends with its last dump). Nothing loaded: ``time_to_target_s`` is
+the makespan and ``time_per_target_m3`` is infinite, like ``time_per_m3``.
 
 ``time_per_m3_lower_bound`` — why it holds: every m³ loaded into the truck was dug and dumped.
 A bucket carries at most ``C`` m³, so loading ``V`` takes at least ``V / C`` digs and as many
@@ -27,7 +36,8 @@ from earthbench.plan import Plan
 from earthbench.referee import Verdict
 from earthbench.world import Scenario
 
-DEFAULT_SUCCESS_THRESHOLD = 0.9
+#: Relative slack when matching the cumulative loaded volume to min(loaded, target): float sums only.
+_SUM_SLACK = 1e-9
 
 
 def lower_bound_time_per_m3(scenario: Scenario) -> float:
@@ -50,12 +60,29 @@ def lower_bound_time_per_m3(scenario: Scenario) -> float:
     return 1.0 / sum(1.0 / b for b in bounds)
 
 
+def time_to_target(verdict: Verdict, target: float) -> float:
+    """End of the first dump at which the cumulative loaded volume reaches min(loaded, target) (s).
+
+    The makespan when nothing was loaded (no dump ever counts).
+    """
+    goal = min(verdict.loaded_volume, target)
+    if goal <= 0:
+        return verdict.makespan
+    for t_end, cumulative in verdict.load_curve:
+        if cumulative >= goal * (1 - _SUM_SLACK):
+            return t_end
+    return verdict.makespan  # unreachable: the last cumulative volume is the loaded volume
+
+
 def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, Any]:
-    """Volume ratio, time per m³ (and its ratio to the bound), digs, fill, travel, claims' error."""
+    """Volume ratio, time per m³ and to the target (and their ratios to the bound), digs, fill, travel, claims' error."""
     target = scenario.task.target_volume
     loaded = verdict.loaded_volume
     makespan = verdict.makespan
     tpm = makespan / loaded if loaded > 0 else math.inf
+    counted = min(loaded, target)
+    ttt = time_to_target(verdict, target)
+    tpt = ttt / counted if counted > 0 else math.inf
     bound = lower_bound_time_per_m3(scenario)
     fills = [d.fill for d in verdict.digs]
     pred = plan.predicted
@@ -65,7 +92,11 @@ def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, 
         "loaded_volume": loaded,
         "target_volume": target,
         "volume_ratio": loaded / target,
+        "overshoot_m3": max(0.0, loaded - target),
         "makespan_s": makespan,
+        "time_to_target_s": ttt,
+        "time_per_target_m3": tpt,
+        "time_per_target_m3_ratio": tpt / bound,
         "time_per_m3": tpm,
         "time_per_m3_lower_bound": bound,
         "time_per_m3_ratio": tpm / bound,
@@ -76,24 +107,3 @@ def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, 
         "volume_prediction_error": None if pred.volume is None else pred.volume - loaded,
         "makespan_prediction_error": None if pred.makespan is None else pred.makespan - makespan,
     }
-
-
-def evaluate(
-    scenario: Scenario,
-    plan: Plan,
-    verdict: Verdict,
-    threshold: float = DEFAULT_SUCCESS_THRESHOLD,
-) -> dict[str, Any]:
-    """All registered metrics of one run, plus ``success`` (valid and volume ratio ≥ threshold).
-
-    ``solve_time_s`` and ``solve_cpu_s`` are left as None: only the harness can measure them.
-    """
-    from earthbench.registry import METRICS
-
-    out: dict[str, Any] = {"solve_time_s": None, "solve_cpu_s": None}
-    out.update(core_metrics(scenario, plan, verdict))
-    for name, fn in METRICS.items():
-        if fn is not core_metrics:
-            out.update(fn(scenario, plan, verdict))
-    out["success"] = bool(verdict.valid and out["volume_ratio"] >= threshold)
-    return out

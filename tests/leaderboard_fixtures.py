@@ -1,7 +1,7 @@
 """Stores of real runs for the publishing tests, written through the store's own API.
 
 Plans come from the greedy planner run in this process (its call timed as the harness
-would), judged by the referee through :func:`earthbench.harness.score`, and stored with
+would), judged by the referee through :func:`earthbench.scoring.score`, and stored with
 :meth:`earthbench.store.Store.record`. Other "planners" reuse those plans cut short (so they
 load less) or fail without a plan, to give the tables and profiles something to separate.
 """
@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from earthbench.plan import Plan
-from earthbench.harness import Case, CaseResult, PlannerRef, environment, score
+from earthbench.harness import Case, CaseResult, PlannerRef, environment
+from earthbench.scoring import score
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite
 from planners.greedy import GreedyPlanner
@@ -61,6 +62,8 @@ class Behaviour:
     slow: float = 1.0  # solve time = greedy's measured time × slow
     cpu_model: str | None = None  # override the environment's CPU model
     fail_every: int = 1  # with ``fail``: fail on every n-th scenario only
+    teleport: float = 0.0  # shift the truck's moves this far east: an invalid plan (discontinuous, dump reach)
+    solve_s: float | None = None  # a fixed solve time instead of the measured one (for golden tables)
 
 
 def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
@@ -76,7 +79,8 @@ def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
             for b in behaviours:
                 case = Case(suite.name, suite.digest, suite.success_threshold, sc, b.ref)
                 e = dict(env, cpu_model=b.cpu_model) if b.cpu_model else env
-                common = dict(key=case.key, scenario_id=sc.id, solve_time_s=wall * b.slow, solve_cpu_s=cpu * b.slow,
+                w, c = (wall, cpu) if b.solve_s is None else (b.solve_s * (1 + n % 3), b.solve_s * (1 + n % 3))
+                common = dict(key=case.key, scenario_id=sc.id, solve_time_s=w * b.slow, solve_cpu_s=c * b.slow,
                               cores=(0, 1), started_at="2026-11-22T05:00:00+00:00",
                               finished_at="2026-11-22T05:00:01+00:00", environment=e)
                 fail = b.fail if (b.fail and n % b.fail_every == 0) else None
@@ -85,6 +89,8 @@ def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
                 else:
                     k = max(0, int(round(len(plan.actions) * b.keep)))
                     mine = Plan(plan.actions[:k]) if b.keep < 1 else plan
+                    if b.teleport:
+                        mine = Plan(tuple(_shifted(a, b.teleport) for a in mine.actions))
                     text = mine.to_json()
                     verdict, metrics = score(sc, text, suite.success_threshold)
                     metrics.update(solve_time_s=common["solve_time_s"], solve_cpu_s=common["solve_cpu_s"])
@@ -92,6 +98,13 @@ def fill_store(db: Path, suite: Suite, behaviours: Sequence[Behaviour]) -> Path:
                                      violations=tuple(v.to_dict() for v in verdict.violations), plan_json=text, **common)
                 store.record(case, res)
     return db
+
+
+def _shifted(action: Any, dx: float) -> Any:
+    """The truck's moves ``dx`` further east: it jumps off its start, and the dumps may miss it."""
+    if getattr(action, "kind", "") == "move" and action.machine == "truck":
+        return dataclasses.replace(action, path=tuple((t, x + dx, y, yaw) for t, x, y, yaw in action.path))
+    return action
 
 
 def standard_behaviours() -> list[Behaviour]:

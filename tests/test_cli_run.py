@@ -69,7 +69,7 @@ def test_sigkill_halfway_then_resume_stores_every_case_once(tmp_path):
     again = cli(*args, env={"EARTHBENCH_TEST_NAP": "0"})
     out, err = again.communicate(timeout=120)
     assert again.returncode == 0, err
-    assert f"{halfway} case(s) already stored were skipped" in err
+    assert f"{halfway} cases already stored were skipped" in err
     df = load_runs(db)
     assert len(df) == 6 and df.scenario_digest.is_unique and set(df.reason) == {"ok"}
     assert "t-nap" in out and "6/6" in out

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from earthbench import judge
-from metrics import evaluate, lower_bound_time_per_m3
+from earthbench.scoring import evaluate
+from metrics import lower_bound_time_per_m3
 from planners.greedy import GreedyPlanner
 from terrains.rbf import rbf
 

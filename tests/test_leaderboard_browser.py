@@ -3,87 +3,22 @@
 Checks: the page loads with no console error, no exception and no request other than the
 file itself and its ``data:`` images; a click on a column heading sorts the table (and a
 second click reverses it); a planner named ``<script>alert(1)</script>`` shows as text and
-opens no dialog. Skipped, with the reason, when Chromium or websocket-client is missing
-(``.ci/run`` installs Debian's ``chromium`` when it can).
+opens no dialog; the filters hide rows; the tables fit a 1400 px window. Skipped, with the
+reason, when Chromium or websocket-client is missing (``.ci/run`` installs Debian's
+``chromium`` when it can).
 """
 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import subprocess
-import tempfile
-import time
-import urllib.request
-from pathlib import Path
 
 import pytest
 
+from chromium import chromium_page, needs_browser
 from earthbench.publish import publish
 from leaderboard_fixtures import EVIL, fill_store, standard_behaviours, suite_of
 
-websocket = pytest.importorskip("websocket", reason="websocket-client is not installed (pip install -e '.[test]')")
-
-BROWSER = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
-pytestmark = pytest.mark.skipif(BROWSER is None, reason="no chromium on PATH (Debian: apt-get install -y chromium)")
-
-
-class DevTools:
-    """A minimal Chrome DevTools Protocol client on one page target."""
-
-    def __init__(self, ws_url: str):
-        self.ws = websocket.create_connection(ws_url, timeout=30, suppress_origin=True)
-        self.next_id = 0
-        self.events: list[dict] = []
-
-    def call(self, method: str, **params):
-        self.next_id += 1
-        mid = self.next_id
-        self.ws.send(json.dumps({"id": mid, "method": method, "params": params}))
-        while True:
-            msg = json.loads(self.ws.recv())
-            if msg.get("id") == mid:
-                if "error" in msg:
-                    raise RuntimeError(f"{method}: {msg['error']}")
-                return msg.get("result", {})
-            self.events.append(msg)
-
-    def wait_for(self, method: str, timeout: float = 30.0) -> dict:
-        end = time.monotonic() + timeout
-        for ev in self.events:
-            if ev.get("method") == method:
-                return ev
-        while time.monotonic() < end:
-            self.ws.settimeout(max(0.1, end - time.monotonic()))
-            msg = json.loads(self.ws.recv())
-            self.events.append(msg)
-            if msg.get("method") == method:
-                return msg
-        raise TimeoutError(method)
-
-    def drain(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.ws.settimeout(max(0.05, end - time.monotonic()))
-            try:
-                self.events.append(json.loads(self.ws.recv()))
-            except websocket.WebSocketTimeoutException:
-                break
-        self.ws.settimeout(30)
-
-    def js(self, expr: str):
-        res = self.call("Runtime.evaluate", expression=expr, returnByValue=True, awaitPromise=True)
-        if "exceptionDetails" in res:
-            raise RuntimeError(f"{expr}: {res['exceptionDetails']}")
-        return res["result"].get("value")
-
-    def click(self, x: float, y: float) -> None:
-        for kind in ("mouseMoved", "mousePressed", "mouseReleased"):
-            self.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", clickCount=1)
-
-    def close(self) -> None:
-        self.ws.close()
+pytestmark = needs_browser
 
 
 @pytest.fixture(scope="module")
@@ -91,44 +26,11 @@ def page(tmp_path_factory):
     root = tmp_path_factory.mktemp("browser")
     db = fill_store(root / "runs.db", suite_of(2), standard_behaviours())
     publish(db, root / "lb", terrain=False)
-    profile = tempfile.mkdtemp(prefix="earthbench-chromium-")
-    proc = subprocess.Popen(
-        [BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run", "--no-default-browser-check",
-         "--disable-extensions", "--disable-dev-shm-usage", f"--user-data-dir={profile}",
-         "--remote-debugging-port=0", "--remote-allow-origins=*", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-    )
-    try:
-        port_file = Path(profile) / "DevToolsActivePort"
-        end = time.monotonic() + 60
-        while not (port_file.exists() and port_file.read_text().strip()):
-            if proc.poll() is not None or time.monotonic() > end:
-                pytest.skip(f"chromium did not start a DevTools endpoint (exit status {proc.poll()})")
-            time.sleep(0.1)
-        port = int(port_file.read_text().split()[0])
-        targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10))
-        ws_url = next(t["webSocketDebuggerUrl"] for t in targets if t.get("type") == "page")
-        dt = DevTools(ws_url)
-        for domain in ("Page", "Runtime", "Log", "Network"):
-            dt.call(f"{domain}.enable")
-        dt.events.clear()
-        dt.call("Page.navigate", url=(root / "lb" / "index.html").as_uri())
-        dt.wait_for("Page.loadEventFired")
+    with chromium_page() as dt:
+        dt.window(1400, 1000)
+        dt.open((root / "lb" / "index.html").as_uri())
         dt.drain(0.5)
         yield dt
-        dt.close()
-    finally:
-        try:
-            os.killpg(proc.pid, 15)
-        except ProcessLookupError:
-            pass
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, 9)
-            proc.wait()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 def test_loads_without_errors_or_network(page):
@@ -166,14 +68,37 @@ def test_tables_sort_on_click(page):
     _click_heading(page, "Planner")
     assert _column(page, 1) == sorted(before, key=str.lower, reverse=True)
     _click_heading(page, "Success")
-    success = [float(v.rstrip("%")) for v in _column(page, 5)]
+    success = [float(v.split("%")[0]) for v in _column(page, 5)]  # "50% [12%–88%]": the rate, then its interval
     assert success == sorted(success)
     _click_heading(page, "Rank")
-    assert _column(page, 0) == ["1", "2", "3", "4"]
+    ranks = [int(v.rstrip("=")) for v in _column(page, 0)]  # shared ranks read "1="
+    assert ranks == sorted(ranks) and ranks[0] == 1
 
 
 def test_script_name_shows_as_text(page):
     assert EVIL in _column(page, 1)
-    assert page.js("document.scripts.length") == 1
+    assert page.js("document.querySelectorAll('script:not([type=\"application/json\"])').length") == 1
     assert page.js("document.querySelectorAll('td script, th script, caption script').length") == 0
     assert not [e for e in page.events if e.get("method") == "Page.javascriptDialogOpening"]
+
+
+def test_tables_fit_a_1400px_window_and_link_their_csvs(page):
+    assert page.js("(() => { const w = document.querySelector('table.sortable').closest('.wrap');"
+                   " return w.scrollWidth <= w.clientWidth; })()") is True
+    assert page.js("Array.from(document.links).map(a => a.getAttribute('href')).filter(h => h.endsWith('.csv'))") == [
+        "summary.csv", "runs.csv"]
+
+
+def test_filters_hide_rows(page):
+    visible = "Array.from(document.querySelectorAll('table.sortable tbody tr')).filter(r => r.offsetParent !== null).length"
+    total = page.js("document.querySelectorAll('table.sortable tbody tr').length")
+    page.js("document.querySelectorAll('details').forEach(d => d.open = true)")
+    assert page.js(visible) == total
+    page.js("(() => { const s = document.querySelector('.filters select[data-key=planner]'); s.value = 'greedy';"
+            " s.dispatchEvent(new Event('change')); })()")
+    shown = page.js("Array.from(document.querySelectorAll('table.sortable tbody tr')).filter(r => r.offsetParent !== null)"
+                    ".map(r => r.getAttribute('data-planner'))")
+    assert shown and set(shown) == {"greedy"} and len(shown) < total
+    page.js("(() => { const s = document.querySelector('.filters select[data-key=planner]'); s.value = '';"
+            " s.dispatchEvent(new Event('change')); })()")
+    assert page.js(visible) == total

@@ -11,7 +11,8 @@ from earthbench import Charge, Scenario, judge
 from earthbench.errors import ScenarioError
 from earthbench.registry import PLANNERS, TERRAINS
 from earthbench.suite import load_suite
-from metrics import evaluate, lower_bound_time_per_m3
+from earthbench.scoring import evaluate
+from metrics import lower_bound_time_per_m3
 from planners.greedy_loader import GreedyLoader, nearest_candidates
 from planners.loader_common import LoaderPlanConfig, CycleBuilder, zero_contour
 from planners.singh_cannon.loader import SinghCannonLoader, corner_candidates

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from earthbench import Dig, Dump, Plan, Prediction, judge
 from earthbench.motion import swing_time
-from metrics import evaluate, lower_bound_time_per_m3
+from earthbench.scoring import evaluate
+from metrics import lower_bound_time_per_m3
 
 
 def test_metrics_of_one_bucket():

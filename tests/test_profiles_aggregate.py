@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from metrics.aggregate import aggregate
-from metrics.profiles import cost_matrix, performance_ratios, profile
+from earthbench.aggregate import aggregate
+from earthbench.profiles import cost_matrix, performance_ratios, profile
 
 INF = math.inf
 
@@ -64,6 +64,7 @@ def test_cost_matrix_failures_and_missing_runs_are_inf():
 def _run(planner, scenario, reason, success, vr, tpm, st, version="1", cpu="cpu-a"):
     return {"suite": "s", "track": "backhoe", "planner": planner, "planner_version": version, "config_hash": "h",
             "scenario_digest": scenario, "reason": reason, "success": success, "volume_ratio": vr, "time_per_m3": tpm,
+            "time_per_target_m3": tpm, "time_per_target_m3_ratio": None if tpm is None else tpm / 10.0,
             "time_per_m3_ratio": None if tpm is None else tpm / 10.0, "solve_time_s": st, "solve_cpu_s": st,
             "cpu_model": cpu}
 
@@ -81,7 +82,7 @@ def test_aggregate_by_hand_and_ranking():
     ])
     s = aggregate(runs)
     assert s["planner"].tolist() == ["good", "fast"]  # 3/4 success beats 2/4
-    assert s["rank"].tolist() == [1, 2]
+    assert s["rank_label"].tolist() == ["1=", "1="]  # four pairs can separate nothing: a shared rank
     f = s.set_index("planner").loc["fast"]
     assert f["runs"] == 4 and f["successes"] == 2 and f["success_rate"] == 0.5
     assert f["volume_ratio_mean"] == pytest.approx(0.8)
@@ -97,7 +98,7 @@ def test_aggregate_by_hand_and_ranking():
     assert g["loaded_nothing"] == 1 and g["n_invalid"] == 1 and g["cpu_models"] == 2
 
 
-def test_ties_on_success_are_broken_by_time_per_m3():
+def test_ties_on_success_are_broken_by_time_per_target_m3():
     runs = pd.DataFrame([
         _run("slow", "a", "ok", True, 1.0, 90.0, 1.0),
         _run("quick", "a", "ok", True, 1.0, 30.0, 5.0),

@@ -19,7 +19,8 @@ from earthbench import Budget, Charge, Dig, Dump, Heightmap, Machines, Move, Pla
 from earthbench.errors import PlanFormatError
 from earthbench.cut import apply_cut, charge_cut
 from earthbench.world import LoaderSpec
-from metrics import evaluate, lower_bound_time_per_m3
+from earthbench.scoring import evaluate
+from metrics import lower_bound_time_per_m3
 
 START = Pose(12.8, 5.0, 0.0)
 TRUCK = Pose(9.2, 8.8, 0.0)

@@ -13,7 +13,7 @@ from earthbench import PLANNERS, judge
 from earthbench.plan import Move, Plan
 from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Site
-from metrics.run import evaluate
+from earthbench.scoring import evaluate
 from planners.singh_cannon.backhoe import SinghCannonBackhoe
 from planners.singh_cannon.backhoe_fig11 import fig11_scenario, lane_profiles
 from planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume

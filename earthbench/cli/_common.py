@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import inspect
 import json
+import types
+import typing
 from pathlib import Path
+from typing import Any
 
+from ..errors import EarthbenchError, UnknownNameError
 from ..registry import TERRAINS, load_plugin_file
 from ..world import Scenario
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 case``, ``2 cases`` (``many`` for irregular plurals)."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
@@ -19,17 +30,107 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--param", action="append", default=[], metavar="KEY=JSON", help="generator parameter, e.g. n_bases=30 (repeatable)")
 
 
+def _key_value(item: str, option: str) -> tuple[str, str]:
+    key, eq, raw = item.partition("=")
+    if not eq or not key.strip():
+        raise EarthbenchError(f"{option} {item!r}: expected KEY=VALUE")
+    return key.strip(), raw
+
+
 def load_scenario(args: argparse.Namespace) -> Scenario:
     if args.scenario:
         return Scenario.from_json(Path(args.scenario))
+    gen = TERRAINS.get(args.terrain)
     params = {}
     for item in args.param:
-        key, _, raw = item.partition("=")
+        key, raw = _key_value(item, "--param")
         try:
             params[key] = json.loads(raw)
         except json.JSONDecodeError:
             params[key] = raw
-    return TERRAINS.get(args.terrain)(args.seed, args.target, **params)
+    check_params(args.terrain, gen, params)
+    return gen(args.seed, args.target, **params)
+
+
+def check_params(name: str, gen: Any, params: dict[str, Any]) -> None:
+    """Refuse a parameter the generator ``gen(seed, target_volume, **params)`` does not take, with close matches."""
+    try:
+        sig = inspect.signature(gen)
+    except (TypeError, ValueError):  # not introspectable: the generator checks for itself
+        return
+    ps = list(sig.parameters.values())
+    if any(p.kind is p.VAR_KEYWORD for p in ps):
+        return
+    known = [p.name for p in ps[2:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    for key in params:
+        if key not in known:
+            raise UnknownNameError(f"{name} parameter", key, known)
+
+
+def parse_config(items: list[str], planner: type) -> dict[str, Any]:
+    """``--config KEY=VALUE`` items as overrides of ``planner.Config``: known fields only, values of the field's type."""
+    fields = {f.name: f for f in dataclasses.fields(planner.Config)} if dataclasses.is_dataclass(planner.Config) else {}
+    try:
+        hints = typing.get_type_hints(planner.Config)
+    except Exception:  # noqa: BLE001 - unresolvable annotations: fall back to JSON values
+        hints = {}
+    out: dict[str, Any] = {}
+    for item in items:
+        key, raw = _key_value(item, "--config")
+        if key not in fields:
+            raise UnknownNameError(f"{planner.name} setting", key, fields)
+        out[key] = _convert(raw, hints.get(key, Any), f"--config {key}={raw}")
+    return out
+
+
+def _convert(raw: str, hint: Any, where: str) -> Any:
+    """``raw`` as a value of type ``hint`` (bool, int, float, str, tuples and lists of them, optionals)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if type(None) in args and raw.strip().lower() in ("none", "null"):
+            return None
+        errors = []
+        for a in (a for a in args if a is not type(None)):
+            try:
+                return _convert(raw, a, where)
+            except EarthbenchError as exc:
+                errors.append(str(exc))
+        raise EarthbenchError(errors[0] if errors else f"{where}: cannot convert")
+    if hint is bool:
+        low = raw.strip().lower()
+        if low in ("true", "yes", "1", "on"):
+            return True
+        if low in ("false", "no", "0", "off"):
+            return False
+        raise EarthbenchError(f"{where}: expected true or false")
+    if hint in (int, float):
+        try:
+            v = float(raw) if hint is float else int(raw)
+        except ValueError:
+            raise EarthbenchError(f"{where}: expected {'a number' if hint is float else 'an integer'}") from None
+        return v
+    if hint is str:
+        return raw
+    if origin in (tuple, list):
+        try:
+            seq = json.loads(raw)
+        except json.JSONDecodeError:
+            seq = [s for s in raw.split(",") if s.strip()]
+        if not isinstance(seq, list):
+            seq = [seq]
+        item = args[0] if args else Any
+        vals = [_convert(json.dumps(v) if not isinstance(v, str) else v, item, where) for v in seq]
+        return tuple(vals) if origin is tuple else vals
+    try:
+        return json.loads(raw)
+    except json.JSONDecodeError:
+        return raw
+
+
+def add_config_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                   help="planner setting, a field of its Config (repeatable; `earthbench list planners --settings` lists them), "
+                        "converted to the field's type, e.g. --config min_fill=0.5")
 
 
 def add_plugin_arg(p: argparse.ArgumentParser) -> None:

@@ -4,8 +4,11 @@ With two databases, side A is read from DB_A and side B from DB_B (e.g. before a
 change, run on the same suite); with one, both sides come from it. Each side is a selection
 PLANNER[@VERSION][#CONFIG] (--a, --b) that must match exactly one configuration; it may be
 left out when the database holds only one. Runs are paired by scenario digest; each metric
-gets the medians, the median and mean difference B − A and a two-sided Wilcoxon
-signed-rank p-value; success gets an exact McNemar test.
+gets the medians, the median difference B − A with its 95 % bootstrap interval, the mean
+difference and a two-sided Wilcoxon signed-rank p-value, Holm-adjusted across the metrics;
+success gets an exact McNemar test. A warning says when the number of pairs can never reach
+alpha. In CI: --format markdown for a comment, --fail-on-regression time_per_target_m3,success
+exits 1 when B is significantly worse on any of them.
 """
 
 from __future__ import annotations
@@ -27,12 +30,23 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--metric", action="append", default=[], metavar="NAME", help="compare this metric (repeatable; default: the main ones)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdicts (default 0.05)")
     p.add_argument("--csv", metavar="FILE", help="also write the per-metric table as CSV")
+    p.add_argument("--format", choices=("text", "markdown"), default="text", help="report format (default: text)")
+    p.add_argument("--fail-on-regression", metavar="METRIC[,...]", default="",
+                   help="exit 1 when B is significantly worse (Holm-adjusted) on any of these metrics; "
+                        "'success' names the McNemar test")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..compare import DEFAULT_METRICS, CompareError, Selector, compare, format_comparison
+    from ..compare import DEFAULT_METRICS, SUCCESS, CompareError, Selector, compare, format_comparison
+    from ..errors import UnknownNameError
     from ..store import load_runs
+
+    metrics = tuple(args.metric) or DEFAULT_METRICS
+    guard = tuple(m.strip() for m in args.fail_on_regression.split(",") if m.strip())
+    for m in guard:
+        if m != SUCCESS and m not in metrics:
+            raise UnknownNameError("metric for --fail-on-regression", m, (*metrics, SUCCESS))
 
     runs_a = load_runs(args.db_a, suite=args.suite)
     runs_b = load_runs(args.db_b, suite=args.suite) if args.db_b else runs_a
@@ -42,9 +56,13 @@ def run(args: argparse.Namespace) -> int:
     b = Selector.parse(args.b).pick(runs_b, "B")
     if not args.db_b and a.index.equals(b.index):
         raise CompareError("--a and --b select the same configuration")
-    res = compare(a, b, tuple(args.metric) or DEFAULT_METRICS, args.alpha)
-    print(format_comparison(res, args.alpha))
+    res = compare(a, b, metrics, args.alpha)
+    print(format_comparison(res, fmt=args.format))
     if args.csv:
         res.table.to_csv(args.csv, index=False)
         print(f"table written to {args.csv}", file=sys.stderr)
+    worse = res.regressions(guard)
+    if worse:
+        print(f"earthbench: regression: B is significantly worse on {', '.join(worse)} (α = {args.alpha:g})", file=sys.stderr)
+        return 1
     return 0

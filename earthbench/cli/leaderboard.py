@@ -1,9 +1,10 @@
 """``earthbench leaderboard``: turn the results store into ``leaderboard/`` (tables, CSVs, page, figures).
 
 Writes README.md (one ranked table per suite and track, each with its ranking rule and a
-reproducibility stamp), runs.csv, summary.csv, a self-contained index.html and figures/
-(PNG and SVG): loaded volume against total time, performance profiles, and terrain before
-and after for one case per planner.
+reproducibility stamp, then one table per family and per target and a history of older
+versions), runs.csv, summary.csv, a self-contained index.html and figures/ (PNG and SVG):
+loaded volume against total time, performance profiles (per family too), version histories,
+and terrain before and after for one case per planner.
 """
 
 from __future__ import annotations
@@ -24,7 +25,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="publish only this suite (repeatable; default: every suite with runs in the store)")
     p.add_argument("--no-figures", action="store_true", help="tables, CSVs and page only")
     p.add_argument("--no-terrain", action="store_true", help="skip the terrain before/after figures (no re-judging)")
+    p.add_argument("--all-versions", action="store_true",
+                   help="rank every stored version of each planner (default: the latest; older ones in a history table)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="processes drawing figures (default: one per core)")
+    p.add_argument("--replays", type=int, default=20, metavar="N",
+                   help="runs the page's replay viewer embeds, a success and an invalid run per planner first (default: 20; 0: none)")
     return p
 
 
@@ -33,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
-                  workers=args.jobs)
+                  workers=args.jobs, replays=args.replays, all_versions=args.all_versions)
     runs = 0 if res.runs is None else len(res.runs)
     tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
     print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "

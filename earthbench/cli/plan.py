@@ -7,7 +7,7 @@ import sys
 import time
 
 from ..registry import PLANNERS
-from ._common import add_plugin_arg, add_scenario_args, load_plugins, load_scenario
+from ._common import add_config_arg, add_plugin_arg, add_scenario_args, load_plugins, load_scenario, parse_config
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -20,6 +20,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("planner", help="planner name (see `earthbench list planners`)")
     add_scenario_args(p)
     add_plugin_arg(p)
+    add_config_arg(p)
     p.add_argument("-o", "--out", metavar="PLAN.json", help="where to write the plan (default: standard output)")
     p.add_argument("--save-scenario", metavar="FILE", help="also write the scenario JSON (to validate the plan later)")
     return p
@@ -28,11 +29,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     cls = PLANNERS.get(args.planner)
+    overrides = parse_config(args.config, cls)
     scenario = load_scenario(args)
     if args.save_scenario:
         scenario.to_json(args.save_scenario)
     t0 = time.perf_counter()
-    plan = cls().plan(scenario)
+    plan = cls(**overrides).plan(scenario)
     dt = time.perf_counter() - t0
     text = plan.to_json(args.out)
     if not args.out:

@@ -13,16 +13,25 @@ import signal
 import sys
 from typing import Any
 
+from ..errors import EarthbenchError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
-from ..store import DEFAULT_DB, Store, summary_rows
+from ..store import DEFAULT_DB, Store, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
-from ._common import add_plugin_arg, load_plugins
+from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
 
 HELP = """Run every (planner, scenario) case of a suite, each in a fresh process pinned to its own
 2-core slot under the suite's wall and memory budget, and store each result as it finishes.
 
 Cases already in the database are skipped, so the same command resumes a killed run;
---rerun runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored."""
+--rerun runs (and replaces) them again. Ctrl-C stops cleanly: finished cases stay stored.
+
+Each finished case prints one line; an invalid or failed one names the broken rule (or
+the error) and the command that shows it in full (earthbench runs --id N).
+
+Exit status: 1 when no case of the command (run now or stored before) has a valid plan
+(every one invalid, timed out, out of memory, an error or crashed); with --require-success,
+1 unless at least one case succeeded (valid and at the success threshold). Otherwise 0;
+2 for bad input, 130 when interrupted."""
 
 
 def default_db() -> str:
@@ -40,12 +49,15 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--planner", action="append", default=[], metavar="NAME",
                    help="planner to run (repeatable; default: the suite's planners, else every planner of its track)")
     add_plugin_arg(p)
+    add_config_arg(p)
     p.add_argument("--db", default=default_db(), metavar="PATH", help=f"results database (default: $EARTHBENCH_DB or {DEFAULT_DB})")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="cases at once (default and maximum: floor(cores / budget cores))")
     p.add_argument("--rerun", action="store_true", help="run cases again even if they are stored, replacing their rows")
     p.add_argument("--seeds", metavar="A-B", help="only scenarios whose seed is in this range, e.g. 0-4 or 3")
     p.add_argument("--quiet", action="store_true", help="no progress output, only the summary")
+    p.add_argument("--require-success", action="store_true",
+                   help="exit with status 1 unless at least one case succeeded (default: unless one has a valid plan)")
     p.add_argument("--executor", choices=("local", "dask"), default=None,
                    help="where cases run: local slots (default) or a Dask cluster (needs the `dask` extra)")
     p.add_argument("--scheduler", metavar="ADDR",
@@ -61,28 +73,45 @@ def _fmt(v: Any, spec: str = ".2f") -> str:
 
 
 def print_summary(store: Store, suite: str, planners: list[str] | None = None, file: Any = None) -> None:
-    """A table per planner of everything stored for ``suite``."""
-    rows = summary_rows(store, suite, planners)
+    """A row per planner configuration of everything stored for ``suite``: the leaderboard's aggregates
+    (:func:`earthbench.aggregate.aggregate`), 95 % intervals in brackets."""
+    import pandas as pd
+
+    from ..aggregate import aggregate, ci_text
+
+    runs = load_runs(store, suite=suite)
+    if planners is not None:
+        runs = runs[runs["planner"].isin(planners)]
     file = file or sys.stdout
-    if not rows:
+    if runs.empty:
         print(f"no runs stored for suite {suite!r}", file=file)
         return
-    head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/m³ med", "solve s med", *REASONS]
+    rows = aggregate(runs, members=suite_members(store, [suite]), all_versions=True)
+    head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/target m³ med", "time/m³ med", "solve s med", *REASONS]
     table = [head]
-    names = [r["planner"] for r in rows]
-    for r in rows:
-        vr = _fmt(r["volume_ratio_mean"]) + ("±" + _fmt(r["volume_ratio_sd"]) if r["volume_ratio_sd"] is not None else "")
-        label = f"{r['planner']} {r['version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
+    names = rows["planner"].tolist()
+    for _, r in rows.iterrows():
+        vr = _fmt(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else "±" + _fmt(r["volume_ratio_sd"]))
+        label = f"{r['planner']} {r['planner_version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
         table.append([
-            label, f"{r['runs']}/{r['of']}", f"{100 * r['success']:.0f}%", vr, _fmt(r["time_per_m3_median"], ".1f"),
-            _fmt(r["solve_time_median"], ".2f"), *(str(r["counts"].get(k, 0)) for k in REASONS),
+            label, f"{r['runs']}/{r['of']}", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
+            vr, ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
+            _fmt(r["time_per_m3_median"], ".1f"), _fmt(r["solve_time_median"], ".2f"), *(str(r[f"n_{k}"]) for k in REASONS),
         ])
     widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    print(f"\nsuite {suite}:", file=file)
+    print(f"\nsuite {suite} (95 % bootstrap intervals in brackets):", file=file)
     for n, row in enumerate(table):
         print("  " + "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))), file=file)
         if n == 0:
             print("  " + "  ".join("-" * w for w in widths), file=file)
+    print(LEGEND, file=file)
+
+
+#: What the summary's columns mean (printed under it).
+LEGEND = """  runs: stored / scenarios in the suite; success: scenarios with a valid plan loading ≥ the threshold
+  (a scenario without a run counts as failed); vol.ratio: loaded / target volume over valid runs;
+  time/m³: plan time per loaded m³, median over valid runs; solve s: median wall time of the planner
+  call; ok … crashed: runs by termination reason (invalid: the referee found a broken rule)"""
 
 
 def _sigterm(signum: int, frame: Any) -> None:
@@ -92,6 +121,13 @@ def _sigterm(signum: int, frame: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     suite = load_suite(args.suite)
+    if args.config:
+        if not args.planner:
+            raise EarthbenchError("--config needs --planner NAME: the settings are checked against that planner's Config")
+        from ..registry import PLANNERS
+
+        for name in dict.fromkeys(args.planner):  # the command line's settings over the suite file's
+            suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, PLANNERS.get(name))}
     seeds = parse_seed_range(args.seeds) if args.seeds else None
     cases, notes = build_cases(suite, args.planner or None, plugins=args.plugin, seeds=seeds)
     for note in notes:
@@ -105,13 +141,13 @@ def run(args: argparse.Namespace) -> int:
         executor = make_executor(args, suite)
         from ..progress import Progress
 
-        progress = Progress(len(cases), quiet=args.quiet)
+        progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: run_id(store, case))
         planners = sorted({c.planner.name for c in cases})
         if not args.quiet:
             print(
-                f"suite {suite.name} ({suite.digest[:12]}): {len(cases)} cases "
-                f"({len(suite.select(seeds))} scenarios × {', '.join(planners) or 'no planner'}), "
-                f"{len(executor.slots)} slot(s) of {suite.budget.cores} cores, budget {suite.budget.wall_s:g} s / "
+                f"suite {suite.name} ({suite.digest[:12]}): {plural(len(cases), 'case')} "
+                f"({plural(len(suite.select(seeds)), 'scenario')} × {', '.join(planners) or 'no planner'}), "
+                f"{plural(len(executor.slots), 'slot')} of {suite.budget.cores} cores, budget {suite.budget.wall_s:g} s / "
                 f"{suite.budget.memory_mb} MB per case, db {args.db}",
                 file=sys.stderr,
             )
@@ -123,14 +159,39 @@ def run(args: argparse.Namespace) -> int:
                 signal.signal(signal.SIGTERM, old)
             getattr(executor, "close", lambda: None)()
         if report.skipped and not args.quiet:
-            print(f"{report.skipped} case(s) already stored were skipped (use --rerun to run them again)", file=sys.stderr)
+            print(f"{plural(report.skipped, 'case')} already stored {'was' if report.skipped == 1 else 'were'} skipped "
+                  "(use --rerun to run them again)", file=sys.stderr)
         print_summary(store, suite.name, planners)
         if report.interrupted:
             left = report.planned - report.skipped - report.stored
-            print(f"earthbench: interrupted: {report.stored} finished case(s) stored, {left} not run; "
+            print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run; "
                   "run the same command again to resume", file=sys.stderr)
             return 130
+        enough = any_stored(store, cases, "success=1" if args.require_success else "reason='ok'")
+        db = "" if args.db == default_db() else f" --db {args.db}"
+        if not args.quiet:
+            print(f"\nnext: earthbench runs{db} --suite {suite.name} --reason invalid  (what failed, then --id N for one run)\n"
+                  f"      earthbench leaderboard{db} --suite {suite.name} --out DIR  (tables, figures and a page with replays)",
+                  file=sys.stderr)
+        if cases and not enough:
+            what = "succeeded" if args.require_success else "has a valid plan"
+            print(f"earthbench: no case {what} (exit status 1); see earthbench runs{db} --suite {suite.name}", file=sys.stderr)
+            return 1
     return 0
+
+
+def run_id(store: Store, case: Any) -> int | None:
+    """The stored run of a case (its resume key), for the progress line's pointer to ``earthbench runs --id``."""
+    row = store.db.execute("SELECT id FROM runs WHERE scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?",
+                           case.key).fetchone()
+    return None if row is None else int(row[0])
+
+
+def any_stored(store: Store, cases: list[Any], where: str) -> bool:
+    """Whether any of ``cases`` has a stored run (by this command or before it) matching the SQL condition ``where``."""
+    keys = {tuple(r) for r in store.db.execute(
+        f"SELECT scenario_digest, planner, planner_version, config_hash FROM runs WHERE {where}")}
+    return any(c.key in keys for c in cases)
 
 
 def make_executor(args: argparse.Namespace, suite: Any) -> Any:

@@ -7,12 +7,15 @@ import csv
 import json
 import math
 import sys
+from typing import Any
 
 from ..harness import REASONS
+from ..scoring import is_success
 from ..store import Store
 from .run import default_db
 
-COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio", "time_per_m3", "solve_time_s")
+COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio",
+           "time_per_target_m3", "time_per_m3", "solve_time_s")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -26,6 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("table", "csv", "json"), default="table", help="output format (default: table)")
     p.add_argument("--id", type=int, metavar="RUN", help="show one run in full: config, violations, error, output tail")
     p.add_argument("--plan-out", metavar="FILE", help="with --id: write the run's plan JSON to FILE")
+    p.add_argument("--scenario-out", metavar="FILE",
+                   help="with --id: write the run's scenario JSON to FILE (then: earthbench validate PLAN --scenario FILE, "
+                        "earthbench show --scenario FILE --plan PLAN)")
     return p
 
 
@@ -37,11 +43,23 @@ def _cell(v: object) -> str:
     return str(v)
 
 
+def _values(r: Any, threshold: float | None) -> dict[str, Any]:
+    """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, and with a
+    suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`, as the leaderboard)."""
+    metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+    d = {c: r[c] if c in r.keys() else metrics.get(c) for c in COLUMNS}
+    if threshold is not None:
+        d["success"] = int(is_success(r["valid"], r["volume_ratio"], threshold))
+    return d
+
+
 def run(args: argparse.Namespace) -> int:
     with Store(args.db, create=False) as store:
         if args.id is not None:
             return _show(store, args)
         rows = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
+        ver = store.suite_version(args.suite) if args.suite else None
+        rows = [_values(r, None if ver is None else ver["threshold"]) for r in rows]
         if args.format == "json":
             json.dump([{c: r[c] for c in COLUMNS} for r in rows], sys.stdout, indent=1)
             print()
@@ -72,6 +90,12 @@ def _show(store: Store, args: argparse.Namespace) -> int:
     print(f"run {r['id']}: {r['scenario_id']} × {r['planner']} {r['planner_version']} (config {r['config_hash']})")
     print(f"  suite {r['suite']} ({r['suite_digest'][:12]}), scenario digest {r['scenario_digest'][:12]}")
     print(f"  reason {r['reason']}, success {bool(r['success'])} (threshold {r['threshold']})")
+    violations = json.loads(r["violations"] or "[]")
+    for v in violations:  # what broke comes first: it is why one looks at a run
+        where = "plan" if v["action"] is None else f"action {v['action']}"
+        print(f"  violation: {where}: {v['rule']} ({v['magnitude']:.3g}) {v['message']}")
+    if r["error"]:
+        print("  error:\n    " + r["error"].strip().replace("\n", "\n    "))
     print(f"  solve {_cell(r['solve_time_s'])} s wall, {_cell(r['solve_cpu_s'])} s CPU; start-up {_cell(r['startup_s'])} s; "
           f"peak RSS {_cell(r['peak_rss_mb'])} MB; cores {r['cores']}; {r['started_at']} → {r['finished_at']}")
     if cfg:
@@ -83,10 +107,6 @@ def _show(store: Store, args: argparse.Namespace) -> int:
         print("  metrics:")
         for k, v in json.loads(r["metrics"]).items():
             print(f"    {k:<28} {_cell(v)}")
-    for v in json.loads(r["violations"] or "[]"):
-        print(f"  violation: action {v['action']}: {v['rule']} ({v['magnitude']:.3g}) {v['message']}")
-    if r["error"]:
-        print("  error:\n    " + r["error"].strip().replace("\n", "\n    "))
     if r["log_tail"]:
         print("  output (tail):\n    " + r["log_tail"].strip().replace("\n", "\n    "))
     if args.plan_out:
@@ -97,4 +117,10 @@ def _show(store: Store, args: argparse.Namespace) -> int:
         with open(args.plan_out, "w") as f:
             f.write(plan)
         print(f"plan written to {args.plan_out}")
+    if args.scenario_out:
+        store.scenario(r["scenario_digest"]).to_json(args.scenario_out)
+        print(f"scenario written to {args.scenario_out}")
+    if violations and not (args.plan_out and args.scenario_out):
+        print(f"  to see it: earthbench runs --db {args.db} --id {args.id} --plan-out P.json --scenario-out S.json, "
+              "then earthbench show --scenario S.json --plan P.json", file=sys.stderr)
     return 0

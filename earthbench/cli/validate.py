@@ -10,6 +10,7 @@ from pathlib import Path
 from ..errors import PlanFormatError
 from ..plan import Plan
 from ..referee import judge
+from ..scoring import DEFAULT_SUCCESS_THRESHOLD
 from ..world import Scenario
 
 
@@ -21,13 +22,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     p.add_argument("plan", metavar="PLAN.json")
     p.add_argument("--scenario", required=True, metavar="SCENARIO.json")
-    p.add_argument("--threshold", type=float, default=0.9, help="volume ratio needed for success (default: 0.9)")
+    p.add_argument("--threshold", type=float, default=DEFAULT_SUCCESS_THRESHOLD,
+                   help=f"volume ratio needed for success (default: {DEFAULT_SUCCESS_THRESHOLD:g})")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
-    from metrics import evaluate  # the built-in metrics package; extra metrics come from plugins
+    from ..scoring import evaluate
 
     scenario = Scenario.from_json(Path(args.scenario))
     # the argument is only ever a file: its content is judged as a plan, never followed as a path
@@ -50,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
             where = "plan" if v.action is None else f"action {v.action}"
             print(f"  {where}: {v.rule} (magnitude {v.magnitude:.4g}) {v.message}")
         for k, val in metrics.items():
+            if val is None:  # e.g. solve times: measured by the harness around a planner call, not here
+                continue
             if isinstance(val, float) and math.isfinite(val):
                 val = f"{val:.4g}"
             print(f"  {k:<26} {val}")

@@ -5,7 +5,6 @@ Modules, each with one job:
 * :mod:`.cases` — :class:`PlannerRef`, :class:`Case`, :class:`CaseResult`, ``REASONS``;
 * :mod:`.sandbox` — :func:`run_case`: one case in a fresh, supervised process tree;
 * :mod:`.child` — the bootstrap and the code that runs inside a case's process;
-* :mod:`.scoring` — :func:`score`: the referee's verdict and the metrics of a plan;
 * :mod:`.environment` — :func:`environment`: the machine and software stamp of a run;
 * :mod:`.slots` — :func:`make_slots`, :class:`SlotPool`: disjoint core groups;
 * :mod:`.local` — the :class:`Executor` protocol and :class:`LocalExecutor`;
@@ -24,12 +23,12 @@ _EXPORTS = {
     "REASONS": "cases", "Case": "cases", "CaseResult": "cases", "PlannerRef": "cases",
     "environment": "environment", "Executor": "local", "LocalExecutor": "local",
     "RunReport": "orchestrate", "build_cases": "orchestrate", "run_cases": "orchestrate", "run_suite": "orchestrate",
-    "run_case": "sandbox", "score": "scoring", "SlotPool": "slots", "make_slots": "slots",
+    "run_case": "sandbox", "SlotPool": "slots", "make_slots": "slots",
 }
 
 __all__ = [
     "REASONS", "Case", "CaseResult", "Executor", "LocalExecutor", "PlannerRef", "RunReport", "SlotPool",
-    "build_cases", "environment", "make_slots", "run_case", "run_cases", "run_suite", "score",
+    "build_cases", "environment", "make_slots", "run_case", "run_cases", "run_suite",
 ]
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -38,7 +37,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .local import Executor, LocalExecutor
     from .orchestrate import RunReport, build_cases, run_cases, run_suite
     from .sandbox import run_case
-    from .scoring import score
     from .slots import SlotPool, make_slots
 
 

@@ -54,7 +54,7 @@ from ..errors import EarthbenchError
 from .cases import Case, CaseResult, utc_now
 from .child import BOOTSTRAP
 from .environment import environment
-from .scoring import score
+from ..scoring import score  # the one scoring rule, in the core
 from .slots import SlotPool
 
 #: Seconds a case may spend starting (interpreter, imports of the planner's code) before it is ready.

@@ -134,4 +134,5 @@ def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     r.loaded += take
     r.bucket -= take
     r.dumps += 1
+    r.load_curve.append((a.t_end, r.loaded))
     r.turn = math.atan2(tpos.y - base.y, tpos.x - base.x) - base.yaw

@@ -241,3 +241,4 @@ def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
     r.loaded += take
     r.bucket -= take
     r.dumps += 1
+    r.load_curve.append((a.t_end, r.loaded))

@@ -86,6 +86,8 @@ class Verdict:
     digs: tuple[DigRecord, ...] = ()
     dumps: int = 0
     travel: dict[str, float] = field(default_factory=dict)
+    #: (end time, cumulative loaded volume) after each dump, in replay order: when the truck got what.
+    load_curve: tuple[tuple[float, float], ...] = ()
 
     @property
     def valid(self) -> bool:
@@ -231,6 +233,7 @@ class Replay:
         self.removed = 0.0
         self.digs: list[DigRecord] = []
         self.dumps = 0
+        self.load_curve: list[tuple[float, float]] = []
         self.travel = {mid: 0.0 for mid in m.ids}
         self.station: tuple[Pose, float, float] | None = None  # excavator: pose, track level, tilt
 
@@ -247,6 +250,7 @@ class Replay:
             digs=tuple(self.digs),
             dumps=self.dumps,
             travel=self.travel,
+            load_curve=tuple(self.load_curve),
         )
 
     # -- motion ------------------------------------------------------------------------------

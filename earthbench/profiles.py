@@ -1,7 +1,7 @@
 """Dolan–Moré performance profiles (Dolan & Moré, Math. Programming 91, 2002).
 
 For problems ``p`` (scenarios) and solvers ``s`` (planner configurations) with cost
-``t[p, s] > 0`` (time per m³, or solve time), the performance ratio is
+``t[p, s] > 0`` (time per target m³, or solve time), the performance ratio is
 
     r[p, s] = t[p, s] / min_s' t[p, s']
 

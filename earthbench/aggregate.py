@@ -1,0 +1,288 @@
+"""Aggregates over the runs of a suite: every number of every table, defined once.
+
+Input: the DataFrame of :func:`earthbench.store.load_runs` (one row per run). One row per
+(suite, track, scope, group, planner, version, config): ``scope`` is ``suite`` (the whole suite,
+``group`` empty), ``family`` (``group`` = the family) or ``target`` (``group`` = the target
+volume, e.g. ``4 m³``). Definitions, used by ``earthbench run``'s summary, the leaderboard and
+its CSVs alike:
+
+* ``runs``: stored runs of the group; ``scenarios``: distinct scenario digests among them;
+  ``of``: the group's scenario count in the suite (``members``, else ``sizes`` for a whole
+  suite), never fewer than ``scenarios``.
+* ``success_rate`` (with its 95 % bootstrap interval ``_lo``/``_hi``): successes
+  (:func:`earthbench.scoring.is_success`) over ``of``: runs that failed in any way and
+  scenarios the planner has no run for count as failures, so a planner run on part of a
+  suite is never ranked on that part alone.
+* over *valid* runs (reason ``ok``; an invalid plan is reported, never ranked):
+  ``volume_ratio_mean`` / ``_sd`` (sample SD, NaN for one run), ``overshoot_m3_mean``, and
+  over those that loaded something (the others are counted in ``loaded_nothing``) the medians
+  with bootstrap intervals of ``time_per_target_m3`` (the primary time metric; with ``_q1`` /
+  ``_q3``), ``time_per_target_m3_ratio`` (to the scenario's lower bound) and ``time_per_m3``.
+* ``solve_time_median`` (with interval) / ``_p90`` and ``solve_cpu_median``: over every run with
+  a measured solve time, failures included (a timeout's solve time is the time it was given).
+* ``n_<reason>`` for each termination reason; ``cpu_models``: how many CPU models the runs
+  came from (solve times from different models are not comparable).
+
+Ranking (:data:`RANKING_RULE`, :func:`rank`) within each table: ``latest`` marks the newest
+version of each planner (by version number, else by its newest run); only those are
+``ranked`` unless ``all_versions``, and never a configuration without a valid run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .stats import bootstrap_ci, mcnemar_p, wilcoxon_p
+
+REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
+GROUP = ["suite", "track", "planner", "planner_version", "config_hash"]
+#: One ranked table: a suite and track, whole (scope ``suite``) or one family or target of it.
+TABLE = ["suite", "track", "scope", "group"]
+SCOPES = ("suite", "family", "target")
+#: The primary time metric of tables, rankings, profiles and figures.
+PRIMARY = "time_per_target_m3"
+#: Significance level of the paired tests that decide shared ranks.
+RANK_ALPHA = 0.05
+RANKING_RULE = (
+    "ranked by success rate (higher first), then median time per target m³ over valid runs (lower first), then "
+    f"median solve time (lower first); a planner shares the rank of the first planner of the group above it (shown "
+    f"as 1=) unless a paired test on their shared scenarios separates the two at α = {RANK_ALPHA:g} (exact McNemar on "
+    "success, or Wilcoxon signed-rank on time per target m³ where both are valid); ranks cover the latest version of each planner "
+    "(older versions: history) and never a configuration without a valid run")
+
+SUMMARY_COLUMNS = [
+    "rank", "rank_label", "ranked", "latest", *TABLE, *GROUP[2:], "runs", "of", "scenarios", "successes", "success_rate",
+    "success_rate_lo", "success_rate_hi", "valid_runs", "volume_ratio_mean", "volume_ratio_sd", "overshoot_m3_mean",
+    "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
+    "time_per_target_m3_q3", "time_per_target_m3_ratio_median", "time_per_target_m3_ratio_lo",
+    "time_per_target_m3_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
+    "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "solve_time_median",
+    "solve_time_lo", "solve_time_hi", "solve_time_p90", "solve_cpu_median",
+    *(f"n_{r}" for r in REASONS), "n_other", "cpu_models",
+]
+
+
+def _num(g: pd.DataFrame, col: str) -> np.ndarray:
+    if col not in g:
+        return np.full(len(g), np.nan)
+    return pd.to_numeric(g[col], errors="coerce").to_numpy(dtype=float)
+
+
+def _median_ci(x: np.ndarray) -> tuple[float, float, float]:
+    if not len(x):
+        return math.nan, math.nan, math.nan
+    lo, hi = bootstrap_ci(x, "median")
+    return float(np.median(x)), lo, hi
+
+
+def target_label(v: Any) -> str:
+    """A target volume as a breakdown's group name: ``4 m³``."""
+    try:
+        return f"{float(v):g} m³"
+    except (TypeError, ValueError):
+        return "?"
+
+
+def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
+    reason = g["reason"].astype(str).to_numpy()
+    ok = reason == "ok"
+    success = g["success"].fillna(False).astype(bool).to_numpy()
+    vr = _num(g, "volume_ratio")[ok]
+    vr = vr[np.isfinite(vr)]
+    over = _num(g, "overshoot_m3")[ok]
+    over = over[np.isfinite(over)]
+    tpt, tpt_ratio = _num(g, PRIMARY)[ok], _num(g, "time_per_target_m3_ratio")[ok]
+    tpm, tpm_ratio = _num(g, "time_per_m3")[ok], _num(g, "time_per_m3_ratio")[ok]
+    tpt_f, tpm_f = tpt[np.isfinite(tpt)], tpm[np.isfinite(tpm)]
+    st = _num(g, "solve_time_s")
+    st = st[np.isfinite(st)]
+    cpu = _num(g, "solve_cpu_s")
+    cpu = cpu[np.isfinite(cpu)]
+    counts = {f"n_{r}": int((reason == r).sum()) for r in REASONS}
+    n_sc = int(g["scenario_digest"].nunique())
+    of = max(int(of), n_sc) if of else n_sc
+    # success per scenario (a duplicate run of one scenario counts once, as its best), padded with failures
+    per_sc = pd.Series(success).groupby(g["scenario_digest"].to_numpy()).max()
+    hits = np.zeros(of)
+    hits[: int(per_sc.sum())] = 1.0
+    s_lo, s_hi = bootstrap_ci(hits, "mean") if of else (math.nan, math.nan)
+    tpt_med, tpt_lo, tpt_hi = _median_ci(tpt_f)
+    r_med, r_lo, r_hi = _median_ci(tpt_ratio[np.isfinite(tpt_ratio)])
+    tpm_med, tpm_lo, tpm_hi = _median_ci(tpm_f)
+    st_med, st_lo, st_hi = _median_ci(st)
+    tq1, tq3 = np.percentile(tpt_f, [25, 75]) if len(tpt_f) else (math.nan, math.nan)
+    q1, q3 = np.percentile(tpm_f, [25, 75]) if len(tpm_f) else (math.nan, math.nan)
+    tr = tpm_ratio[np.isfinite(tpm_ratio)]
+    return {
+        "runs": len(g), "of": of, "scenarios": n_sc, "successes": int(per_sc.sum()),
+        "success_rate": float(per_sc.sum() / of) if of else math.nan, "success_rate_lo": s_lo, "success_rate_hi": s_hi,
+        "valid_runs": int(ok.sum()),
+        "volume_ratio_mean": float(vr.mean()) if len(vr) else math.nan,
+        "volume_ratio_sd": float(vr.std(ddof=1)) if len(vr) > 1 else math.nan,
+        "overshoot_m3_mean": float(over.mean()) if len(over) else math.nan,
+        "time_per_target_m3_median": tpt_med, "time_per_target_m3_lo": tpt_lo, "time_per_target_m3_hi": tpt_hi,
+        "time_per_target_m3_q1": float(tq1), "time_per_target_m3_q3": float(tq3),
+        "time_per_target_m3_ratio_median": r_med, "time_per_target_m3_ratio_lo": r_lo, "time_per_target_m3_ratio_hi": r_hi,
+        "time_per_m3_median": tpm_med, "time_per_m3_lo": tpm_lo, "time_per_m3_hi": tpm_hi,
+        "time_per_m3_q1": float(q1), "time_per_m3_q3": float(q3), "time_per_m3_iqr": float(q3 - q1),
+        "time_per_m3_ratio_median": float(np.median(tr)) if len(tr) else math.nan,
+        "loaded_nothing": int(np.isinf(tpm).sum()),
+        "solve_time_median": st_med, "solve_time_lo": st_lo, "solve_time_hi": st_hi,
+        "solve_time_p90": float(np.percentile(st, 90)) if len(st) else math.nan,
+        "solve_cpu_median": float(np.median(cpu)) if len(cpu) else math.nan,
+        **counts, "n_other": int(len(g) - sum(counts.values())),
+        "cpu_models": int(g["cpu_model"].dropna().nunique()) if "cpu_model" in g else 0,
+    }
+
+
+def _version_key(version: str) -> tuple[int, Any]:
+    from packaging.version import InvalidVersion, Version
+
+    try:
+        return (1, Version(str(version)))
+    except InvalidVersion:
+        return (0, str(version))
+
+
+def latest_versions(runs: pd.DataFrame) -> set[tuple[str, str, str, str]]:
+    """(suite, track, planner, version) of each planner's newest version: the highest version number
+    (PEP 440), else — for versions that are not numbers — the one whose newest run finished last."""
+    out: set[tuple[str, str, str, str]] = set()
+    if runs.empty:
+        return out
+    finished = runs["finished_at"].astype(str) if "finished_at" in runs else pd.Series("", index=runs.index)
+    last = finished.groupby([runs[c] for c in GROUP[:4]]).max()
+    for (suite, track, planner), sub in last.groupby(level=[0, 1, 2]):
+        versions = [(v, t) for (_, _, _, v), t in sub.items()]
+        best = max(versions, key=lambda vt: (_version_key(vt[0]), vt[1]))[0]
+        out.add((suite, track, planner, str(best)))
+    return out
+
+
+def _scoped(runs: pd.DataFrame, scope: str) -> pd.DataFrame:
+    if scope == "suite":
+        return runs.assign(scope="suite", group="")
+    col = runs["family"] if scope == "family" else runs["target_volume"].map(target_label)
+    return runs.assign(scope=scope, group=col.fillna("?").astype(str))
+
+
+def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None, *, members: pd.DataFrame | None = None,
+              scopes: Sequence[str] = ("suite",), all_versions: bool = False) -> pd.DataFrame:
+    """One row per (table, planner configuration), columns :data:`SUMMARY_COLUMNS`, ranked by :func:`rank`.
+
+    ``sizes``: suite name → its number of scenarios; ``members``: the suites' scenarios
+    (columns ``suite``, ``scenario_digest``, ``family``, ``target_volume``), which give every
+    breakdown's scenario count. ``scopes``: the tables to make (``suite``, ``family``, ``target``); a
+    suite with a single family (or target) gets no table for that scope.
+    """
+    sizes = sizes or {}
+    of: dict[tuple[str, str, str], int] = {}
+    if members is not None and len(members):
+        for scope in scopes:
+            m = _scoped(members, scope)
+            for key, n in m.groupby(["suite", "scope", "group"]).size().items():
+                of[key] = int(n)
+    latest = latest_versions(runs) if len(runs) else set()
+    rows, vectors = [], []
+    for scope in scopes:
+        if not len(runs):
+            break
+        sr = _scoped(runs, scope)
+        if scope != "suite":  # a suite of one family (or one target) has no breakdown: it would repeat the suite
+            parts = _scoped(members, scope) if members is not None and len(members) else sr
+            split = parts.groupby("suite")["group"].nunique()
+            sr = sr[sr["suite"].map(split).fillna(0) > 1]
+        for key, g in sr.groupby(["suite", "track", "scope", "group", *GROUP[2:]], sort=True, dropna=False):
+            suite, track, _, group, planner, version, _cfg = key
+            n_of = of.get((suite, scope, group), sizes.get(suite) if scope == "suite" else None)
+            is_latest = (suite, track, planner, str(version)) in latest
+            rows.append({**dict(zip(["suite", "track", "scope", "group", *GROUP[2:]], key)), "latest": is_latest,
+                         **_summarise(g, n_of)})
+            vectors.append(_paired_vectors(g))
+    out = pd.DataFrame.from_records(rows, columns=[c for c in SUMMARY_COLUMNS if c not in ("rank", "rank_label", "ranked")])
+    return rank(out, vectors, all_versions=all_versions)
+
+
+def _paired_vectors(g: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    """Per scenario digest: success (best run) and the primary time of valid runs (finite only)."""
+    d = g["scenario_digest"].to_numpy()
+    succ = pd.Series(g["success"].fillna(False).astype(bool).to_numpy()).groupby(d).max()
+    t = _num(g, PRIMARY)
+    ok = (g["reason"].astype(str).to_numpy() == "ok") & np.isfinite(t)
+    times = pd.Series(t[ok]).groupby(d[ok]).min()
+    return succ, times
+
+
+def separated(a: tuple[pd.Series, pd.Series], b: tuple[pd.Series, pd.Series], alpha: float = RANK_ALPHA) -> bool:
+    """Whether a paired test on shared scenarios tells two configurations apart (the shared-rank rule:
+    each row is tested against the first row of the group it would join, so ties never chain).
+
+    Success over the union of their scenarios (a missing run is a failure), exact McNemar; else the
+    primary time over the scenarios where both are valid, two-sided Wilcoxon signed-rank.
+    """
+    digests = a[0].index.union(b[0].index)
+    sa = a[0].reindex(digests, fill_value=False).to_numpy(dtype=bool)
+    sb = b[0].reindex(digests, fill_value=False).to_numpy(dtype=bool)
+    if mcnemar_p(sa, sb) < alpha:
+        return True
+    both = a[1].index.intersection(b[1].index)
+    if len(both) == 0:
+        return False
+    return wilcoxon_p(b[1].loc[both].to_numpy() - a[1].loc[both].to_numpy())[1] < alpha
+
+
+def rank(summary: pd.DataFrame, vectors: Sequence[tuple[pd.Series, pd.Series]] | None = None, *,
+         all_versions: bool = False) -> pd.DataFrame:
+    """Order each table by :data:`RANKING_RULE`; number the ranked rows (``rank``, ``rank_label``: ``1=`` when shared).
+
+    ``vectors`` (per row, from :func:`_paired_vectors`) feed the paired tests; without them
+    (a summary read back from CSV) every rank is distinct.
+    """
+    if summary.empty:
+        return summary.assign(rank=pd.Series(dtype=float), rank_label=pd.Series(dtype=str),
+                              ranked=pd.Series(dtype=bool))[SUMMARY_COLUMNS]
+    s = summary.copy()
+    s["_v"] = range(len(s))
+    s["ranked"] = (s["latest"].astype(bool) | all_versions) & (s["valid_runs"] > 0)
+    s["_unranked"] = ~s["ranked"]
+    s["_neg_success"] = -s["success_rate"].fillna(0.0)
+    s["_scope"] = s["scope"].map({sc: i for i, sc in enumerate(SCOPES)})
+    s = s.sort_values(["suite", "track", "_scope", "group", "_unranked", "_neg_success", "time_per_target_m3_median",
+                       "solve_time_median", "planner", "planner_version", "config_hash"],
+                      na_position="last", kind="mergesort").reset_index(drop=True)
+    ranks: list[float] = [math.nan] * len(s)
+    labels: list[str] = ["–"] * len(s)
+    for _, idx in s.groupby(TABLE, sort=False).groups.items():
+        ranked = [i for i in idx if s.at[i, "ranked"]]
+        leader = None  # the first row of the current group of shared rank
+        for pos, i in enumerate(ranked):
+            if leader is not None and vectors is not None and not separated(vectors[s.at[leader, "_v"]], vectors[s.at[i, "_v"]]):
+                ranks[i] = ranks[leader]
+            else:
+                leader, ranks[i] = i, float(pos + 1)
+        for i in ranked:
+            shared = sum(1 for j in ranked if ranks[j] == ranks[i]) > 1
+            labels[i] = f"{int(ranks[i])}=" if shared else str(int(ranks[i]))
+    s["rank"] = ranks
+    s["rank_label"] = labels
+    return s[SUMMARY_COLUMNS]
+
+
+def ci_text(value: Any, lo: Any, hi: Any, spec: str = ".1f", scale: float = 1.0, unit: str = "") -> str:
+    """``value [lo–hi]`` (the 95 % interval), ``value`` alone without one, ``–`` for no value."""
+    def f(v: Any) -> str:
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            return "–"
+        if isinstance(v, float) and math.isinf(v):
+            return "∞"
+        return format(float(v) * scale, spec) + unit
+
+    text = f(value)
+    if text == "–" or lo is None or hi is None or (isinstance(lo, float) and math.isnan(lo)):
+        return text
+    return f"{text} [{f(lo)}–{f(hi)}]"

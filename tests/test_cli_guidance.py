@@ -1,0 +1,107 @@
+"""The CLI guides: the broken rule inline with the command to see more, exit status, plurals,
+violations first, a stored run's scenario exported, planner settings and generator parameters
+checked with close matches."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from earthbench.cli import main
+from earthbench.store import load_runs
+from earthbench.world import Scenario
+
+from conftest import tiny_suite_toml
+
+PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
+
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
+
+
+@pytest.fixture
+def suite(tmp_path):
+    f = tmp_path / "g.toml"
+    f.write_text(tiny_suite_toml("g"))
+    return str(f)
+
+
+def test_invalid_case_names_its_rule_and_the_run_to_see(tmp_path, suite, capsys):
+    db = str(tmp_path / "g.db")
+    assert main(["run", suite, "--planner", "t-invalid", "--plugin", PLUGIN, "--db", db]) == 1  # no valid plan
+    err = capsys.readouterr().err
+    run_id = int(load_runs(db)["id"].iloc[0])
+    assert "1 case (1 scenario × t-invalid), 1 slot of" in err
+    assert "invalid" in err and "cut_depth at action 0" in err and f"see: earthbench runs --id {run_id}" in err
+    assert "no case has a valid plan (exit status 1)" in err and "next: earthbench runs" in err
+
+    scen, plan = tmp_path / "s.json", tmp_path / "p.json"
+    assert main(["runs", "--db", db, "--id", str(run_id), "--scenario-out", str(scen), "--plan-out", str(plan)]) == 0
+    out = capsys.readouterr().out
+    assert out.index("violation: action 0: cut_depth") < out.index("metrics:")
+    assert Scenario.from_json(scen).digest == load_runs(db)["scenario_digest"].iloc[0]
+    assert main(["validate", str(plan), "--scenario", str(scen)]) == 1  # the exported pair reproduces the verdict
+    assert "cut_depth" in capsys.readouterr().out
+
+
+def test_exit_status_and_legend(tmp_path, suite, capsys):
+    db = str(tmp_path / "ok.db")
+    assert main(["run", suite, "--planner", "greedy", "--db", db]) == 0
+    cap = capsys.readouterr()
+    assert "solve s: median wall time" in cap.out and "(s)" not in cap.err
+    # t-fast's plans are valid but load nothing: exit 0, unless success is required
+    assert main(["run", suite, "--planner", "t-fast", "--plugin", PLUGIN, "--db", db, "--quiet"]) == 0
+    assert main(["run", suite, "--planner", "t-fast", "--plugin", PLUGIN, "--db", db, "--quiet", "--require-success"]) == 1
+    assert "no case succeeded" in capsys.readouterr().err
+    assert main(["run", suite, "--planner", "greedy", "--db", db, "--quiet", "--require-success"]) == 0
+
+
+def test_config_is_checked_against_the_planners_config(tmp_path, suite, capsys):
+    db = str(tmp_path / "c.db")
+    assert main(["run", suite, "--planner", "greedy", "--config", "min_fil=0.5", "--db", db]) == 2
+    assert "Did you mean 'min_fill'?" in capsys.readouterr().err
+    assert main(["run", suite, "--planner", "greedy", "--config", "max_actions=many", "--db", db]) == 2
+    assert "max_actions=many: expected an integer" in capsys.readouterr().err
+    assert main(["run", suite, "--config", "min_fill=0.5", "--db", db]) == 2
+    assert "--config needs --planner" in capsys.readouterr().err
+    assert main(["run", suite, "--planner", "greedy", "--config", "min_fill=0.5", "--config", "max_actions=50", "--db", db,
+                 "--quiet"]) == 0
+    cfg = load_runs(db)["config"].iloc[0]
+    cfg = json.loads(cfg) if isinstance(cfg, str) else cfg
+    assert cfg["min_fill"] == 0.5 and cfg["max_actions"] == 50 and isinstance(cfg["max_actions"], int)
+
+
+def test_plan_takes_config_and_checks_params(tmp_path, capsys):
+    out = tmp_path / "p.json"
+    assert main(["plan", "greedy", "--config", "min_fill=0.3", "--param", "n_bases=14", "-o", str(out)]) == 0
+    assert main(["plan", "greedy", "--param", "n_base=14", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown rbf parameter 'n_base'. Did you mean 'n_bases'?" in err and "Traceback" not in err
+    assert main(["plan", "greedy", "--param", "n_bases", "-o", str(out)]) == 2
+    assert "expected KEY=VALUE" in capsys.readouterr().err
+    assert main(["plan", "greedy", "--config", "min_fill=lots", "-o", str(out)]) == 2
+    assert "expected a number" in capsys.readouterr().err
+
+
+def test_validate_prints_no_missing_values(tmp_path, capsys):
+    plan, scen = tmp_path / "p.json", tmp_path / "s.json"
+    assert main(["plan", "greedy", "-o", str(plan), "--save-scenario", str(scen)]) == 0
+    capsys.readouterr()
+    assert main(["validate", str(plan), "--scenario", str(scen)]) == 0
+    out = capsys.readouterr().out
+    assert "None" not in out and "solve_time_s" not in out and "volume_ratio" in out
+
+
+def test_settings_are_listed_and_typed(capsys):
+    from earthbench.cli._common import parse_config
+    from earthbench.registry import PLANNERS
+
+    assert main(["list", "--settings"]) == 0
+    out = capsys.readouterr().out
+    assert "settings: min_fill=0.6" in out and "params: n_bases=14" in out
+    cls = PLANNERS.get("singh-cannon-backhoe")
+    assert parse_config(["relax_fills=[0.5, 0.2]", "max_digs=7", "fill_min=1"], cls) == {
+        "relax_fills": (0.5, 0.2), "max_digs": 7, "fill_min": 1.0}
+    assert parse_config(["retime_moves=false", "mu_strategy=monotone"], PLANNERS.get("stl-tamp")) == {
+        "retime_moves": False, "mu_strategy": "monotone"}
