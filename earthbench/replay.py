@@ -26,7 +26,8 @@ import numpy as np
 
 from .errors import PlanFormatError
 from .plan import Charge, Dig, Dump, Move, Plan
-from .referee import Verdict, footprint, judge
+from .cut import footprint
+from .referee import Verdict, judge
 from .world import Scenario
 
 if TYPE_CHECKING:

@@ -31,6 +31,25 @@ Track = Literal["backhoe", "wheel_loader"]
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
 
+#: Field metadata of world-model fields added after digests were first pinned: such a field is
+#: left out of the JSON form and the digest while it holds its default, so every scenario
+#: written before it existed keeps its digest.
+LATER = {"omit_default": True}
+
+
+def _later(default: Any) -> Any:
+    return field(default=default, metadata=LATER)
+
+
+def rectangle(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, back: float, front: float, width: float) -> np.ndarray:
+    """Corners ``[k, 4, 2]`` of a rectangle from ``back`` behind to ``front`` ahead of each pose
+    (along its yaw), ``width`` across; the one footprint shape of every machine."""
+    x, y, yaw = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (x, y, yaw))
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    along = np.array([-back, front, front, -back])[None, :]
+    across = np.array([-width / 2, -width / 2, width / 2, width / 2])[None, :]
+    return np.stack([x[:, None] + along * c - across * s, y[:, None] + along * s + across * c], axis=-1)
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -154,11 +173,19 @@ def _polygon(points: Any, what: str) -> Polygon:
 
 @dataclass(frozen=True)
 class Site:
-    """Where digging is allowed: the dig area, the design grade and the keep-out zones."""
+    """Where digging is allowed: the dig area, the design grade and the keep-out zones.
+
+    ``open_outside`` says whether the ground beyond the heightmap's edge is open, level ground
+    at the floor (or, without a floor, at the map's lowest cell) that machines may use, or
+    closed (a path or footprint leaving the map is ``off_map``). ``None`` (the default, left out
+    of the JSON) means the track's convention: open for ``backhoe`` (the STL-TAMP paper's maps
+    show only the dig area, with the machines beside it), closed for ``wheel_loader``.
+    """
 
     dig_area: Polygon
     floor: float | None = None
     keep_outs: tuple[Polygon, ...] = ()
+    open_outside: bool | None = _later(None)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dig_area", _polygon(self.dig_area, "site.dig_area"))
@@ -169,6 +196,8 @@ class Site:
         )
         if self.floor is not None:
             object.__setattr__(self, "floor", float(self.floor))
+        if self.open_outside not in (None, True, False):
+            raise ScenarioError(f"site.open_outside must be true, false or absent, got {self.open_outside!r}")
 
 
 @dataclass(frozen=True)
@@ -199,17 +228,38 @@ class ExcavatorSpec:
     min_dump_time: float = 2.0
     clearance: float = 3.5
     chord_tolerance: float = 0.05
+    track_length: float = _later(2.6)
+    track_width: float = _later(2.1)
+    undermine_slope: float = _later(1.0)
+    max_tilt: float = _later(0.35)
+
+    def outline(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
+        """Corners ``[k, 4, 2]`` of the tracks at each pose."""
+        return rectangle(x, y, yaw, self.track_length / 2, self.track_length / 2, self.track_width)
+
+    body = outline
 
 
 @dataclass(frozen=True)
 class TruckSpec:
-    """A dump truck: the same travel limits as the excavator, a loading radius and a capacity."""
+    """A dump truck: the same travel limits as the excavator, a loading radius and a capacity.
+
+    Footprint: a ``length`` × ``width`` rectangle centred on its pose (a small site dumper).
+    """
 
     travel_speed: float = 0.86
     yaw_rate: float = 0.11
     loading_radius: float = 1.0
     capacity: float = 10.0
     chord_tolerance: float = 0.05
+    length: float = _later(3.2)
+    width: float = _later(1.6)
+
+    def outline(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
+        """Corners ``[k, 4, 2]`` of the truck at each pose."""
+        return rectangle(x, y, yaw, self.length / 2, self.length / 2, self.width)
+
+    body = outline
 
 
 @dataclass(frozen=True)
@@ -228,6 +278,12 @@ class LoaderSpec:
     distance between the loader's pose and the truck's centre. The pose may never cross a cell
     more than ``max_step`` above the base level (the floor; see the referee).
     ``chord_tolerance`` is the lateral slack (m) between an arc and the chord of two samples.
+
+    Footprint: the wheels stand on the ``wheelbase`` × ``wheel_width`` rectangle behind the
+    front axle (the step rule checks every cell under it); the body reaches ``rear_overhang``
+    behind the rear axle and ``front_overhang`` ahead of the front one (clearance to the truck,
+    over whose bed the raised bucket may reach); the outline adds the bucket out to its cutting
+    edge, ``bucket_width`` wide (keep-out zones and the map's edge).
     """
 
     bucket_width: float = 1.8
@@ -243,6 +299,22 @@ class LoaderSpec:
     clearance: float = 2.5
     max_step: float = 0.15
     chord_tolerance: float = 0.05
+    wheelbase: float = _later(2.0)
+    wheel_width: float = _later(1.6)
+    rear_overhang: float = _later(0.9)
+    front_overhang: float = _later(0.5)
+
+    def wheels(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
+        """Corners ``[k, 4, 2]`` of the rectangle the wheels stand on at each pose."""
+        return rectangle(x, y, yaw, self.wheelbase, 0.0, self.wheel_width)
+
+    def body(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
+        """Corners ``[k, 4, 2]`` of the body without the bucket at each pose."""
+        return rectangle(x, y, yaw, self.wheelbase + self.rear_overhang, self.front_overhang, self.wheel_width)
+
+    def outline(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
+        """Corners ``[k, 4, 2]`` of body and bucket (a rectangle out to the cutting edge)."""
+        return rectangle(x, y, yaw, self.wheelbase + self.rear_overhang, self.bucket_offset, max(self.bucket_width, self.wheel_width))
 
 
 @dataclass(frozen=True)
@@ -320,6 +392,18 @@ class Scenario:
         if getattr(self.machines, needed, None) is None:
             raise ScenarioError(f"a {self.track} scenario needs machines.{needed}")
 
+    @property
+    def outside_open(self) -> bool:
+        """Whether machines may leave the map (``Site.open_outside``, else the track's convention)."""
+        if self.site.open_outside is not None:
+            return self.site.open_outside
+        return self.track == "backhoe"
+
+    @property
+    def outside_level(self) -> float:
+        """Height of the open ground beyond the map: the floor, or the map's lowest cell."""
+        return self.site.floor if self.site.floor is not None else float(self.terrain.z.min())
+
     # -- identity ---------------------------------------------------------------------------
     def _content(self) -> dict[str, Any]:
         d = _drop_absent_loader(_to_plain(self))
@@ -366,7 +450,7 @@ class Scenario:
                 z = np.frombuffer(base64.b64decode(z["f8_base64"]), dtype="<f8").reshape(z["shape"])
             terrain = Heightmap(tuple(t["origin"]), t["resolution"], np.asarray(z, dtype=float))
             s = _section(d["site"], "site")
-            site = Site(tuple(s["dig_area"]), s.get("floor"), tuple(s.get("keep_outs", ())))
+            site = Site(tuple(s["dig_area"]), s.get("floor"), tuple(s.get("keep_outs", ())), s.get("open_outside"))
             m = _section(d["machines"], "machines")
             machines = Machines(
                 truck=_checked(TruckSpec, m["truck"], "machines.truck"),
@@ -456,7 +540,11 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
 def _to_plain(obj: Any) -> Any:
     """Dataclasses → dicts, tuples → lists, numpy → Python; the JSON form of the world model."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        return {
+            f.name: _to_plain(getattr(obj, f.name))
+            for f in dataclasses.fields(obj)
+            if not (f.metadata.get("omit_default") and getattr(obj, f.name) == f.default)
+        }
     if isinstance(obj, dict):
         return {str(k): _to_plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

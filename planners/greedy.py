@@ -25,10 +25,11 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.motion import swing_time, turn_drive_turn
+from earthbench.cut import apply_cut, path_cells
+from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.referee import apply_cut
+from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
@@ -55,7 +56,7 @@ class GreedyPlanner(Planner):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.0"
+    version = "1.1"
     tracks = ("backhoe",)
     Config = GreedyConfig
 
@@ -203,8 +204,12 @@ class _Greedy:
         # prefer a full bucket, then (among equals) the stroke nearest the current swing
         order = np.argsort(-np.minimum(est, want * 1.05))[:6]
         best = None
+        track_level = self.station()[0]
         for k in order:
-            vol = self.trial_cut((float(p[k, 0]), float(p[k, 1])), float(h[k]), float(level[k]))
+            contact = (float(p[k, 0]), float(p[k, 1]))
+            if self.undermines(contact, float(h[k]), float(level[k]), track_level):
+                continue  # the referee's undermining rule
+            vol = self.trial_cut(contact, float(h[k]), float(level[k]))
             if best is None or vol > best[0] + 1e-9:
                 best = (vol, (float(p[k, 0]), float(p[k, 1])), float(h[k]), float(depth[k]))
         return best
@@ -218,6 +223,21 @@ class _Greedy:
         vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
         self.z[rows, cols] = saved
         return vol
+
+    def undermines(self, contact: tuple[float, float], heading: float, level: float, track_level: float) -> bool:
+        """Whether the stroke breaks the referee's undermining rule (a trial cut, put back)."""
+        if level >= track_level:
+            return False  # nothing is cut below the tracks' ground
+        e = self.exc
+        rows, cols = self._window(contact, heading)
+        saved = self.z[rows, cols].copy()
+        jj, ii, _ = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
+        before = self.z[jj, ii]
+        apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
+        cut = self.z[jj, ii] < before
+        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
+        self.z[rows, cols] = saved
+        return excess > -ABS_TOL
 
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
         """Rows and columns of the grid holding every cell a stroke from ``contact`` may cut."""
@@ -233,7 +253,7 @@ class _Greedy:
     def dig(self, best: tuple[float, tuple[float, float], float, float]) -> None:
         _, contact, heading, depth = best
         e = self.exc
-        dur = swing_time(self.base, self.turn, contact, e) + e.min_stroke_time + _EPS_T
+        dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
         level = self.terrain.height_at(contact[0], contact[1], self.z) - depth
         self.bucket = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
         self._cut_since.append(self._window(contact, heading))
@@ -245,11 +265,21 @@ class _Greedy:
     def dump(self) -> None:
         e = self.exc
         target = (self.truck.x, self.truck.y)
-        dur = swing_time(self.base, self.turn, target, e) + e.min_dump_time + _EPS_T
+        dur = min_dump_time(self.base, self.turn, target, e) + _EPS_T
         self.actions.append(Dump("excavator", self.t, self.t + dur))
         self.t += dur
         self.loaded += min(self.bucket, self.truck_spec.capacity - self.loaded)
         self.turn = math.atan2(target[1] - self.base.y, target[0] - self.base.x) - self.base.yaw
+
+    def station(self, base: Pose | None = None) -> tuple[float, float]:
+        """The referee's ground level under the tracks and tilt at ``base`` (default: here)."""
+        b = base or self.base
+        if base is None and getattr(self, "_station", (None,))[0] == b:
+            return self._station[1]
+        out = track_level_and_tilt(self.sc, self.z, self.exc, b)
+        if base is None:
+            self._station = (b, out)
+        return out
 
     # -- relocation ----------------------------------------------------------------------------
     def truck_in_reach(self, base: Pose | None = None, truck: Pose | None = None) -> bool:
@@ -339,6 +369,10 @@ class _Greedy:
             if any(ko.contains(Point(key)) for ko in self.keep_outs):
                 continue
             bearing = math.atan2(key[1] - self.base.y, key[0] - self.base.x)
+            yaw = turn_drive_turn(self.base, key, 0.0, self.exc.travel_speed, self.exc.yaw_rate)[-1][3]
+            if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - 0.01:
+                visited.add(key)
+                continue  # the referee's tilt rule
             if self._place_truck_and_go(Pose(key[0], key[1], self.base.yaw), bearing):
                 visited.add(key)
                 return True

@@ -47,7 +47,7 @@ class GreedyLoader(Planner):
     """Nearest contour point to the truck, perpendicular entry; see the module docstring."""
 
     name = "greedy-loader"
-    version = "1.0"
+    version = "1.1"
     tracks = ("wheel_loader",)
     Config = GreedyLoaderConfig
 

@@ -9,7 +9,7 @@ rank dig candidates; the rest lives here:
   heading ``h`` into the pile, the entry pose of a charge: the cutting edge starts just before
   the first material in the bucket's corridor and the loader's pose (front axle) is
   ``bucket_offset`` behind it.
-- :func:`simulate_charge` — the referee's own cut (:func:`earthbench.referee.charge_cut`) on a
+- :func:`simulate_charge` — the referee's own cut (:func:`earthbench.cut.charge_cut`) on a
   copy of the grid. The penetration is chosen so that the bucket takes whole cells up to the
   capacity and no more, so the loader never drives onto material its bucket cannot take.
 - :func:`search_routes` — car-like routes at or above the minimum turning radius: an optional
@@ -36,9 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from earthbench.motion import wrap
+from earthbench.motion import dense_poses, wrap
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
-from earthbench.referee import cell_heights, charge_cut, densify, loader_base_level, step_excess
+from earthbench.cut import charge_cut
+from earthbench.referee.loader import cell_heights, densify, loader_base_level, step_excess, wheel_step_excess
+from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
 
 MARGIN = 0.995
@@ -178,7 +180,7 @@ def simulate_charge(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, entry: 
     if vol < 0.02 * spec.bucket_capacity:
         return None
     end = (x + pen * ux, y + pen * uy, yaw)
-    if step_excess(terrain, zz, np.array([[x, y], [end[0], end[1]]]), base, spec.max_step)[0] > -1e-3:
+    if wheel_step_excess(terrain, zz, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), base)[0] > -1e-3:
         return None
     return ChargeResult(pen, vol, zz, end)
 
@@ -345,16 +347,23 @@ def search_routes(
 
 
 def _clear(scenario: Scenario, z: np.ndarray, route: Route, base: float) -> bool:
-    """On the map (0.5 m margin), clear of the truck (clearance + 0.1 m), traversable step."""
+    """With the referee's own footprint rules: the outline on the map (0.2 m margin, or the
+    outside open), the body clear of the truck's and its centre beyond the clearance (+ 0.1 m),
+    the wheels' step traversable."""
     spec: LoaderSpec = scenario.machines.loader
     truck = scenario.machines.truck_pose
-    xmin, xmax, ymin, ymax = scenario.terrain.extent
     xy = route.p[:, :2]
-    if np.any(xy[:, 0] < xmin + 0.5) or np.any(xy[:, 0] > xmax - 0.5) or np.any(xy[:, 1] < ymin + 0.5) or np.any(xy[:, 1] > ymax - 0.5):
-        return False
     if np.min(np.hypot(xy[:, 0] - truck.x, xy[:, 1] - truck.y)) < spec.clearance + 0.1:
         return False
-    return step_excess(scenario.terrain, z, xy, base, spec.max_step)[0] <= -1e-3
+    if step_excess(scenario.terrain, z, xy, base, spec.max_step)[0] > -1e-3:  # the axle: a quick first test
+        return False
+    path = np.column_stack([route.t, route.p[:, :3]])
+    dense = dense_poses(path, scenario.terrain.resolution / 2, reach_of(spec.outline(0.0, 0.0, 0.0)))[:, 1:4]  # as the referee samples
+    if not scenario.outside_open and np.max(off_map_excess(scenario, spec, dense)) > -0.05:
+        return False
+    if bodies_touch(spec, dense, scenario.machines.truck, np.array([truck.x, truck.y, truck.yaw]), margin=0.1).any():
+        return False
+    return wheel_step_excess(scenario.terrain, z, spec, path, base)[0] <= -1e-3
 
 
 def search_dubins(

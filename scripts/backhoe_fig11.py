@@ -15,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from earthbench.referee import apply_cut
+from earthbench.cut import apply_cut
 from earthbench.world import Scenario, Task
 from terrains.bench import bench
 

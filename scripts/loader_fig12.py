@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from earthbench.plan import Charge, Plan
-from earthbench.referee import charge_cut, judge
+from earthbench.cut import charge_cut
+from earthbench.referee import judge
 from earthbench.world import Scenario
 from planners.loader_common import zero_contour
 from planners.singh_cannon.loader import SinghCannonLoader

@@ -57,7 +57,7 @@ from hypothesis import strategies as st
 
 import numpy as np
 
-from earthbench.referee import apply_cut
+from earthbench.cut import apply_cut
 from planners.greedy import _Greedy, GreedyConfig
 
 

@@ -71,9 +71,10 @@ def test_move_starts_where_the_machine_is(scenario, start, ok):
     assert ("discontinuous" not in rules(judge(scenario, Plan((m,))))) == ok
 
 
-@pytest.mark.parametrize("y_top, ok", [(6.9, True), (7.1, False)])
+@pytest.mark.parametrize("y_top, ok", [(5.3, True), (5.5, False)])
 def test_keep_out_for_machines(y_top, ok):
-    # the truck, facing north, reverses south from (9, 9) to (9, 7), toward a zone ending at y_top
+    # the truck, facing north, reverses south from (9, 9) to (9, 7), toward a zone ending at
+    # y_top: its 3.2 m footprint reaches 1.6 m behind its centre, to y = 5.4
     sc = block_scenario(keep_outs=[((8.5, 5.0), (9.5, 5.0), (9.5, y_top), (8.5, y_top))])
     truck = Pose(9.0, 9.0, math.pi / 2)
     sc = sc.replace(machines=sc.machines.__class__(excavator=sc.machines.excavator, excavator_pose=EXC, truck_pose=truck))

@@ -17,7 +17,7 @@ import pytest
 
 from earthbench import Budget, Charge, Dig, Dump, Heightmap, Machines, Move, Plan, Pose, Scenario, Site, Task, judge
 from earthbench.errors import PlanFormatError
-from earthbench.referee import apply_cut, charge_cut
+from earthbench.cut import apply_cut, charge_cut
 from earthbench.world import LoaderSpec
 from earthbench.scoring import evaluate
 from metrics import lower_bound_time_per_m3
@@ -26,13 +26,13 @@ START = Pose(12.8, 5.0, 0.0)
 TRUCK = Pose(9.2, 8.8, 0.0)
 
 
-def loader_scenario(truck: Pose = TRUCK, start: Pose = START, floor: float | None = 0.0, **spec) -> Scenario:
+def loader_scenario(truck: Pose = TRUCK, start: Pose = START, floor: float | None = 0.0, open_outside: bool = True, **spec) -> Scenario:
     z = np.zeros((120, 200))
     z[:, 140:] = 1.0
     return Scenario(
         id="test/loader-block",
         terrain=Heightmap((0.0, 0.0), 0.1, z),
-        site=Site(((0, 0), (20, 0), (20, 12), (0, 12)), floor=floor),
+        site=Site(((0, 0), (20, 0), (20, 12), (0, 12)), floor=floor, open_outside=open_outside),
         machines=Machines(excavator=None, excavator_pose=None, loader=LoaderSpec(**spec), loader_pose=start, truck_pose=truck),
         task=Task(0.7),
         track="wheel_loader",
@@ -94,7 +94,7 @@ def test_the_loader_lower_bound_and_metrics_hold_for_the_cycle():
     assert m["digs"] == 1 and m["dumps"] == 1
 
 
-@pytest.mark.parametrize("pens", [(0.4, 0.1), (0.2, 0.3, 0.05), (1.0,), (0.44, 0.44, 0.44)])
+@pytest.mark.parametrize("pens", [(0.4, 0.1), (0.2, 0.3, 0.05), (0.45,), (0.44, 0.44, 0.44)])
 def test_the_loader_bound_holds_for_repeated_minimal_charges_and_dumps(pens):
     """Charges and dumps at their minimum durations, back to back: the tightest valid plan."""
     sc = loader_scenario(dump_reach=50.0, clearance=0.0)  # dumping from anywhere in front
@@ -171,15 +171,16 @@ def test_charge_needs_an_empty_bucket():
     assert v.valid, v.violations
 
 
-def test_charge_fills_up_to_capacity_and_pushing_on_into_material_breaks_the_step_rule():
+def test_charge_fills_up_to_capacity_and_pushing_on_into_material_is_overfill():
     sc = loader_scenario()
     # 0.44 m: the edge sweeps 4 columns (0.72 m³) and the axle stays on cut ground
     ok = judge(sc, Plan((Charge("loader", 0.0, 2.0, (12.8, 5.0, 0.0), 0.44),)))
     assert ok.valid and ok.digs[0].volume == pytest.approx(0.72)
-    # 2.0 m: the bucket is full after 0.8 m³; the axle then drives onto uncut material
+    # 2.0 m: the bucket is full after 0.8 m³; the edge pushes on through material it cannot
+    # take, and the wheels then drive onto uncut material
     over = judge(sc, Plan((Charge("loader", 0.0, 4.0, (12.8, 5.0, 0.0), 2.0),)))
     assert over.digs[0].volume == pytest.approx(0.8)
-    assert rules(over) == {"step"}
+    assert rules(over) == {"overfill", "step"}
 
 
 def test_charge_path_must_stay_in_the_dig_area():
@@ -335,12 +336,12 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
 @given(
     radius=st.floats(3.5, 40.0),
     sign=st.sampled_from([1.0, -1.0]),
-    length=st.floats(0.5, 6.0),
+    length=st.floats(0.5, 4.0),
     reverse=st.booleans(),
     n=st.integers(2, 40),
 )
 def test_any_arc_at_or_above_the_minimum_radius_is_accepted_on_open_ground(radius, sign, length, reverse, n):
-    start = (7.0, 3.0, math.pi + 0.3)  # facing away from the pile, 7 m behind
+    start = (7.0, 3.0, math.pi + 0.3)  # facing away from the pile, 7 m behind (its wheels 5 m)
     sc = loader_scenario(start=Pose(*start), truck=Pose(-30.0, -30.0, 0.0))  # the truck far out of the way
     move = arc(start, sign / radius, -length if reverse else length, 0.0, speed=1.0, n=n)
     v = judge(sc, Plan((move,)))

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from earthbench import Dig
-from earthbench.referee import apply_cut, cut_level, judge
+from earthbench.cut import apply_cut, cut_level
+from earthbench.referee import judge
 from earthbench.registry import PLANNERS
 from planners.stl_tamp import StlTampPlanner
 from planners.stl_tamp.separate import Config, SeparatePlanner, rule_digs

@@ -11,7 +11,7 @@ from shapely.geometry import Polygon
 
 from earthbench import PLANNERS, judge
 from earthbench.plan import Move, Plan
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Site
 from earthbench.scoring import evaluate
 from planners.singh_cannon.backhoe import SinghCannonBackhoe

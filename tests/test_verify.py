@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from earthbench.cli import main
 from earthbench.merge import MergeError, merge
 from earthbench.store import Store, load_runs
+from earthbench.registry import PLANNERS
 from earthbench.verify import Judgement, audit, differences, rejudge, same
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
@@ -28,7 +29,7 @@ from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 def clean(tmp_path_factory) -> Path:
     """greedy (every run a plan) and flaky (a timeout, without a plan, on every second scenario)."""
     return fill_store(tmp_path_factory.mktemp("verify") / "clean.db", suite_of(2),
-                      [Behaviour(ref("greedy")), Behaviour(ref("flaky"), keep=0.5, fail="timeout", fail_every=2)])
+                      [Behaviour(ref("greedy", PLANNERS.get("greedy").version)), Behaviour(ref("flaky"), keep=0.5, fail="timeout", fail_every=2)])
 
 
 def _copy(src: Path, dst: Path) -> Path:
@@ -248,7 +249,7 @@ def test_verify_refuses_a_planner_version_not_installed(clean, tmp_path, capsys)
     err = capsys.readouterr().err
     assert "is installed, but the runs to re-time are of version 0.0-old" in err and "Traceback" not in err
     assert _sha(old) == before
-    db = _copy(clean, tmp_path / "db.db")  # the fixture's greedy "1.0" has a configuration hash of its own
+    db = _copy(clean, tmp_path / "db.db")  # the fixture's greedy (the installed version) has a configuration hash of its own
     assert main(["verify", str(db), "--sample", "2", "--planner", "greedy"]) == 2
     assert "Config changed without a version bump" in capsys.readouterr().err
     assert main(["verify", str(db), "--sample", "2", "--planner", "nobody"]) == 2

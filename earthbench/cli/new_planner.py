@@ -128,7 +128,7 @@ excavator repeatedly digs the stroke in reach that fills the bucket most (draggi
 itself, as deep as allowed and never below the floor), swings to the truck and dumps, until
 the target volume is loaded or nothing worth a dig is left in reach.
 
-It predicts volumes with the referee's own cut model (``earthbench.referee.apply_cut``), so
+It predicts volumes with the referee's own cut model (``earthbench.cut.apply_cut``), so
 its claims match what the referee measures. Replace ``plan`` with your method.
 """
 
@@ -141,8 +141,8 @@ import numpy as np
 from shapely.geometry import Polygon
 
 from earthbench import Dig, Dump, Move, Plan, Planner, Prediction, Scenario
-from earthbench.motion import swing_time, turn_drive_turn
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.motion import min_dig_time, min_dump_time, turn_drive_turn
+from earthbench.cut import apply_cut, cut_level, footprint
 
 EPS_T = 1e-6  # seconds added to minimum durations so that rounding never makes them short
 
@@ -213,11 +213,11 @@ class {cls}(Planner):
                 break
             vol, contact, heading, depth, level = best
             apply_cut(terrain, z, contact, heading, exc.bucket_width, exc.max_drag_length, level, exc.bucket_capacity)
-            dig_time = swing_time(base, turn, contact, exc) + exc.min_stroke_time + EPS_T
+            dig_time = min_dig_time(base, turn, contact, exc) + EPS_T
             actions.append(Dig("excavator", t, t + dig_time, contact, heading, depth, exc.max_drag_length))
             t += dig_time
             turn = math.atan2(contact[1] - base.y, contact[0] - base.x) - base.yaw
-            dump_time = swing_time(base, turn, goal, exc) + exc.min_dump_time + EPS_T
+            dump_time = min_dump_time(base, turn, goal, exc) + EPS_T
             actions.append(Dump("excavator", t, t + dump_time))
             t += dump_time
             turn = math.atan2(goal[1] - base.y, goal[0] - base.x) - base.yaw

@@ -43,7 +43,7 @@ Without a design grade (``site.floor`` None) the lowest ground in the dig area s
 floor, so the planner never digs a pit below the surrounding site.
 
 Execution model: the chosen dig is applied to the planner's copy of the grid with the referee's
-own :func:`~earthbench.referee.apply_cut`, so the predicted volume of every dig is the one the
+own :func:`~earthbench.cut.apply_cut`, so the predicted volume of every dig is the one the
 referee will measure. Each dig is followed by a dump into the truck. When nothing worth
 ``fill_min`` of a bucket remains anywhere, the planner relaxes V_min through ``relax_fills``
 before giving up.
@@ -61,7 +61,9 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint, path_cells
+from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
+from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
@@ -148,7 +150,7 @@ class SinghCannonBackhoe(Planner):
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.1"
+    version = "1.2"
     tracks = ("backhoe",)
     Config = SinghCannonBackhoeConfig
 
@@ -191,7 +193,7 @@ class Session:
         inner = self.area.buffer(-1e-3)
         self.area_inner = inner if not inner.is_empty else self.area
         shapely.prepare(self.area_inner)
-        self.area_tol = self.area.buffer(1e-6)
+        self.area_tol = self.area.buffer(ABS_TOL)
         self.keep_outs = [Polygon(k) for k in sc.site.keep_outs]
         self.keep_outs_pad = [k.buffer(1e-3) for k in self.keep_outs]
         for k in self.keep_outs + self.keep_outs_pad:
@@ -309,7 +311,15 @@ class Session:
             if r > e.reach_max - 1e-9 or r < e.reach_min + 1e-9:
                 return False
         level = cut_level(self.terrain, self.z, contact, ch.depth)
-        return level >= self.floor + 1e-6
+        if level < self.floor + ABS_TOL:
+            return False
+        # the referee's undermining rule, on a trial cut
+        trial = self.z.copy()
+        apply_cut(self.terrain, trial, contact, heading, e.bucket_width, ch.drag, level, self.cap)
+        jj, ii, _ = path_cells(self.terrain, trial.shape, contact, heading, e.bucket_width, ch.drag)
+        cut = trial[jj, ii] < self.z[jj, ii]
+        track_level = track_level_and_tilt(self.sc, self.z, e, base)[0]
+        return undermining_excess(self.terrain, trial, e, base, track_level, jj[cut], ii[cut]) <= -ABS_TOL
 
     def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float) -> tuple[int, _Choice | None]:
         """The first region from ``start`` on with a feasible dig, and that dig."""
@@ -325,8 +335,7 @@ class Session:
         contact, heading = self.dig_geometry(ch, self.base)
         level = cut_level(self.terrain, self.z, contact, ch.depth)
         vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap)
-        swing = abs(wrap(ch.region.bearing - (self.base.yaw + self.turn))) / e.swing_rate
-        duration = max(ch.time, swing + e.min_stroke_time) + _EPS_T
+        duration = max(ch.time, min_dig_time(self.base, self.turn, contact, e)) + _EPS_T
         self.actions.append(Dig("excavator", self.t, self.t + duration, contact, heading, ch.depth, ch.drag))
         self.log.append({
             "station": self.station, "band": ch.region.band, "lane": ch.region.lane,
@@ -344,8 +353,7 @@ class Session:
         e = self.spec
         t0 = max(self.t, self.truck_ready)
         bearing = math.atan2(self.truck.y - self.base.y, self.truck.x - self.base.x)
-        swing = abs(wrap(bearing - (self.base.yaw + self.turn))) / e.swing_rate
-        t1 = t0 + swing + e.min_dump_time + _EPS_T
+        t1 = t0 + min_dump_time(self.base, self.turn, (self.truck.x, self.truck.y), e) + _EPS_T
         self.actions.append(Dump("excavator", t0, t1))
         self.t = t1
         self.turn = bearing - self.base.yaw
@@ -481,6 +489,8 @@ class Session:
             tried += 1
             path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
             pose = Pose(path[-1][1], path[-1][2], path[-1][3])
+            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - 0.01:
+                continue  # the referee's tilt rule
             regions = self.coarse_plan(pose, v_min)
             idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
             if ch is None:

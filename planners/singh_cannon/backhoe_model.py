@@ -17,7 +17,7 @@ depth servo holds the heel on the surface while the lip bites, so the lip settle
 the bucket); it then drags the lip horizontally toward the machine at that level,
 ``λ = z(c) − h(α)``, and curls out when the bucket is full, when the drag reaches the machine's
 maximum drag length, when the lip would pass inside the reach annulus or leave the dig area.
-That is exactly the flat cut the referee applies (``earthbench.referee.apply_cut``): cells whose
+That is exactly the flat cut the referee applies (``earthbench.cut.apply_cut``): cells whose
 centres lie in the ``width × drag`` rectangle are lowered to ``λ`` in drag order until the
 bucket holds its capacity. The swept volume is therefore computed on the grid cell by cell, the
 same way, and the drag length we write is where the predicted bucket becomes full.

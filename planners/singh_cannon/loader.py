@@ -92,7 +92,7 @@ class SinghCannonLoader(Planner):
     """Coarse dig region on the zero contour, refined by ξ·ψ·ζ; see the module docstring."""
 
     name = "singh-cannon-loader"
-    version = "1.0"
+    version = "1.1"
     tracks = ("wheel_loader",)
     Config = SinghCannonLoaderConfig
 

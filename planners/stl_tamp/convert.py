@@ -2,7 +2,7 @@
 
 The NLP's trajectories are a model; the referee judges the plan on the real heightmap with
 its flat cut. The conversion therefore replays every decision on an exact copy of what the
-referee will do (``earthbench.referee.apply_cut``/``cut_level`` on our own copy of the grid,
+referee will do (``earthbench.cut.apply_cut``/``cut_level`` on our own copy of the grid,
 ``earthbench.motion.swing_time`` for durations) and re-checks every rule before it emits an
 action:
 
@@ -39,9 +39,9 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import swing_time, wrap
+from earthbench.motion import arcs, min_dig_time, min_dump_time, wrap
 from earthbench.plan import Dig, Dump, Move
-from earthbench.referee import apply_cut, cut_level, footprint
+from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Heightmap, Pose, Scenario
 
 EPS_T = 1e-6
@@ -98,12 +98,14 @@ def fastest_steps(nodes: np.ndarray, dts: np.ndarray, vmax: float, wmax: float, 
 
     The NLP's step durations also pay for joint motion it models inside the move steps, which
     the plan's dig and dump durations pay for again (``swing_time``). A node pair is a unicycle
-    chord, so any duration keeps it slip-free; the shortest one puts the chord's speed or its yaw
-    rate at ``margin`` × the limit. Never longer than the NLP's own ``dts``."""
-    chord = np.hypot(np.diff(nodes[:, 0]), np.diff(nodes[:, 1]))
+    arc (the referee's motion model, :func:`earthbench.motion.arcs`), so any duration keeps it
+    slip-free; the shortest one puts the arc's speed or its yaw rate at ``margin`` × the limit.
+    Never longer than the NLP's own ``dts``, except where those drive the chord (the NLP's
+    model) at the limit and so the longer arc above it."""
+    length = arcs(np.column_stack([np.arange(len(nodes), dtype=float), nodes[:, :3]]))["length"]
     turn = np.abs(np.diff(nodes[:, 2]))
-    fastest = np.maximum(chord / (vmax * margin), turn / (wmax * margin))
-    return np.minimum(dts, np.maximum(fastest, 1e-4))
+    fastest = np.maximum(length / (vmax * margin), turn / (wmax * margin))
+    return np.maximum(np.minimum(dts, np.maximum(fastest, 1e-4)), fastest)
 
 
 def _samples(nodes: np.ndarray, times: np.ndarray) -> list[tuple[float, float, float, float]]:
@@ -401,14 +403,14 @@ class Converter:
     def _dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
                       drag: float) -> float:
         es = self.exc_spec
-        dig_t = swing_time(st.exc, st.turn, contact, es) + es.min_stroke_time + EPS_T
+        dig_t = min_dig_time(st.exc, st.turn, contact, es) + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)
         st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
                               float(depth), float(drag)))
         st.t += dig_t
         st.turn = math.atan2(contact[1] - st.exc.y, contact[0] - st.exc.x) - st.exc.yaw
-        dump_t = swing_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + es.min_dump_time + EPS_T
+        dump_t = min_dump_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + EPS_T
         st.actions.append(Dump("excavator", st.t, st.t + dump_t))
         st.t += dump_t
         st.turn = math.atan2(st.truck.y - st.exc.y, st.truck.x - st.exc.x) - st.exc.yaw

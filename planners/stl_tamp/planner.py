@@ -128,7 +128,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.6.0"
+    version = "0.6.1"
     tracks = ("backhoe",)
     Config = Config
 

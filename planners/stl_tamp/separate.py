@@ -13,7 +13,7 @@ The rule (Fig. 5b), per local area:
   nominal base ``base_offset`` beyond it toward the truck's side and a truck pose behind it,
   exactly as in ``stl-tamp``'s tiling.
 - ``m_l`` = 5 digs per area. For each dig, on the grid as it will be after the previous digs
-  (the referee's own cut, ``earthbench.referee.apply_cut``, replayed on a copy): take the
+  (the referee's own cut, ``earthbench.cut.apply_cut``, replayed on a copy): take the
   highest cell of the area among the cells a bucket can reach from the nominal base with its
   whole footprint inside the area; the contact point sits ``L_drag`` beyond it, away from the
   base, so the drag runs toward the machine and ends at the highest point. The drag heading
@@ -65,7 +65,7 @@ import numpy as np
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Planner
-from earthbench.referee import apply_cut, cut_level
+from earthbench.cut import apply_cut, cut_level
 from earthbench.world import Heightmap, Scenario
 from terrains.surface import fit_rbf
 
@@ -224,7 +224,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.4.0"
+    version = "0.4.1"
     tracks = ("backhoe",)
     Config = Config
 

@@ -1,0 +1,81 @@
+"""The independent referee: replays a plan on a copy of the heightmap and judges it.
+
+The referee, not the planner, decides what happened (docs/DESIGN.md §5). It replays actions in time order, applies
+every dig and charge to the grid with the cut model of :mod:`earthbench.cut`, transfers dumped
+material to the truck, and records every broken rule as a :class:`Violation` (action index,
+rule, magnitude). A plan with any violation is invalid: reported, never ranked.
+
+The contract is public, module by module, so that planners call the rules instead of
+re-deriving them:
+
+- :mod:`earthbench.motion` — the motion model between move samples (one arc per pair, which
+  every rule samples densely), minimum dig and dump durations, dump reach, the tolerances
+  ``ABS_TOL`` and ``RATE_TOL``;
+- :mod:`earthbench.cut` — the cut model (``apply_cut``, ``charge_cut``);
+- :mod:`earthbench.referee.replay` — the rules all machines share: speed, yaw rate, heading,
+  keep-out zones and the map's edge along the footprint's swept path, and clearance between
+  machines checked along both swept paths at once;
+- :mod:`earthbench.referee.backhoe` — digs and dumps of the excavator (reach, depth, drag, dig
+  area, floor, undermining, tilt, durations);
+- :mod:`earthbench.referee.loader` — the wheel loader's charges, dumps, turning radius and the
+  step of its wheels.
+"""
+
+from __future__ import annotations
+
+from ..errors import PlanFormatError
+from ..motion import ABS_TOL, RATE_TOL
+from ..plan import Charge, Dig, Dump, Move, Plan
+from ..world import LoaderSpec, Scenario
+from . import backhoe, loader
+from .replay import RULES, DigRecord, Replay, Verdict, Violation
+
+__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Verdict", "Violation", "judge"]
+
+
+def _run(r: Replay) -> Verdict:
+    plan = r.plan
+    for n in sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n)):
+        a = plan.actions[n]
+        if a.machine not in r.pose:
+            r.flag(n, "unknown_machine", 1.0, f"no machine {a.machine!r}; on site: {', '.join(r.pose)}")
+            continue
+        if a.t_start < r.busy_until[a.machine] - ABS_TOL:
+            gap = r.busy_until[a.machine] - a.t_start
+            r.flag(n, "overlap", gap, f"{a.machine} is busy until t={r.busy_until[a.machine]:.3f} s")
+        spec = r.specs.get(a.machine)
+        if isinstance(a, Move):
+            arc = r.move(n, a)
+            if isinstance(spec, LoaderSpec):
+                loader.move(r, n, a, spec, arc)
+        elif isinstance(a, Dig):
+            backhoe.dig(r, n, a)
+        elif isinstance(a, Dump):
+            if isinstance(spec, LoaderSpec):
+                loader.dump(r, n, a, spec)
+            elif a.machine == "excavator" and spec is not None:
+                backhoe.dump(r, n, a, spec)  # type: ignore[arg-type]
+            else:
+                r.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot dump into the truck")
+        elif isinstance(a, Charge):
+            loader.charge(r, n, a)
+        r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
+    r.collisions()
+    return r.verdict()
+
+
+def judge(scenario: Scenario, plan: Plan | dict | str) -> Verdict:
+    """Replay ``plan`` on ``scenario`` and return the verdict.
+
+    ``plan`` may be a :class:`Plan`, a plan document (dict) or JSON text; a document that
+    cannot be read gives an invalid verdict with a ``malformed`` violation, never an exception.
+    """
+    try:
+        if isinstance(plan, Plan):  # built in code: check its form the same way as a document's
+            plan = Plan.from_dict(plan.to_dict())
+        else:
+            plan = Plan.from_dict(plan) if isinstance(plan, dict) else Plan.from_json(plan)
+    except (PlanFormatError, TypeError, ValueError, AttributeError) as exc:
+        v = Violation(None, "malformed", 1.0, str(exc))
+        return Verdict((v,), scenario.terrain, 0.0, 0.0, 0.0)
+    return _run(Replay(scenario, plan))
