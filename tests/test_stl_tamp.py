@@ -109,9 +109,7 @@ def test_paper_switch_digs_the_minimum_number_of_buckets(buckets):
         sc = rbf(seed, buckets * 0.28, n_bases=14, local_area=(2.0, 1.75))
         plan = StlTampPlanner().plan(sc)
         v = judge(sc, plan)
-        # stl-tamp's NLP does not model the referee's tilt rule yet: where its base stands on a
-        # mound's flank that is the one rule allowed to fail here (to be fixed in the planner)
-        assert {x.rule for x in v.violations} <= {"tilt"}, v.violations[:3]
+        assert v.valid, v.violations[:3]  # stands too steep for the tilt rule are never used
         assert v.loaded_volume == pytest.approx(buckets * 0.28, abs=0.01)
         assert plan.info["digs"] == buckets
         # 0.6.0: the one area's local problem sometimes stops at the acceptable level short of
@@ -282,7 +280,7 @@ def test_solve_counts_are_the_planners_report_and_malformed_counts_add_nothing()
 @given(hst.floats(1.0, 11.0), hst.floats(1.0, 5.0), hst.floats(-math.pi, math.pi), hst.floats(0.01, 0.4),
        hst.floats(0.1, 1.0))
 def test_trial_cuts_on_a_window_take_what_the_whole_grid_takes(x, y, heading, depth, drag):
-    from earthbench.referee import apply_cut, cut_level
+    from earthbench.cut import apply_cut, cut_level
 
     sc = rbf(3, 1.0, n_bases=30)
     st = SimState.start(sc)

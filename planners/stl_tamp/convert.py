@@ -41,10 +41,13 @@ from shapely.geometry import Polygon
 
 from earthbench.motion import arcs, min_dig_time, min_dump_time, wrap
 from earthbench.plan import Dig, Dump, Move
-from earthbench.cut import apply_cut, cut_level, footprint
+from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
+from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
 EPS_T = 1e-6
+#: How far (rad) under the referee's tilt limit a stand must be for the converter to work from it.
+TILT_MARGIN = 0.01
 
 
 class ConversionError(RuntimeError):
@@ -154,6 +157,29 @@ class Converter:
         self.clearance = self.exc_spec.clearance + clearance_margin
         self.floor = scenario.site.floor
         self.skips: dict[str, int] = {}
+        self._station: tuple[Pose, float, float] | None = None
+
+    def station(self, st: SimState) -> tuple[float, float]:
+        """The ground level under the tracks and their tilt where the excavator now stands,
+        judged as it arrives, exactly as the referee judges a station (its first dig there)."""
+        if self._station is None or self._station[0] != st.exc:
+            level, tilt = track_level_and_tilt(self.sc, st.z, self.exc_spec, st.exc)
+            self._station = (st.exc, level, tilt)
+        return self._station[1], self._station[2]
+
+    def undermines(self, st: SimState, contact: tuple[float, float], heading: float, depth: float, drag: float) -> bool:
+        """Whether this dig breaks the referee's undermining rule (a trial cut on the footprint's window)."""
+        track_level = self.station(st)[0]
+        terrain, z = self._window(st, contact, heading, drag)
+        level = cut_level(terrain, z, contact, depth)
+        if level >= track_level:
+            return False  # nothing is cut below the tracks' ground
+        es = self.exc_spec
+        jj, ii, _ = path_cells(terrain, z.shape, contact, heading, es.bucket_width, drag)
+        before = z[jj, ii].copy()
+        apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
+        cut = z[jj, ii] < before
+        return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -1e-4
 
     def _skip(self, why: str) -> float:
         self.skips[why] = self.skips.get(why, 0) + 1
@@ -258,6 +284,8 @@ class Converter:
         r = self.truck_spec.loading_radius
         if d - r > es.reach_max - 1e-4 or d + r < es.reach_min + 1e-4:
             return "dump_reach"
+        if self.station(st)[1] > es.max_tilt - TILT_MARGIN:
+            return "tilt"
         return None
 
     def cut_volume(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
@@ -403,6 +431,8 @@ class Converter:
     def _dig_and_dump(self, st: SimState, contact: tuple[float, float], heading: float, depth: float,
                       drag: float) -> float:
         es = self.exc_spec
+        if self.undermines(st, contact, heading, depth, drag):
+            return self._skip("undermining")
         dig_t = min_dig_time(st.exc, st.turn, contact, es) + EPS_T
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)

@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 from shapely.geometry import Polygon
 
-from earthbench.world import Scenario
+from earthbench.referee.backhoe import track_level_and_tilt
+from earthbench.world import Pose, Scenario
 from terrains.surface import RbfSurface, fit_rbf
 
-from .convert import Converter, SimState
+from .convert import TILT_MARGIN, Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes
 from .model import NX, PhaseNLP, Shape, Solution
 
@@ -200,11 +201,39 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
             est = min(est, vmax)
             if est < 0.05:
                 continue
-            base = (cx + ux * base_offset, cy + uy * base_offset)
+            base = level_stand(scenario, z, (cx, cy), (ux, uy), base_offset, side)
+            if base is None:
+                continue  # no stand in reach of this area is level enough for the referee's tilt rule
             truck = (base[0] + dx_t * truck_offset, base[1] + dy_t * truck_offset)
             px, py = cx - ux * side / 2, cy - uy * side / 2
             out.append(Area(px, py, psi, base, truck, est, (cx, cy)))
     return out
+
+
+#: How far (m) a stand may slide along the line from the area toward the truck's side when the
+#: nominal one is too steep: the area stays in reach for every one of these.
+STAND_SHIFTS = (0.0, 0.5, -0.5, 1.0, -1.0)
+
+
+def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], toward: tuple[float, float],
+                base_offset: float, side: float) -> tuple[float, float] | None:
+    """The stand nearest the nominal one (``base_offset`` from the area's centre toward the
+    truck's side) on which the referee's tilt rule lets the excavator work, facing the area;
+    None when every stand in reach is too steep. The referee judges the tilt where the machine
+    stands (:func:`earthbench.referee.backhoe.track_level_and_tilt`), so a plan from a steep
+    stand would be invalid whatever the NLP does there."""
+    es = scenario.machines.excavator
+    ux, uy = toward
+    yaw = math.atan2(-uy, -ux)
+    half = side / math.sqrt(2.0)
+    for shift in STAND_SHIFTS:
+        d = base_offset + shift
+        if d - half < es.reach_min or d + half > es.reach_max:
+            continue
+        base = (centre[0] + ux * d, centre[1] + uy * d)
+        if track_level_and_tilt(scenario, z, es, Pose(base[0], base[1], yaw))[1] <= es.max_tilt - TILT_MARGIN:
+            return base
+    return None
 
 
 def greedy_tour(areas: list[Area], start: tuple[float, float], target: float, speed: float, work_per_m3: float,
