@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Iterable
+from pathlib import Path
 
 
 class EarthbenchError(Exception):
@@ -47,3 +48,14 @@ class StoreError(EarthbenchError):
 
 class PluginError(EarthbenchError):
     """A plugin that cannot be loaded, or a planner that breaks the planner contract."""
+
+
+def read_document(path: Path, what: str, error: type[EarthbenchError]) -> str:
+    """The text of the ``what`` file at ``path``, or ``error`` with one line saying why not
+    (missing, unreadable, not text): a bad file name is bad input, never a traceback."""
+    try:
+        return path.read_text()
+    except FileNotFoundError:
+        raise error(f"{what} file {str(path)!r} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"cannot read {what} file {str(path)!r}: {getattr(exc, 'strerror', None) or exc}") from None

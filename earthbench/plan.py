@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Union
 
-from .errors import PlanFormatError
+from .errors import PlanFormatError, read_document
 
 PLAN_SCHEMA = "earthbench.plan/1"
 
@@ -163,12 +163,7 @@ class Plan:
         that text, never as the file it names.
         """
         if isinstance(source, Path):
-            try:
-                source = source.read_text()
-            except FileNotFoundError:
-                raise PlanFormatError(f"plan file {str(source)!r} not found") from None
-            except (OSError, UnicodeDecodeError) as exc:
-                raise PlanFormatError(f"cannot read plan file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
+            source = read_document(source, "plan", PlanFormatError)
         try:
             return cls.from_dict(json.loads(source))
         except json.JSONDecodeError as exc:

@@ -23,7 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .errors import ScenarioError
+from .errors import ScenarioError, read_document
 
 SCENARIO_SCHEMA = "earthbench.scenario/1"
 TRACKS = ("backhoe", "wheel_loader")
@@ -481,12 +481,7 @@ class Scenario:
     def from_json(cls, source: str | Path) -> Scenario:
         """A scenario from JSON text (a ``str``) or from a file (a :class:`~pathlib.Path`)."""
         if isinstance(source, Path):
-            try:
-                source = source.read_text()
-            except FileNotFoundError:
-                raise ScenarioError(f"scenario file {str(source)!r} not found") from None
-            except (OSError, UnicodeDecodeError) as exc:
-                raise ScenarioError(f"cannot read scenario file {str(source)!r}: {getattr(exc, 'strerror', None) or exc}") from None
+            source = read_document(source, "scenario", ScenarioError)
         try:
             doc = json.loads(source)
         except RecursionError:
