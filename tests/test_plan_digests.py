@@ -1,0 +1,68 @@
+"""Pinned plan digests: every built-in planner's plan on ``smoke``, ``quick`` and ``pile`` is
+byte-identical to the one recorded in ``tests/golden/plan_digests.json``.
+
+A refactor must leave every plan as it was; a change that is meant to move plans bumps the
+planner's version, updates the golden file (the command is in the module's ``__main__``), and
+says in its commit which plans moved and why — the published leaderboards then need a rerun.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from earthbench.plan import Plan
+from earthbench.registry import PLANNERS
+from earthbench.suite import load_suite
+
+GOLDEN = Path(__file__).parent / "golden" / "plan_digests.json"
+SUITES = ("smoke", "quick", "pile")
+
+
+def plan_digest(plan: Plan) -> str:
+    """sha256 (first 16 hex digits) of the plan's actions; ``info`` and predictions are left out."""
+    return hashlib.sha256(json.dumps(plan.to_dict()["actions"], sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _cases() -> list[tuple[str, str]]:
+    pinned = json.loads(GOLDEN.read_text())["plans"]
+    return [(planner, sid) for planner in sorted(pinned) for sid in sorted(pinned[planner])]
+
+
+@pytest.fixture(scope="module")
+def scenarios():
+    return {sc.id: sc for name in SUITES for sc in load_suite(name).scenarios}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("planner", "scenario_id"), _cases())
+def test_plan_is_byte_identical(scenarios, planner, scenario_id):
+    expected = json.loads(GOLDEN.read_text())["plans"][planner][scenario_id]
+    plan = PLANNERS.get(planner)().plan(scenarios[scenario_id])
+    assert plan_digest(plan) == expected
+
+
+def test_every_built_in_planner_is_pinned():
+    pinned = json.loads(GOLDEN.read_text())["plans"]
+    assert set(pinned) == {"greedy", "greedy-loader", "separate", "singh-cannon-backhoe", "singh-cannon-loader", "stl-tamp"}
+    assert all(len(v) >= 4 for v in pinned.values())
+
+
+def write_golden() -> None:
+    """Record every built-in planner's current plans: ``python tests/test_plan_digests.py``."""
+    plans: dict[str, dict[str, str]] = {}
+    for name in SUITES:
+        suite = load_suite(name)
+        for planner in suite.planners or [p for p in PLANNERS.names() if suite.track in PLANNERS.get(p).tracks]:
+            for sc in suite.scenarios:
+                plans.setdefault(planner, {})[sc.id] = plan_digest(PLANNERS.get(planner)().plan(sc))
+    doc = {"note": "sha256 (first 16 hex) of each plan's actions as sorted-key JSON; see tests/test_plan_digests.py",
+           "plans": plans}
+    GOLDEN.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    write_golden()
