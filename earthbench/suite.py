@@ -8,7 +8,7 @@ the same generator call in two suites gives two labels but, with equal budgets, 
 
 Where suites come from (:func:`known_suites`): the ``earthbench.suites`` entry-point group.
 Each entry point names a *package*; every ``*.toml`` file directly in it is a suite named by
-the file's stem. The built-in suites register this way (``terrains.suites``), exactly as a
+the file's stem. The built-in suites register this way (``earthbench_terrains.suites``), exactly as a
 third-party package would, so the core never imports ``terrains`` by name. A user may also
 pass the path of any suite file.
 

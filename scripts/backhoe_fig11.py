@@ -17,9 +17,9 @@ import numpy as np
 
 from earthbench.cut import apply_cut
 from earthbench.world import Scenario, Task
-from terrains.bench import bench
+from earthbench_terrains.bench import bench
 
-from planners.singh_cannon.backhoe import SinghCannonBackhoe
+from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
 
 
 def fig11_scenario(seed: int = 0) -> Scenario:

@@ -20,9 +20,9 @@ from earthbench.plan import Charge, Plan
 from earthbench.cut import charge_cut
 from earthbench.referee import judge
 from earthbench.world import Scenario
-from planners.loader_common import zero_contour
-from planners.singh_cannon.loader import SinghCannonLoader
-from terrains.pile import pile
+from earthbench_planners.loader_cycle import zero_contour
+from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+from earthbench_terrains.pile import pile
 
 
 def _contours(sc: Scenario, z: np.ndarray) -> list[np.ndarray]:

@@ -6,9 +6,9 @@ import pytest
 
 from earthbench import judge
 from earthbench.scoring import evaluate
-from metrics import lower_bound_time_per_m3
-from planners.greedy import GreedyPlanner
-from terrains.rbf import rbf
+from earthbench_metrics import lower_bound_time_per_m3
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_terrains.rbf import rbf
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -58,7 +58,7 @@ from hypothesis import strategies as st
 import numpy as np
 
 from earthbench.cut import apply_cut
-from planners.greedy import _Greedy, GreedyConfig
+from earthbench_planners.greedy.backhoe import _Greedy, GreedyConfig
 
 
 @settings(max_examples=60, deadline=None)

@@ -10,7 +10,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).parents[1] / "earthbench"
-PLUGIN_PACKAGES = ("planners", "terrains", "metrics")
+#: Import name of each plugin package → its folder in the repository (pyproject's package-dir).
+PLUGIN_PACKAGES = {"earthbench_planners": "planners", "earthbench_terrains": "terrains", "earthbench_metrics": "metrics"}
+FOLDER_PACKAGES = {folder: name for name, folder in PLUGIN_PACKAGES.items()}
 
 
 def _imports(path: Path) -> list[tuple[str, str, bool]]:
@@ -48,6 +50,7 @@ def test_the_store_and_progress_line_read_only_the_case_types_and_the_harness_ne
 
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
+    parts[0] = FOLDER_PACKAGES.get(parts[0], parts[0])
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -127,7 +130,7 @@ def test_the_core_never_imports_a_plugin_package():
 def _private_imports() -> set[tuple[str, str]]:
     """(importing module, module.name) for each private name imported from another module of the
     project, or a private module imported from outside its own package."""
-    files = [p for top in ("earthbench", *PLUGIN_PACKAGES, "scripts") for p in sorted((ROOT.parent / top).rglob("*.py"))]
+    files = [p for top in ("earthbench", *FOLDER_PACKAGES, "scripts") for p in sorted((ROOT.parent / top).rglob("*.py"))]
     out = set()
     for path in files:
         here = path.stem if path.parent.name == "scripts" else _module_name(path)
@@ -145,3 +148,13 @@ def _private_imports() -> set[tuple[str, str]]:
 
 def test_no_private_name_crosses_a_module():
     assert _private_imports() == set()
+
+
+def test_no_file_imports_a_plugin_folder_by_its_generic_name():
+    """``planners``, ``terrains`` and ``metrics`` are folders, not import names: the wheel installs
+    them as ``earthbench_planners``, … (a module reached both ways would be loaded twice)."""
+    files = [p for top in ("earthbench", *FOLDER_PACKAGES, "scripts", "tests") for p in sorted((ROOT.parent / top).rglob("*.py"))]
+    assert len(files) > 100
+    found = {(str(path.relative_to(ROOT.parent)), module) for path in files
+             for module, _ in _all_imports(path, in_functions=True) if module.split(".")[0] in FOLDER_PACKAGES}
+    assert found == set()

@@ -12,12 +12,12 @@ from earthbench.errors import ScenarioError
 from earthbench.registry import PLANNERS, TERRAINS
 from earthbench.suite import load_suite
 from earthbench.scoring import evaluate
-from metrics import lower_bound_time_per_m3
-from planners.greedy_loader import GreedyLoader, nearest_candidates
-from planners.loader_common import LoaderPlanConfig, CycleBuilder, zero_contour
-from planners.singh_cannon.loader import SinghCannonLoader, corner_candidates
-from terrains.common import dig_area_volume
-from terrains.pile import pile
+from earthbench_metrics import lower_bound_time_per_m3
+from earthbench_planners.greedy.loader import GreedyLoader, nearest_candidates
+from earthbench_planners.loader_cycle import LoaderPlanConfig, CycleBuilder, zero_contour
+from earthbench_planners.singh_cannon.loader import SinghCannonLoader, corner_candidates
+from earthbench_terrains.common import dig_area_volume
+from earthbench_terrains.pile import pile
 
 ONE_PROTRUSION = [(9.0, 1.2, 0.8)]  # x, amplitude toward the loader, width (σ) in metres
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from earthbench import Dig, Dump, Plan, Prediction, judge
 from earthbench.motion import swing_time
 from earthbench.scoring import evaluate
-from metrics import lower_bound_time_per_m3
+from earthbench_metrics import lower_bound_time_per_m3
 
 
 def test_metrics_of_one_bucket():

@@ -9,7 +9,7 @@ import pytest
 from helpers import block_scenario
 
 from earthbench import Plan, PlanFormatError, Scenario, ScenarioError, judge
-from terrains.rbf import rbf
+from earthbench_terrains.rbf import rbf
 
 
 def test_plan_round_trip(valid_plan):

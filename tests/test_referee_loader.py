@@ -20,7 +20,7 @@ from earthbench.errors import PlanFormatError
 from earthbench.cut import apply_cut, charge_cut
 from earthbench.world import LoaderSpec
 from earthbench.scoring import evaluate
-from metrics import lower_bound_time_per_m3
+from earthbench_metrics import lower_bound_time_per_m3
 
 START = Pose(12.8, 5.0, 0.0)
 TRUCK = Pose(9.2, 8.8, 0.0)

@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from earthbench import Dig, Dump, Move, Plan, judge
-from planners.greedy import GreedyPlanner
-from terrains.rbf import rbf
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_terrains.rbf import rbf
 
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -29,7 +29,7 @@ def test_a_broken_plugin_is_reported_and_does_not_hide_the_others(monkeypatch):
     eps = [
         EntryPoint("broken", "earthbench_no_such_module:Planner", "earthbench.planners"),
         EntryPoint("notaplanner", "math:pi", "earthbench.planners"),
-        EntryPoint("greedy", "planners.greedy:GreedyPlanner", "earthbench.planners"),
+        EntryPoint("greedy", "earthbench_planners.greedy.backhoe:GreedyPlanner", "earthbench.planners"),
     ]
     monkeypatch.setattr(registry, "entry_points", lambda group: eps)
     reg = registry.Registry("earthbench.planners", "planner", registry._check_planner)

@@ -15,7 +15,7 @@ from earthbench.referee import judge
 from earthbench.replay import QUANTUM, pick_runs, replay, replay_data, viewer_html
 from earthbench.store import Store
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
-from planners.greedy import GreedyPlanner
+from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 
 @pytest.fixture(scope="module")

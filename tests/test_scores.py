@@ -19,9 +19,9 @@ from earthbench.referee import Verdict, judge
 from earthbench.scoring import evaluate, is_success
 from earthbench.world import Task
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
-from metrics import time_to_target
-from planners.greedy import GreedyPlanner
-from terrains.rbf import rbf
+from earthbench_metrics import time_to_target
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_terrains.rbf import rbf
 
 GOLDEN = Path(__file__).parent / "golden" / "scores_tables.md"
 
@@ -186,7 +186,7 @@ def test_run_summary_uses_the_leaderboard_aggregates(tmp_path, capsys):
 
 
 def test_the_core_never_imports_the_metrics_plugin():
-    """Scoring iterates the metrics registry; no module of the core imports the ``metrics`` package."""
+    """Scoring iterates the metrics registry; no module of the core imports the ``earthbench_metrics`` package."""
     import ast
 
     core = Path(__file__).resolve().parents[1] / "earthbench"
@@ -194,4 +194,4 @@ def test_the_core_never_imports_the_metrics_plugin():
         for node in ast.walk(ast.parse(path.read_text())):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
-            assert not any(n == "metrics" or n.startswith("metrics.") for n in names), path
+            assert not any(n == "earthbench_metrics" or n.startswith("earthbench_metrics.") for n in names), path

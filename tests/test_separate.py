@@ -18,9 +18,9 @@ from earthbench import Dig
 from earthbench.cut import apply_cut, cut_level
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
-from planners.stl_tamp import StlTampPlanner
-from planners.stl_tamp.separate import Config, SeparatePlanner, rule_digs
-from terrains.rbf import rbf
+from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench_planners.separate.planner import Config, SeparatePlanner, rule_digs
+from earthbench_terrains.rbf import rbf
 
 from helpers import block_scenario
 

@@ -11,8 +11,8 @@ from earthbench.cli import main
 from earthbench.figures import terrain_before_after, view_box
 from earthbench.plan import Plan
 from earthbench.referee import judge
-from planners.greedy import GreedyPlanner
-from terrains.rbf import rbf
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_terrains.rbf import rbf
 
 
 @pytest.fixture(scope="module")

@@ -14,11 +14,11 @@ from earthbench.plan import Move, Plan
 from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Site
 from earthbench.scoring import evaluate
-from planners.singh_cannon.backhoe import SinghCannonBackhoe
-from planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
-from terrains.bench import bench
-from terrains.dem import dem
-from terrains.rbf import rbf
+from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
+from earthbench_planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
+from earthbench_terrains.bench import bench
+from earthbench_terrains.dem import dem
+from earthbench_terrains.rbf import rbf
 
 from helpers import load_script
 
@@ -248,7 +248,7 @@ def test_fig11_digs_move_down_the_face_and_the_machine_moves_when_nothing_is_lef
 
 def test_station_convolution_is_the_direct_sum():
     """The stations' reach scores: every output cell is the sum of the blocks under the kernel."""
-    from planners.singh_cannon.backhoe import _convolve_full
+    from earthbench_planners.singh_cannon.backhoe import _convolve_full
 
     rng = np.random.default_rng(5)
     blocks = rng.uniform(0.0, 1.0, (7, 11))

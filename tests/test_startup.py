@@ -13,7 +13,7 @@ import pytest
 
 HEAVY = ("scipy", "cvxpy", "matplotlib", "pandas", "distributed", "dask", "casadi")
 NEEDS = {"stl-tamp": {"casadi"}, "separate": {"casadi"}}
-BUILT_IN = sorted((e.name, e.value) for e in entry_points(group="earthbench.planners") if e.value.startswith("planners."))
+BUILT_IN = sorted((e.name, e.value) for e in entry_points(group="earthbench.planners") if e.value.startswith("earthbench_planners."))
 
 
 def test_every_built_in_planner_is_checked():

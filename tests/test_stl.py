@@ -4,7 +4,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from planners.stl import And, Const, Finally, Globally, Not, Or, Predicate, smooth_max, smooth_min
+from earthbench_planners.stl_tamp.stl import And, Const, Finally, Globally, Not, Or, Predicate, smooth_max, smooth_min
 
 
 def _spec():
@@ -84,7 +84,7 @@ def test_casadi_expressions_match_numpy():
 
 
 def test_robustness_constraints_decompose_top_level_min():
-    from planners.stl import robustness_constraints
+    from earthbench_planners.stl_tamp.stl import robustness_constraints
 
     rng = np.random.default_rng(11)
     spec = And((Globally(Predicate.lt("y", 1.0), 1, 6), Finally(Predicate.gt("x", 0.5), 0, 4)))

@@ -15,14 +15,14 @@ from earthbench import Move, Plan
 from earthbench.motion import arcs
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
-from planners.stl_tamp.separate import SeparatePlanner
-from planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
-from planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
-from planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
-from planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
-from planners.stl_tamp.model import inverse_kinematics, tip_position
-from terrains.rbf import rbf
-from terrains.surface import fit_rbf
+from earthbench_planners.separate.planner import SeparatePlanner
+from earthbench_planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
+from earthbench_planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
+from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
+from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
+from earthbench_planners.stl_tamp.model import inverse_kinematics, tip_position
+from earthbench_terrains.rbf import rbf
+from earthbench_planners.stl_tamp.surface import fit_rbf
 
 import casadi as ca
 
@@ -250,7 +250,7 @@ def test_as_planned_executes_the_nlps_own_digs():
 
 
 def test_the_global_layer_splits_a_large_site_into_windows_of_one_shape():
-    from planners.stl_tamp.hierarchy import global_blocks, global_lattice
+    from earthbench_planners.stl_tamp.hierarchy import global_blocks, global_lattice
 
     assert global_blocks((0.0, 12.0, 0.0, 6.0), (12.0, 6.0)) == [(0.0, 12.0, 0.0, 6.0)]
     tiles = global_blocks((0.0, 96.0, 0.0, 48.0), (12.0, 6.0))
@@ -261,8 +261,8 @@ def test_the_global_layer_splits_a_large_site_into_windows_of_one_shape():
 
 
 def test_solve_counts_are_the_planners_report_and_malformed_counts_add_nothing():
-    from planners.stl_tamp.hierarchy import solve_counts
-    from planners.stl_tamp.report import local_solve_counts
+    from earthbench_planners.stl_tamp.hierarchy import solve_counts
+    from earthbench_planners.stl_tamp.report import local_solve_counts
 
     recs = [{"status": "Solve_Succeeded"}, {"status": "Solved_To_Acceptable_Level"},
             {"status": "Maximum_Iterations_Exceeded (feasible iterate accepted)"},

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from earthbench.referee import judge
-from planners.stl_tamp import StlTampPlanner
-from terrains.rbf import rbf
+from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench_terrains.rbf import rbf
 
 
 def _cases() -> list[tuple[int, float]]:

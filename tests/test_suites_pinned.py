@@ -13,7 +13,7 @@ import pytest
 
 from earthbench.errors import SuiteError
 from earthbench.suite import load_suite, parse_suite
-from terrains.common import dig_area_volume
+from earthbench_terrains.common import dig_area_volume
 
 PINNED = {
     "smoke": ("17d4380c5c43371f276a09a68ddbca1ca2f0a1dcebc5a5074e0f614493ed4f5c", 4),

@@ -1,4 +1,4 @@
-"""terrains.surface: the Gaussian RBF fit (cvxpy) and its numpy/CasADi evaluation."""
+"""earthbench_planners.stl_tamp.surface: the Gaussian RBF fit (cvxpy) and its numpy/CasADi evaluation."""
 
 import casadi as ca
 import numpy as np
@@ -6,8 +6,8 @@ import pytest
 
 from earthbench.errors import ScenarioError
 from earthbench.world import Heightmap
-from terrains.rbf import rbf_surface
-from terrains.surface import fit_rbf
+from earthbench_terrains.rbf import rbf_surface
+from earthbench_planners.stl_tamp.surface import fit_rbf
 
 
 @pytest.fixture(scope="module")
@@ -88,6 +88,6 @@ def test_flat_map_fits_exactly_enough():
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_dem_crops_fit_within_5_cm(seed):
-    dem = pytest.importorskip("terrains.dem")
+    dem = pytest.importorskip("earthbench_terrains.dem")
     hm, _ = dem.dem_crop(seed)
     assert fit_rbf(hm).rms < 0.05

@@ -15,9 +15,9 @@ from earthbench.plan import Dig, Dump, Plan
 from earthbench.referee import judge
 from earthbench.registry import TERRAINS
 from earthbench.world import Scenario
-from terrains.bench import bench
-from terrains.common import dig_area_volume, polygon_mask, reachable_volume
-from terrains.rbf import rbf
+from earthbench_terrains.bench import bench
+from earthbench_terrains.common import dig_area_volume, polygon_mask, reachable_volume
+from earthbench_terrains.rbf import rbf
 
 
 def _one_cycle(sc: Scenario, contact: tuple[float, float]) -> Plan:
@@ -126,7 +126,7 @@ def test_generators_are_registered():
 
 # -- dem -----------------------------------------------------------------------------------------
 def test_dem_is_deterministic_scaled_and_holds_the_suite_target():
-    from terrains.dem import dem
+    from earthbench_terrains.dem import dem
 
     a, b = dem(2, 7.0), dem(2, 7.0)
     assert a.digest == b.digest and dem(3, 7.0).digest != a.digest
@@ -140,8 +140,8 @@ def test_dem_is_deterministic_scaled_and_holds_the_suite_target():
 
 def test_dem_crops_differ_from_every_rbf_map():
     """Real data, not a generator: no dem crop correlates closely with any rbf map."""
-    from terrains.dem import dem
-    from terrains.rbf import rbf_surface
+    from earthbench_terrains.dem import dem
+    from earthbench_terrains.rbf import rbf_surface
 
     dems = [dem(s, 4.0).terrain.z for s in range(10)]
     rbfs = [rbf_surface(s, n_bases=n).z for n in (14, 30) for s in range(10)]
@@ -152,7 +152,7 @@ def test_dem_crops_differ_from_every_rbf_map():
 
 
 def test_dem_refuses_a_crop_larger_than_the_sample():
-    from terrains.dem import dem
+    from earthbench_terrains.dem import dem
 
     with pytest.raises(ScenarioError, match="ground_scale"):
         dem(0, 4.0, ground_scale=5000.0)
@@ -166,7 +166,7 @@ def _grid() -> np.ndarray:
 
 @pytest.mark.parametrize("fmt", ["npy", "npz", "csv"])
 def test_heightmap_files_round_trip(tmp_path, fmt):
-    from terrains.files import heightmap_file, load_heightmap
+    from earthbench_terrains.files import heightmap_file, load_heightmap
 
     z = np.round(_grid(), 4)
     p = tmp_path / f"site.{fmt}"
@@ -188,7 +188,7 @@ def test_heightmap_files_round_trip(tmp_path, fmt):
 
 
 def test_heightmap_file_errors(tmp_path):
-    from terrains.files import load_heightmap
+    from earthbench_terrains.files import load_heightmap
 
     with pytest.raises(ScenarioError, match="not found"):
         load_heightmap(tmp_path / "missing.npy", resolution=0.1)
@@ -247,7 +247,7 @@ def test_heightmap_file_errors(tmp_path):
 
 
 def test_heightmap_file_checks_the_target(tmp_path):
-    from terrains.files import heightmap_file
+    from earthbench_terrains.files import heightmap_file
 
     p = tmp_path / "site.npy"
     np.save(p, _grid())
@@ -266,7 +266,7 @@ def test_bench_refuses_poses_the_referee_would_reject():
 @given(st.integers(0, 2**31 - 1))
 def test_any_seed_holds_the_largest_suite_targets(seed):
     """Not only the suites' seeds: every seed's site holds twice the suites' largest target."""
-    from terrains.dem import dem
+    from earthbench_terrains.dem import dem
 
     b = bench(seed, 8.0)
     assert reachable_volume(b) >= 8.0
@@ -276,7 +276,7 @@ def test_any_seed_holds_the_largest_suite_targets(seed):
 
 def test_check_scenario_enforces_the_clearance():
     from earthbench.world import Pose
-    from terrains.common import check_scenario
+    from earthbench_terrains.common import check_scenario
 
     sc = bench(0, 4.0)
     close = sc.replace(machines=dataclasses.replace(sc.machines, truck_pose=Pose(8.0, 6.0, 0.0)))

@@ -46,7 +46,7 @@ import numpy as np
 from earthbench.plan import Plan
 from earthbench.planner import Planner
 from earthbench.world import Scenario
-from planners.loader_common import CycleBuilder, LoaderPlanConfig, box_volumes, pile_side
+from ..loader_cycle import Cycle, CycleBuilder, LoaderPlanConfig, box_volumes, pile_side
 
 
 @dataclass(frozen=True)
@@ -99,39 +99,29 @@ class SinghCannonLoader(Planner):
     def plan(self, scenario: Scenario) -> Plan:
         cfg: SinghCannonLoaderConfig = self.config
         b = CycleBuilder(scenario, cfg)
-        spec = b.spec
         truck = scenario.machines.truck_pose
-        target = scenario.task.target_volume
         widened = 0
-        stop = "target loaded"
-        while b.loaded < target - 1e-9:
-            if len(b.cycles) >= cfg.max_cycles:
-                stop = "max_cycles"
-                break
-            lines = b.contours()
-            if not lines:
-                stop = "no contour left"
-                break
+
+        def choose(lines: list[np.ndarray], capacity: float) -> Cycle | str:
+            nonlocal widened
             Ms, Ns = [], []
             for line in lines:
-                M, n, _ = corner_candidates(line, spec.bucket_width)
+                M, n, _ = corner_candidates(line, b.spec.bucket_width)
                 Ms.append(M), Ns.append(n)
             M, n = np.concatenate(Ms), np.concatenate(Ns)
             if len(M) == 0:
-                stop = "no contour left"
-                break
+                return "no contour left"
             h = n * pile_side(scenario.terrain, b.z, M, n, b.base)[:, None]
             allpts = np.concatenate(lines)
             pstar = allpts[np.argmin(np.hypot(allpts[:, 0] - truck.x, allpts[:, 1] - truck.y))]
-            V1, V2 = box_volumes(scenario.terrain, b.z, M, h, spec.bucket_width, cfg.bucket_depth, cfg.ahead, b.level)
+            V1, V2 = box_volumes(scenario.terrain, b.z, M, h, b.spec.bucket_width, cfg.bucket_depth, cfg.ahead, b.level)
             tot = V1 + V2
             with np.errstate(divide="ignore", invalid="ignore"):
                 xi = np.where(tot > 0, 1.0 - np.abs(V1 - V2) / tot, 0.0)
-            psi = np.minimum(1.0, tot / spec.bucket_capacity)
+            psi = np.minimum(1.0, tot / b.spec.bucket_capacity)
             zeta = np.maximum(0.0, 1.0 - np.hypot(M[:, 0] - truck.x, M[:, 1] - truck.y) / cfg.max_distance)
             score = xi * psi * zeta
             dstar = np.hypot(M[:, 0] - pstar[0], M[:, 1] - pstar[1])
-            capacity = min(spec.bucket_capacity, target - b.loaded + 0.02)
             d1, d2 = cfg.d1, cfg.d2
             failed: list[np.ndarray] = []
             while True:  # the region d1–d2, widened until a candidate is feasible or nothing is left
@@ -144,9 +134,10 @@ class SinghCannonLoader(Planner):
                 d1, d2 = 0.0, d2 * cfg.widen
                 widened += 1
             if cycle is None:
-                stop = "no feasible candidate"
-                break
+                return "no feasible candidate"
             cycle.candidate = {"xi": float(xi[k]), "psi": float(psi[k]), "zeta": float(zeta[k]), "score": float(score[k]),
                                "edge_centre": [float(M[k, 0]), float(M[k, 1])]}
-            b.commit(cycle)
+            return cycle
+
+        stop = b.load_until_target(cfg.max_cycles, choose)
         return b.plan({"stop": stop, "region_widened": widened, "digs": [c.candidate for c in b.cycles]})

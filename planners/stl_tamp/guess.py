@@ -1,4 +1,4 @@
-"""Initial guesses for :class:`~planners.stl_tamp.model.PhaseNLP` from inverse kinematics.
+"""Initial guesses for :class:`~earthbench_planners.stl_tamp.model.PhaseNLP` from inverse kinematics.
 
 docs/DESIGN.md §11: from a constant guess IPOPT runs into its iteration limit; a guess that already
 drives the base to its dig poses, swings the arm to spread-out contact points by inverse

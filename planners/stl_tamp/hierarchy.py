@@ -1,11 +1,11 @@
 """Algorithm 1: a global problem over local areas, then one local problem per chosen area.
 
-1. Fit the surface (``terrains.surface.fit_rbf``; counted in the solve time).
+1. Fit the surface (``earthbench_planners.stl_tamp.surface.fit_rbf``; counted in the solve time).
 2. Candidate local areas tile the dig area (side √S_l, S_l = 5 buckets); a greedy tour from the
    excavator's start, by estimated volume per second of travel and digging, seeds the global
    problem (contact at each area's far edge, base ``base_offset`` beyond the area toward the
    truck's side, truck behind the base).
-3. Global: the same :class:`~planners.stl_tamp.model.PhaseNLP` with the area as the unit
+3. Global: the same :class:`~earthbench_planners.stl_tamp.model.PhaseNLP` with the area as the unit
    (V_max = 1 m³ per area, m_g phases); the areas with η ≥ ``eta_on`` in phase order are the
    local areas. If the global solve fails, its seed tour is used (recorded in ``plan.info``).
 4. Local: for each area, a fresh window fit of the *current* grid (after the digs already
@@ -30,7 +30,7 @@ from shapely.geometry import Polygon
 
 from earthbench.referee.backhoe import track_level_and_tilt
 from earthbench.world import Pose, Scenario
-from terrains.surface import RbfSurface, fit_rbf
+from .surface import RbfSurface, fit_rbf
 
 from .convert import TILT_MARGIN, Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes

@@ -4,7 +4,7 @@ One :class:`PhaseNLP` is an optimal-control problem over ``m + 1`` task phases o
 motion steps each (phase 0 is the independent task — travel, η₀ = 0 — as in the paper's
 Fig. 6; phases 1…m may dig). It is built **once per process and problem shape** and reused:
 everything that changes between local areas is a *parameter* — the terrain (the weights and
-lattice origin of a fitted :class:`~terrains.surface.RbfSurface`), the initial machine state,
+lattice origin of a fitted :class:`~earthbench_planners.stl_tamp.surface.RbfSurface`), the initial machine state,
 the target volume, the cost weights and a goal for the base at the end (terminal cost) — and
 the contact box, η, fixed tasks and the initial guess are variable bounds and start values.
 The ``separate`` baseline (tasks fixed, motions and times optimised) is the same NLP solved
@@ -27,7 +27,7 @@ positive part is our calibration to the referee's cut, which only lowers cells (
 rectangle widened by ``widen`` on every side (docs/DESIGN.md §11: a sigmoid of steepness k leaks about
 ``3/k`` of the box; the widened box catches what the sigmoid removes).
 
-Specifications, Eq. (4)–(8), (17)–(24), with the smooth robustness of :mod:`planners.stl`;
+Specifications, Eq. (4)–(8), (17)–(24), with the smooth robustness of :mod:`earthbench_planners.stl_tamp.stl`;
 the dump-still formula (22) stays in ρ_safe, but with ``Shape.hold_truck`` (default) it is also
 enforced structurally by fixing the truck's inputs to 0 after phase 0: with the smooth ``G``
 alone (ε_r = 5 cm normalised) IPOPT hit its iteration limit with ρ_safe ≈ −500 on our first
@@ -47,7 +47,7 @@ import casadi as ca
 import numpy as np
 
 from earthbench.world import ExcavatorSpec, TruckSpec
-from planners.stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
+from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
 NX, NU = 9, 7
 #: Every number handed to IPOPT (parameters and start point) is rounded to this grid (m, rad,
@@ -355,7 +355,7 @@ class PhaseNLP:
             "tipx": [t[0] for t in tips], "tipy": [t[1] for t in tips],
             "__len__": N + 1,
         }
-        # A conjunction/G of lower bounds is imposed conjunct by conjunct (planners.stl.
+        # A conjunction/G of lower bounds is imposed conjunct by conjunct (earthbench_planners.stl_tamp.stl.
         # robustness_constraints): exact at the top level and sparse; the smoothing acts inside
         # the disjunction (5) and the finally (18).
         tasks = []

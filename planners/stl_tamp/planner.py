@@ -13,7 +13,7 @@ from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.world import Scenario
-from terrains.surface import fit_rbf
+from .surface import fit_rbf
 
 from .convert import Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts

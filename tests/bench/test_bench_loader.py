@@ -8,9 +8,9 @@ from __future__ import annotations
 import pytest
 
 from earthbench import judge
-from planners.greedy_loader import GreedyLoader
-from planners.singh_cannon.loader import SinghCannonLoader
-from terrains.pile import pile
+from earthbench_planners.greedy.loader import GreedyLoader
+from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+from earthbench_terrains.pile import pile
 
 
 @pytest.mark.parametrize("planner", [SinghCannonLoader, GreedyLoader], ids=lambda p: p.name)

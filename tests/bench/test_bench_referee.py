@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 
 from earthbench import judge
-from planners.greedy import GreedyPlanner
-from planners.singh_cannon.loader import SinghCannonLoader
-from terrains.pile import pile
-from terrains.rbf import rbf
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+from earthbench_terrains.pile import pile
+from earthbench_terrains.rbf import rbf
 
 BASELINE = "e1318948ddbaee0900a8fda12989cf90f5230e77"  # the point-machine, chord referee
 ROOT = Path(__file__).resolve().parents[2]

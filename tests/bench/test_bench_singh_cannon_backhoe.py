@@ -9,9 +9,9 @@ a whole plan for a ``bench`` scenario under 5 s. Run with
 from __future__ import annotations
 
 from earthbench import judge
-from planners.singh_cannon.backhoe import SinghCannonBackhoe
-from planners.singh_cannon.backhoe_model import candidate_grid, evaluate
-from terrains.bench import bench
+from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
+from earthbench_planners.singh_cannon.backhoe_model import candidate_grid, evaluate
+from earthbench_terrains.bench import bench
 
 
 def _session_and_region(seed: int = 0):

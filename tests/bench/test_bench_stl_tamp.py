@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import pytest
 
-from planners.stl_tamp import StlTampPlanner
-from planners.stl_tamp.convert import SimState
-from planners.stl_tamp.guess import build_guess, fill_volumes
-from planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
-from terrains.rbf import rbf, rbf_surface
-from terrains.surface import fit_rbf
+from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench_planners.stl_tamp.convert import SimState
+from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes
+from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
+from earthbench_terrains.rbf import rbf, rbf_surface
+from earthbench_planners.stl_tamp.surface import fit_rbf
 
 
 def _local_case(seed: int, target: float):

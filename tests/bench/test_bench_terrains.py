@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from terrains.bench import bench
-from terrains.dem import dem
-from terrains.rbf import rbf
+from earthbench_terrains.bench import bench
+from earthbench_terrains.dem import dem
+from earthbench_terrains.rbf import rbf
 
 CASES = {
     "rbf30-12x6": lambda: rbf(0, 7.0, n_bases=30),

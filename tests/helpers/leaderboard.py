@@ -24,7 +24,7 @@ from earthbench.harness.environment import environment
 from earthbench.scoring import score
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite
-from planners.greedy import GreedyPlanner
+from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 EVIL = "<script>alert(1)</script>"
 

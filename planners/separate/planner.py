@@ -2,14 +2,14 @@
 
 This is the comparison method of the STL-TAMP paper (Satoh, Takano, Oyama, section V-B and
 Fig. 5b, "Separate"): the *same* system model as ``stl-tamp`` — its
-:class:`~planners.stl_tamp.model.PhaseNLP` of the local shape, built once per process through
-:func:`~planners.stl_tamp.hierarchy.get_nlp` — but only the local optimisation of Eq. (25), with the task vector fixed through the
+:class:`~earthbench_planners.stl_tamp.model.PhaseNLP` of the local shape, built once per process through
+:func:`~earthbench_planners.stl_tamp.hierarchy.get_nlp` — but only the local optimisation of Eq. (25), with the task vector fixed through the
 NLP's bounds (``PhaseNLP.solve(..., fixed_tasks=...)``). No global layer, no task choice.
 
 The rule (Fig. 5b), per local area:
 
 - The dig area is tiled into square local areas of width ``W_local`` = 2 m
-  (:func:`~planners.stl_tamp.hierarchy.candidate_areas` with that side). Each area has a
+  (:func:`~earthbench_planners.stl_tamp.hierarchy.candidate_areas` with that side). Each area has a
   nominal base ``base_offset`` beyond it toward the truck's side and a truck pose behind it,
   exactly as in ``stl-tamp``'s tiling.
 - ``m_l`` = 5 digs per area. For each dig, on the grid as it will be after the previous digs
@@ -67,15 +67,13 @@ from earthbench.plan import Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.cut import apply_cut, cut_level
 from earthbench.world import Heightmap, Scenario
-from terrains.surface import fit_rbf
-
-from .convert import Converter, SimState
-from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from .hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
-from .model import PhaseNLP, Solution, quantize
-from .planner import Config as StlTampConfig
-from .planner import LocalNLPConfig
-from .planner import StlTampPlanner
+from ..stl_tamp.convert import Converter, SimState
+from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
+from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
+from ..stl_tamp.model import PhaseNLP, Solution, quantize
+from ..stl_tamp.planner import Config as StlTampConfig
+from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
+from ..stl_tamp.surface import fit_rbf
 
 
 @dataclass(frozen=True)

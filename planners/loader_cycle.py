@@ -23,7 +23,8 @@ rank dig candidates; the rest lives here:
   feasible returns is used. The leg to the truck is always two arcs (the paper's constraint).
 - :class:`CycleBuilder` — turns a ranked list of candidates into charge, reverse out, two arcs
   to the truck, dump, return; the first candidate whose charge, route to the truck and approach
-  are all feasible wins.
+  are all feasible wins; :meth:`CycleBuilder.load_until_target` is the cycle loop both planners
+  run, each with its own choice of dig.
 
 All moves are sampled finely enough (≤ 0.25 m and ≤ 0.08 rad per step) that the referee's
 chord, speed, yaw-rate and curvature checks see exact arcs, at ``MARGIN`` of every limit.
@@ -32,6 +33,7 @@ chord, speed, yaw-rate and curvature checks see exact arcs, at ``MARGIN`` of eve
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -554,6 +556,24 @@ class CycleBuilder:
         self.t = c.dump.t_end
         self.pose = c.to_truck.end
         self.cycles.append(c)
+
+    def load_until_target(self, max_cycles: int, choose: Callable[[list[np.ndarray], float], Cycle | str]) -> str:
+        """The loop both loader planners share: while the truck lacks its target, ask ``choose``
+        for the next cycle given the pile's contours and the bucket's capacity for this cycle
+        (never much more than the target still needs), and commit it. ``choose`` returns a
+        feasible :class:`Cycle`, or the reason to stop. Returns why loading stopped."""
+        target = self.sc.task.target_volume
+        while self.loaded < target - 1e-9:
+            if len(self.cycles) >= max_cycles:
+                return "max_cycles"
+            lines = self.contours()
+            if not lines:
+                return "no contour left"
+            chosen = choose(lines, min(self.spec.bucket_capacity, target - self.loaded + 0.02))
+            if isinstance(chosen, str):
+                return chosen
+            self.commit(chosen)
+        return "target loaded"
 
     def plan(self, info: dict) -> Plan:
         info = dict(info, cycles=len(self.cycles), candidates_tried=self.tried)

@@ -7,7 +7,7 @@ into the pile. If that dig is infeasible (its charge takes nothing, or no route 
 to the truck keeps the turning radius, the clearance and the traversable step), the next
 nearest contour point is tried. Everything else — the contour, the charge model (the bucket
 takes whole cells up to its capacity with the referee's own cut), the two-arc routes to the
-truck and the return leg — is the shared machinery of :mod:`planners.loader_common`, so the
+truck and the return leg — is the shared machinery of :mod:`earthbench_planners.loader_cycle`, so the
 difference to ``singh-cannon-loader`` is only the choice of dig: no dig region, no scoring.
 """
 
@@ -20,7 +20,7 @@ import numpy as np
 from earthbench.plan import Plan
 from earthbench.planner import Planner
 from earthbench.world import Scenario
-from planners.loader_common import CycleBuilder, LoaderPlanConfig, pile_side
+from ..loader_cycle import Cycle, CycleBuilder, LoaderPlanConfig, pile_side
 
 
 @dataclass(frozen=True)
@@ -54,28 +54,19 @@ class GreedyLoader(Planner):
     def plan(self, scenario: Scenario) -> Plan:
         cfg: GreedyLoaderConfig = self.config
         b = CycleBuilder(scenario, cfg)
-        spec = b.spec
         truck = scenario.machines.truck_pose
-        target = scenario.task.target_volume
-        stop = "target loaded"
-        while b.loaded < target - 1e-9:
-            if len(b.cycles) >= cfg.max_cycles:
-                stop = "max_cycles"
-                break
-            lines = b.contours()
-            if not lines:
-                stop = "no contour left"
-                break
-            parts = [nearest_candidates(line, spec.bucket_width) for line in lines]
+
+        def choose(lines: list[np.ndarray], capacity: float) -> Cycle | str:
+            parts = [nearest_candidates(line, b.spec.bucket_width) for line in lines]
             M = np.concatenate([p[0] for p in parts])
             n = np.concatenate([p[1] for p in parts])
             h = n * pile_side(scenario.terrain, b.z, M, n, b.base)[:, None]
             order = np.argsort(np.hypot(M[:, 0] - truck.x, M[:, 1] - truck.y), kind="stable")
-            capacity = min(spec.bucket_capacity, target - b.loaded + 0.02)
             cycle, k = b.first_feasible(M, h, order, capacity, [], cfg.max_tries)
             if cycle is None:
-                stop = "no feasible candidate"
-                break
+                return "no feasible candidate"
             cycle.candidate = {"edge_centre": [float(M[k, 0]), float(M[k, 1])]}
-            b.commit(cycle)
+            return cycle
+
+        stop = b.load_until_target(cfg.max_cycles, choose)
         return b.plan({"stop": stop, "digs": [c.candidate for c in b.cycles]})
