@@ -18,14 +18,14 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
 
-from .plan import Charge, Dig, Dump, Move, Plan  # noqa: E402
-from .referee import Verdict  # noqa: E402
-from .replay import bucket_footprint, machine_paths, pose_at, replay  # noqa: E402
-from .world import Scenario  # noqa: E402
+from .plan import Charge, Dig, Dump, Move, Plan
+from .referee import Verdict
+from .replay import bucket_footprint, machine_paths, pose_at, replay
+from .world import Scenario
 
 _COLOURS = {"excavator": "tab:orange", "truck": "tab:blue", "loader": "tab:green"}
 _RED = "#d00000"
@@ -89,7 +89,7 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
         at = (p0.x, p0.y)
         moves = [a for a in sorted(plan.actions, key=lambda a: a.t_start) if a.machine == mid and isinstance(a, (Move, Charge))]
         ax.plot([], [], "-", color=colour, label=mid)  # the legend shows the machine's colour, red or not
-        for seg, a in zip(paths[mid], moves):
+        for seg, mv in zip(paths[mid], moves):
             if seg[0, 0] > t:
                 break
             shown = seg[seg[:, 0] <= t] if seg[-1, 0] > t else seg
@@ -97,7 +97,7 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
                 shown = np.vstack([shown, [t, *pose_at((p0.x, p0.y, p0.yaw), paths[mid], t)]])
             if math.hypot(seg[0, 1] - at[0], seg[0, 2] - at[1]) > _JUMP:  # a jump: never an ordinary path
                 ax.plot([at[0], seg[0, 1]], [at[1], seg[0, 2]], ls=(0, (3, 2)), color=_RED, lw=1.8, zorder=4)
-            rules = bad.get(index[id(a)])
+            rules = bad.get(index[id(mv)])
             ax.plot(shown[:, 1], shown[:, 2], "-", color=_RED if rules else colour, lw=2.4 if rules else 1.5, zorder=3)
             if rules:
                 ax.text(shown[-1, 1], shown[-1, 2], " " + ", ".join(sorted(set(rules))), color=_RED, fontsize=7, zorder=6)
@@ -110,9 +110,8 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
             ax.plot([end[0], end[0] + 0.8 * math.cos(end[2])], [end[1], end[1] + 0.8 * math.sin(end[2])], "k-", lw=1.2, zorder=5)
         else:
             _edge_marker(ax, box, end[0], end[1], colour, mid)
-    exc = m.excavator
-    if exc is not None and "excavator" in paths:
-        e0 = m.excavator_pose
+    exc, e0 = m.excavator, m.excavator_pose
+    if exc is not None and e0 is not None and "excavator" in paths:
         bases = [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], a.t_start)[:2]
                  for a in sorted(plan.actions, key=lambda a: a.t_start) if isinstance(a, Dig) and a.t_start <= t]
         stations: list[tuple[float, float]] = []
@@ -120,10 +119,10 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
             if all(math.hypot(b[0] - s[0], b[1] - s[1]) > 1.5 for s in stations):  # one ring per station, not per nudge
                 stations.append(b)
         th = np.linspace(0, 2 * math.pi, 121)
-        for k, (sx, sy) in enumerate(stations):
+        for ring, (sx, sy) in enumerate(stations):
             for r in (exc.reach_min, exc.reach_max):
                 ax.plot(sx + r * np.cos(th), sy + r * np.sin(th), ":", color="0.25", lw=0.9,
-                        label="reach annulus" if k == 0 and r == exc.reach_min else None, zorder=2)
+                        label="reach annulus" if ring == 0 and r == exc.reach_min else None, zorder=2)
     dumps = 0
     if any(isinstance(a, Dump) for a in plan.actions):
         ax.plot([], [], "s", color="#5b3a1a", ms=5, label="dump")
@@ -198,6 +197,7 @@ def animate(scenario: Scenario, plan: Plan, out: str, frames: int = 80, fps: int
     from .errors import EarthbenchError
 
     ext = out.rsplit(".", 1)[-1].lower()
+    writer: animation.AbstractMovieWriter
     if ext == "gif":
         writer = animation.PillowWriter(fps=fps)
     elif ext == "mp4":

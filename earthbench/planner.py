@@ -51,7 +51,8 @@ class Planner(ABC):
 
     @property
     def config_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.config) if dataclasses.is_dataclass(self.config) else dict(self.config)
+        config = self.config
+        return dataclasses.asdict(config) if dataclasses.is_dataclass(config) and not isinstance(config, type) else dict(config)
 
     @property
     def config_hash(self) -> str:

@@ -44,9 +44,9 @@ import io
 import math
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 from typing import Any
 
@@ -441,9 +441,10 @@ FIGURE_COLUMNS = ["scenario_digest", "family", "solver", "reason", "success", "m
 def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     """Draw one figure and save it as PNG and SVG; return the PNG (runs in a worker process)."""
     kind, base, args = job
-    maker = {"volume-time": volume_time_figure, "profiles": profiles_figure, "families": families_figure,
-             "history": history_figure, "terrain": terrain_figure, "cost-growth": cost_growth_figure}[kind]
-    return _save(maker(*args), Path(base))[2]
+    makers: dict[str, Callable[..., Any]] = {
+        "volume-time": volume_time_figure, "profiles": profiles_figure, "families": families_figure,
+        "history": history_figure, "terrain": terrain_figure, "cost-growth": cost_growth_figure}
+    return _save(makers[kind](*args), Path(base))[2]
 
 
 class Renderer:
@@ -560,7 +561,7 @@ def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
     data = {c: runs[c].tolist() for c, _ in cols}
     filters = {k: runs[c].astype(str).tolist() for k, c in FILTERS.items() if c in runs}
     for i in range(len(runs)):
-        cells = []
+        cells: list[tuple[str, str, float | None]] = []
         for c, h in cols:
             v = data[c][i]
             if c in _NUMERIC_RUN:
@@ -766,7 +767,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
 
     out = Path(out)
     fig_dir = out / "figures"
-    generated = generated or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    generated = generated or datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     result = Published(out)
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:

@@ -158,7 +158,7 @@ def load_plugin_file(path: str | Path) -> list[str]:
     except SystemExit as exc:  # a plugin must not end the process that loads it
         del sys.modules[mod_name]
         raise PluginError(f"plugin file {p} called sys.exit({exc.code!r}) while being imported; a plugin must only define planners") from None
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         del sys.modules[mod_name]
         raise PluginError(f"plugin file {p} failed to import: {type(exc).__name__}: {exc}") from exc
     found = set(PLANNERS.names()) - before

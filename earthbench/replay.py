@@ -126,7 +126,7 @@ def bucket_footprint(scenario: Scenario, a: Any) -> list[tuple[float, float]] | 
     return list(poly.exterior.coords)
 
 
-def _poly(points: Any) -> list[list[float]]:
+def _poly(points: Any) -> list[list[float | None]]:
     return [[_r(x), _r(y)] for x, y in points]
 
 

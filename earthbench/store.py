@@ -28,14 +28,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import sqlite3
 import zlib
 from collections.abc import Iterable
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 from urllib.parse import quote
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, overload
 
 from .errors import StoreError
 from .scoring import is_success
@@ -45,7 +44,6 @@ if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
     from .harness.cases import Case, CaseResult
-    from .suite import Suite
 
 SCHEMA_VERSION = 1
 APPLICATION_ID = 0x45424E43  # "EBNC"
@@ -111,13 +109,35 @@ def _compress(text: str) -> bytes:
     return zlib.compress(text.encode(), 6)
 
 
+
+class SuiteRecord(Protocol):
+    """What :meth:`Store.register_suite` reads of a suite: a loaded :class:`~earthbench.suite.Suite`,
+    or a suite version read back from another store (:mod:`earthbench.merge`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def digest(self) -> str: ...
+    @property
+    def track(self) -> str: ...
+    @property
+    def success_threshold(self) -> float: ...
+    @property
+    def description(self) -> str: ...
+    @property
+    def scenarios(self) -> Any: ...
+
+@overload
+def decompress(blob: bytes) -> str: ...
+@overload
+def decompress(blob: None) -> None: ...
 def decompress(blob: bytes | None) -> str | None:
     """The text of a ``plan`` or ``scenarios`` blob as stored (zlib-compressed JSON), or None."""
     return None if blob is None else zlib.decompress(blob).decode()
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _json(obj: Any) -> str:
@@ -214,7 +234,7 @@ class Store:
         rows = self.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")
         return {tuple(r) for r in rows}  # type: ignore[misc]
 
-    def register_suite(self, suite: Suite) -> int:
+    def register_suite(self, suite: SuiteRecord) -> int:
         """Record a suite version and its scenarios (once per digest), in one transaction."""
         row = self.db.execute("SELECT id FROM suites WHERE name=? AND digest=?", (suite.name, suite.digest)).fetchone()
         if row:
@@ -227,6 +247,7 @@ class Store:
                     (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now()),
                 )
                 sid = cur.lastrowid
+                assert sid is not None  # an INSERT always sets it
                 self.db.executemany(
                     "INSERT INTO suite_scenarios (suite_id, scenario_id, scenario_digest, family, seed) VALUES (?, ?, ?, ?, ?)",
                     [(sid, sc.id, sc.digest, sc.meta.get("family"), sc.meta.get("seed")) for sc in suite.scenarios],
@@ -353,7 +374,8 @@ class Store:
     def query(self, *, suite: str | None = None, planner: Iterable[str] | None = None, reason: Iterable[str] | None = None,
               scenario: str | None = None, run_id: int | None = None, limit: int | None = None) -> list[sqlite3.Row]:
         """Rows of ``runs`` (newest first) matching every given filter; ``scenario`` is a substring of the id."""
-        where, args = [], []
+        where: list[str] = []
+        args: list[Any] = []
         if suite:  # runs of the suite's scenarios, whichever suite ran them
             where.append("(suite = ? OR scenario_digest IN (SELECT ss.scenario_digest FROM suite_scenarios ss "
                          "JOIN suites s ON s.id = ss.suite_id WHERE s.name = ?))")

@@ -30,7 +30,7 @@ import traceback
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from typing import Any
 
 from .errors import EarthbenchError, StoreError
@@ -354,7 +354,7 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
     here = machine_label(environment())
     stored_env = {e["id"]: machine_label(e) for e in store.db.execute("SELECT id, hostname, cpu_model, cores FROM environments")}
-    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    now = datetime.now(UTC).isoformat(timespec="seconds")
     out = []
     for key in refs:
         runs = [(c, by_key[c.key]) for c in cases if (c.planner.name, c.planner.version, c.planner.config_hash) == key]

@@ -7,7 +7,6 @@ import ast
 import graphlib
 from pathlib import Path
 
-import pytest
 
 ROOT = Path(__file__).parents[1] / "earthbench"
 #: Import name of each plugin package → its folder in the repository (pyproject's package-dir).

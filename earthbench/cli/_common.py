@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import EarthbenchError, UnknownNameError
+from ..planner import Planner
 from ..registry import TERRAINS, load_plugin_file
 from ..world import Scenario
 
@@ -67,7 +68,7 @@ def check_params(name: str, gen: Any, params: dict[str, Any]) -> None:
             raise UnknownNameError(f"{name} parameter", key, known)
 
 
-def parse_config(items: list[str], planner: type) -> dict[str, Any]:
+def parse_config(items: list[str], planner: type[Planner]) -> dict[str, Any]:
     """``--config KEY=VALUE`` items as overrides of ``planner.Config``: known fields only, values of the field's type."""
     fields = {f.name: f for f in dataclasses.fields(planner.Config)} if dataclasses.is_dataclass(planner.Config) else {}
     try:

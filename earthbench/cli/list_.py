@@ -24,9 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def settings(kind: str, obj: object) -> str:
     """``key=default`` of a planner's ``Config`` or of a generator's keyword parameters."""
-    if kind == "planners" and dataclasses.is_dataclass(getattr(obj, "Config", None)):
+    config = getattr(obj, "Config", None)
+    if kind == "planners" and dataclasses.is_dataclass(config):
         return ", ".join(f"{f.name}={f.default!r}" if f.default is not dataclasses.MISSING else f.name
-                         for f in dataclasses.fields(obj.Config))  # type: ignore[arg-type]
+                         for f in dataclasses.fields(config))
     if kind == "terrains":
         try:
             ps = list(inspect.signature(obj).parameters.values())[2:]  # type: ignore[arg-type]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..store import Store
+from ..store import Store, decompress
 from ..verify import rejudge
 from .run import default_db
 
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
             digest = r["scenario_digest"]
             if digest not in scenarios:
                 scenarios[digest] = store.scenario(digest)
-            judged = rejudge(scenarios[digest], store.plan_json(r["id"]), r["threshold"],
+            judged = rejudge(scenarios[digest], decompress(r["plan"]), r["threshold"],
                              solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
             if judged.metrics is None:  # the referee failed on it: keep the row, say so
                 failed += 1

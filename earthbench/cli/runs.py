@@ -57,9 +57,9 @@ def run(args: argparse.Namespace) -> int:
     with Store(args.db, create=False) as store:
         if args.id is not None:
             return _show(store, args)
-        rows = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
+        stored = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
         ver = store.suite_version(args.suite) if args.suite else None
-        rows = [_values(r, None if ver is None else ver["threshold"]) for r in rows]
+        rows = [_values(r, None if ver is None else ver["threshold"]) for r in stored]
         if args.format == "json":
             json.dump([{c: r[c] for c in COLUMNS} for r in rows], sys.stdout, indent=1)
             print()

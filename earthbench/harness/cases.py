@@ -60,7 +60,7 @@ class PlannerRef:
         )
 
 
-def _source_of(klass: type) -> str:
+def _source_of(klass: type[Planner]) -> str:
     mod = sys.modules.get(klass.__module__)
     file = getattr(mod, "__file__", None)
     if "<locals>" in klass.__qualname__:

@@ -300,10 +300,10 @@ class DaskExecutor:
                     break
             for fut in ac:
                 with self._lock:
-                    case = self._futures.pop(fut, None)
-                if case is None:
+                    mine = self._futures.pop(fut) if fut in self._futures else None
+                if mine is None:
                     continue
-                res = self._collect(fut, case)
+                res = self._collect(fut, mine)
                 if not self._stopped.is_set():
                     nxt = next(todo, None) if self.jobs is not None else None
                     if nxt is not None:
@@ -331,12 +331,12 @@ class DaskExecutor:
                 return CaseResult.failure(case, "error", f"the Dask task returned {type(res).__qualname__} for another case, not this case's result")
             return res
         if status == "error":
-            exc = fut.exception()
-            if isinstance(exc, self._distributed.KilledWorker):
-                return CaseResult.failure(case, "crashed", f"the Dask workers running this case died repeatedly ({exc}); "
+            failure = fut.exception()
+            if isinstance(failure, self._distributed.KilledWorker):
+                return CaseResult.failure(case, "crashed", f"the Dask workers running this case died repeatedly ({failure}); "
                                                 "it was given up after distributed.scheduler.allowed-failures tries")
             tb = fut.traceback()
-            text = "".join(traceback.format_exception(type(exc), exc, tb)) if tb is not None else repr(exc)
+            text = "".join(traceback.format_exception(type(failure), failure, tb)) if tb is not None else repr(failure)
             return CaseResult.failure(case, "error", "the Dask task failed on its worker:\n" + text)
         return None  # cancelled or lost: not stored, a rerun picks it up
 

@@ -29,9 +29,9 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_bench_stl_tamp import _local_case  # noqa: E402
+from test_bench_stl_tamp import _local_case
 
-from earthbench_planners.stl_tamp.model import NX, PhaseNLP  # noqa: E402
+from earthbench_planners.stl_tamp.model import NX, PhaseNLP
 
 VARIANTS = ["sx-exact", "mx", "mx-expand", "sx-lbfgs", "sx-warm", "sx-jit"]
 

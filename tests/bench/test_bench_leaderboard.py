@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of  # noqa: E402
+from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
-from earthbench.publish import publish  # noqa: E402
+from earthbench.publish import publish
 
 
 @pytest.fixture(scope="module")

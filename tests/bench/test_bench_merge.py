@@ -21,11 +21,11 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from helpers.leaderboard import Behaviour, fill_store, ref, suite_of  # noqa: E402
+from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
-from earthbench.merge import merge  # noqa: E402
-from earthbench.store import Store  # noqa: E402
-from earthbench.verify import audit  # noqa: E402
+from earthbench.merge import merge
+from earthbench.store import Store
+from earthbench.verify import audit
 
 
 @pytest.fixture(scope="module")

@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from chromium import chromium_page, needs_browser  # noqa: E402
-from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of  # noqa: E402
+from chromium import chromium_page, needs_browser
+from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
-from earthbench.publish import publish  # noqa: E402
+from earthbench.publish import publish
 
 pytestmark = needs_browser
 
