@@ -140,8 +140,11 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     slope = math.tan(math.radians(repose_deg))
     dist = distance_transform_edt(~channel) * resolution
     band = ~channel & (dist <= float(lost[channel].max()) / slope + 1e-9)
-    walls, rise = sub[band], slope * dist[band]
     floor = sub[channel]
+    band &= sub - slope * dist > floor.min()  # only cells above the lowest possible slope can fall
+    if not band.any():
+        return 0.0
+    walls, rise = sub[band], slope * dist[band]
     level = _balance(walls - rise, floor)
     cut_back = np.minimum(walls, level + rise)
     fallen = float((walls - cut_back).sum())
@@ -163,8 +166,7 @@ def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
     then solve the one linear piece that changes sign.
     """
     t, f = np.sort(tops), np.sort(floor)
-    kinks = np.concatenate([t, f])
-    kinks.sort()
+    kinks = np.sort(np.concatenate([t, f]))
     ct = np.concatenate([[0.0], np.cumsum(t[::-1])])  # sum of the k largest tops
     cf = np.concatenate([[0.0], np.cumsum(f)])  # sum of the k smallest floor heights
     above = len(t) - np.searchsorted(t, kinks, side="right")  # tops above each kink

@@ -199,6 +199,20 @@ def test_a_cut_face_slumps_and_keeps_the_volume():
     assert steep(real.final_terrain.z) <= math.tan(math.radians(30.0)) * 0.05 + 1e-3
 
 
+def test_a_loader_drives_over_what_slumped_but_the_truck_gets_less():
+    """The wheels' step rule measures firm ground: loose material that slumped in front of the
+    face is driven over (and cut again); the truck gets the soil's fill factor."""
+    sc = load_suite("pile").scenarios[0]
+    plan = (GOLDEN / "verdict_loader_plan.json").read_text()
+    exact = judge(sc, plan)
+    real = judge(sc.replace(soil=Soil("sand", 0.8, 1.0, 30.0, None)), plan)
+    assert exact.valid and real.valid
+    assert not np.array_equal(exact.final_terrain.z, real.final_terrain.z)
+    assert real.loaded_volume < exact.loaded_volume
+    for d in real.digs:
+        assert d.volume <= 0.8 * 0.8 + 1e-9 and d.nominal is not None
+
+
 # -- perception ---------------------------------------------------------------------------------------
 
 def wall_scenario() -> Scenario:

@@ -159,7 +159,7 @@ def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, 
 
 def step(r: Replay, n: int, machine: str, spec: LoaderSpec, path: np.ndarray, arc: dict[str, np.ndarray] | None = None) -> None:
     base = loader_base_level(r.sc)
-    excess, x, y = wheel_step_excess(r.terrain, r.z, spec, path, base, arc)
+    excess, x, y = wheel_step_excess(r.terrain, r.ground, spec, path, base, arc)
     if excess > ABS_TOL:
         r.flag(n, "step", excess, f"{machine}'s wheels cross a cell {spec.max_step + excess:.3f} m above the base level {base:g} m at ({x:.2f}, {y:.2f}); traversable step {spec.max_step} m")
 

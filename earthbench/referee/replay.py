@@ -271,6 +271,8 @@ class Replay:
         #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
         self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
         self._unsettled: tuple[tuple[int, int, int, int], np.ndarray] | None = None
+        #: with soil, the firm ground: the heights less the loose material slumping left on top
+        self.firm: np.ndarray | None = None if self.soil is None else self.z.copy()
 
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
         self.violations.append(Violation(n, rule, float(magnitude), message))
@@ -312,14 +314,24 @@ class Replay:
         levels = cut_levels(self.soil, self.sc.terrain.z, self.z, jj, ii, level)
         real = cut_along(self.terrain, self.z, contact, heading, width, length, levels,
                          self.soil.fill_factor * bucket_capacity - self.bucket, cells)
+        if self.firm is not None and jj.size:
+            self.firm[jj, ii] = np.minimum(self.firm[jj, ii], self.z[jj, ii])
         return real, nominal
 
     def settle(self) -> None:
         """Slump the faces the last cut left steeper than the soil's angle of repose."""
         if self.soil is not None and self._unsettled is not None:
-            box, before = self._unsettled
-            slump(self.z, self.terrain.resolution, self.soil.repose_deg, before, box)
+            (j0, j1, i0, i1), before = self._unsettled
+            slump(self.z, self.terrain.resolution, self.soil.repose_deg, before, (j0, j1, i0, i1))
+            if self.firm is not None:  # what fell is loose: the firm ground only ever goes down
+                np.minimum(self.firm[j0:j1, i0:i1], self.z[j0:j1, i0:i1], out=self.firm[j0:j1, i0:i1])
         self._unsettled = None
+
+    @property
+    def ground(self) -> np.ndarray:
+        """The ground a wheel stands on: the heights, less (with soil) the loose material that
+        slumped, which a loader drives over and through."""
+        return self.z if self.firm is None else self.firm
 
     # -- motion ------------------------------------------------------------------------------
     def move(self, n: int, a: Move) -> dict[str, np.ndarray]:
