@@ -138,8 +138,13 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     from scipy.ndimage import distance_transform_edt  # only once a cut happened
 
     slope = math.tan(math.radians(repose_deg))
+    run = float(lost[channel].max()) / slope  # how far from the channel a face can reach
+    pad = int(math.ceil(run / resolution)) + 1
+    js, is_ = np.nonzero(channel)
+    crop = (slice(max(int(js.min()) - pad, 0), int(js.max()) + pad + 1), slice(max(int(is_.min()) - pad, 0), int(is_.max()) + pad + 1))
+    sub, channel = sub[crop], channel[crop]  # views: what changes lands in ``z``
     dist = distance_transform_edt(~channel) * resolution
-    band = ~channel & (dist <= float(lost[channel].max()) / slope + 1e-9)
+    band = ~channel & (dist <= run + 1e-9)
     floor = sub[channel]
     band &= sub - slope * dist > floor.min()  # only cells above the lowest possible slope can fall
     if not band.any():
