@@ -21,7 +21,9 @@ What ``run_case`` enforces (the trust model is in the README, "What a plugin can
   kernel's CPU accounting of the case's process tree over the same span (never negative);
 * every message validated: anything malformed, out of order or larger than
   :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
-* the referee runs here, in the harness process, never inside the planner's process.
+* the referee runs here, in the harness process, never inside the planner's process;
+* the planner gets :func:`earthbench.sensing.observe` of the scenario (the scan and the
+  soil's nominal class), computed here; the referee judges on the truth.
 
 Termination reasons: ``ok`` (a valid plan), ``invalid`` (the referee found violations),
 ``timeout``, ``memory``, ``error`` (with the traceback or the protocol fault), ``crashed``
@@ -55,6 +57,7 @@ from .cases import Case, CaseResult, utc_now
 from .child import BOOTSTRAP
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
+from ..sensing import observe
 from .slots import SlotPool
 
 #: Seconds a case may spend starting (interpreter, imports of the planner's code) before it is ready.
@@ -159,7 +162,7 @@ def run_case(
             log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-        scenario = json.dumps(case.scenario.to_dict()).encode()
+        scenario = json.dumps(observe(case.scenario).to_dict()).encode()  # the planner's view; the referee keeps the truth
         mr, mw = os.pipe()
         rr, rw = os.pipe()
         mem = int(budget.memory_mb) * 1024 * 1024
