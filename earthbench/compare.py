@@ -71,7 +71,9 @@ class Selector:
         if self.config is not None:
             m &= runs["config_hash"].astype(str).str.startswith(self.config)
         sel = runs[m]
-        keys = sorted({(r.planner, str(r.planner_version), r.config_hash) for r in sel[["planner", "planner_version", "config_hash"]].itertuples()})
+        keys = sorted(
+            {(r.planner, str(r.planner_version), r.config_hash) for r in sel[["planner", "planner_version", "config_hash"]].itertuples()}
+        )
         choices = sorted({f"{p}@{v}#{c[:8]}" for p, v, c in runs[["planner", "planner_version", "config_hash"]].itertuples(index=False)})
         if not keys:
             raise CompareError(f"side {side}: no runs match {self}; stored configurations: {', '.join(choices) or '(none)'}")

@@ -12,7 +12,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Union
+from typing import Any, ClassVar
 
 from .errors import PlanFormatError, read_document
 
@@ -85,7 +85,7 @@ class Charge:
         return (x + self.penetration * math.cos(yaw), y + self.penetration * math.sin(yaw), yaw)
 
 
-Action = Union[Move, Dig, Dump, Charge]
+Action = Move | Dig | Dump | Charge
 ACTION_TYPES: dict[str, type] = {c.kind: c for c in (Move, Dig, Dump, Charge)}
 
 

@@ -157,7 +157,9 @@ def load_plugin_file(path: str | Path) -> list[str]:
         spec.loader.exec_module(module)
     except SystemExit as exc:  # a plugin must not end the process that loads it
         del sys.modules[mod_name]
-        raise PluginError(f"plugin file {p} called sys.exit({exc.code!r}) while being imported; a plugin must only define planners") from None
+        raise PluginError(
+            f"plugin file {p} called sys.exit({exc.code!r}) while being imported; a plugin must only define planners"
+        ) from None
     except Exception as exc:
         del sys.modules[mod_name]
         raise PluginError(f"plugin file {p} failed to import: {type(exc).__name__}: {exc}") from exc

@@ -64,7 +64,9 @@ def _read_csv(p: Path) -> np.ndarray:
         try:
             out.append([float(c) if c.strip() else math.nan for c in cells])
         except ValueError as exc:
-            raise ScenarioError(f"heightmap file {str(p)!r}, data row {n + 1}: {exc}; the CSV must be a grid of numbers without a header") from None
+            raise ScenarioError(
+                f"heightmap file {str(p)!r}, data row {n + 1}: {exc}; the CSV must be a grid of numbers without a header"
+            ) from None
         if len(out[-1]) != len(out[0]):
             raise ScenarioError(
                 f"heightmap file {str(p)!r} is not a rectangular grid: data row {n + 1} has {len(out[-1])} values, row 1 has {len(out[0])}"
@@ -105,7 +107,9 @@ def load_heightmap(
     if z.size == 0:
         raise ScenarioError(f"heightmap file {str(p)!r} holds an empty array (shape {z.shape})")
     if z.ndim != 2 or min(z.shape) < 2:
-        raise ScenarioError(f"heightmap file {str(p)!r} holds an array of shape {z.shape}; a heightmap is a 2-D grid of at least 2 × 2 cells")
+        raise ScenarioError(
+            f"heightmap file {str(p)!r} holds an array of shape {z.shape}; a heightmap is a 2-D grid of at least 2 × 2 cells"
+        )
     z = z.astype(np.float64)
     bad = int(np.count_nonzero(~np.isfinite(z)))
     if bad:

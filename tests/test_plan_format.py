@@ -47,7 +47,10 @@ def good_doc(valid_plan) -> dict:
         (lambda d: d["actions"][1].update(t_end=0.5), ["action 1 (dump)", "before t_start"]),
         (lambda d: d["actions"][0].update(contact=[1.0]), ["action 0 (dig)", "'contact'", "2 numbers"]),
         (lambda d: d["actions"][0].update(machine=7), ["action 0 (dig)", "'machine'"]),
-        (lambda d: d["actions"].append({"type": "move", "machine": "truck", "path": [[0, 9, 9, 0], [0, 9, 9, 0]]}), ["action 2 (move) sample 1", "increase"]),
+        (
+            lambda d: d["actions"].append({"type": "move", "machine": "truck", "path": [[0, 9, 9, 0], [0, 9, 9, 0]]}),
+            ["action 2 (move) sample 1", "increase"],
+        ),
         (lambda d: d.update(schema="earthbench.plan/0"), ["schema"]),
         (lambda d: d.update(actions={}), ["'actions'", "list"]),
     ],

@@ -22,7 +22,13 @@ def test_new_planner_as_a_plugin_file(tmp_path, capsys):
     pkg = tmp_path / "pkg"
     assert main(["new-planner", "tutorial-demo", "--dir", str(pkg)]) == 0
     assert "pip install -e" in capsys.readouterr().out
-    for rel in ("pyproject.toml", "README.md", "earthbench_tutorial_demo/__init__.py", "earthbench_tutorial_demo/planner.py", "tests/test_planner.py"):
+    for rel in (
+        "pyproject.toml",
+        "README.md",
+        "earthbench_tutorial_demo/__init__.py",
+        "earthbench_tutorial_demo/planner.py",
+        "tests/test_planner.py",
+    ):
         assert (pkg / rel).is_file(), rel
     assert 'tutorial-demo = "earthbench_tutorial_demo.planner:TutorialDemoPlanner"' in (pkg / "pyproject.toml").read_text()
     # the package's own test passes

@@ -28,8 +28,11 @@ from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 @pytest.fixture(scope="module")
 def clean(tmp_path_factory) -> Path:
     """greedy (every run a plan) and flaky (a timeout, without a plan, on every second scenario)."""
-    return fill_store(tmp_path_factory.mktemp("verify") / "clean.db", suite_of(2),
-                      [Behaviour(ref("greedy", PLANNERS.get("greedy").version)), Behaviour(ref("flaky"), keep=0.5, fail="timeout", fail_every=2)])
+    return fill_store(
+        tmp_path_factory.mktemp("verify") / "clean.db",
+        suite_of(2),
+        [Behaviour(ref("greedy", PLANNERS.get("greedy").version)), Behaviour(ref("flaky"), keep=0.5, fail="timeout", fail_every=2)],
+    )
 
 
 def _copy(src: Path, dst: Path) -> Path:

@@ -16,7 +16,22 @@ import sys
 from ..errors import EarthbenchError
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
-COMMANDS = ["list_", "plan", "validate", "show", "suites", "run", "runs", "rescore", "new_planner", "leaderboard", "compare", "merge", "export", "verify"]
+COMMANDS = [
+    "list_",
+    "plan",
+    "validate",
+    "show",
+    "suites",
+    "run",
+    "runs",
+    "rescore",
+    "new_planner",
+    "leaderboard",
+    "compare",
+    "merge",
+    "export",
+    "verify",
+]
 
 
 def build_parser() -> argparse.ArgumentParser:

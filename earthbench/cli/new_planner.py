@@ -31,7 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def names(name: str) -> tuple[str, str, str]:
     """(distribution, module, class) names for a planner name."""
     if not NAME_RE.fullmatch(name):
-        raise EarthbenchError(f"planner name {name!r} must be lower case letters and digits, words joined by '-' or '_' (e.g. 'my-planner')")
+        raise EarthbenchError(
+            f"planner name {name!r} must be lower case letters and digits, words joined by '-' or '_' (e.g. 'my-planner')"
+        )
     module = "earthbench_" + name.replace("-", "_")
     words = re.split(r"[-_]", name)
     cls = "".join(w.capitalize() for w in words) + ("" if words[-1] == "planner" and len(words) > 1 else "Planner")

@@ -45,7 +45,11 @@ def run(args: argparse.Namespace) -> int:
     plan = None if any(v.rule == "malformed" for v in verdict.violations) else Plan.from_json(text)
     metrics = evaluate(scenario, plan, verdict, args.threshold) if plan is not None else {}
     if args.json:
-        print(json.dumps({"valid": verdict.valid, "violations": [v.to_dict() for v in verdict.violations], "metrics": metrics}, indent=1, default=str))
+        print(
+            json.dumps(
+                {"valid": verdict.valid, "violations": [v.to_dict() for v in verdict.violations], "metrics": metrics}, indent=1, default=str
+            )
+        )
     else:
         print(f"verdict: {verdict.summary()}")
         for v in verdict.violations:

@@ -227,7 +227,11 @@ class DaskExecutor:
     # -- cluster facts -----------------------------------------------------------------------
     def worker_slots(self) -> dict[str, float]:
         """Each worker's declared ``slots`` (0 for a worker without the resource)."""
-        workers = self.client.scheduler_info(n_workers=-1)["workers"] if _accepts_n_workers(self.client) else self.client.scheduler_info()["workers"]
+        workers = (
+            self.client.scheduler_info(n_workers=-1)["workers"]
+            if _accepts_n_workers(self.client)
+            else self.client.scheduler_info()["workers"]
+        )
         return {addr: float((w.get("resources") or {}).get(self.resource or RESOURCE, 0)) for addr, w in workers.items()}
 
     @property
@@ -328,7 +332,9 @@ class DaskExecutor:
             except Exception as exc:  # noqa: BLE001 - a result that cannot be fetched is the task's failure
                 return CaseResult.failure(case, "error", f"the Dask task's result could not be fetched: {exc!r}")
             if not isinstance(res, CaseResult) or res.key != case.key:
-                return CaseResult.failure(case, "error", f"the Dask task returned {type(res).__qualname__} for another case, not this case's result")
+                return CaseResult.failure(
+                    case, "error", f"the Dask task returned {type(res).__qualname__} for another case, not this case's result"
+                )
             return res
         if status == "error":
             failure = fut.exception()

@@ -32,7 +32,9 @@ def _baseline_judge():
     if shutil.which("git") is None:
         pytest.skip("git is needed to read the baseline referee")
     try:
-        src = subprocess.run(["git", "-C", str(ROOT), "show", f"{BASELINE}:earthbench/referee.py"], check=True, capture_output=True, text=True).stdout
+        src = subprocess.run(
+            ["git", "-C", str(ROOT), "show", f"{BASELINE}:earthbench/referee.py"], check=True, capture_output=True, text=True
+        ).stdout
     except subprocess.CalledProcessError:
         pytest.skip("the baseline commit is not in this clone's history")
     mod = types.ModuleType("earthbench._baseline_referee")

@@ -42,8 +42,11 @@ def _local_case(seed: int, target: float):
 def test_local_solve(benchmark, seed):
     pl, nlp, p, w0, box = _local_case(seed, 1.0)
     c = pl.config
-    sol = benchmark.pedantic(lambda: nlp.solve(p, w0, box, max_iter=c.max_iter, accept_feasible=c.accept_feasible, options=pl._ipopt_options()),
-                             rounds=5, iterations=1)
+    sol = benchmark.pedantic(
+        lambda: nlp.solve(p, w0, box, max_iter=c.max_iter, accept_feasible=c.accept_feasible, options=pl._ipopt_options()),
+        rounds=5,
+        iterations=1,
+    )
     benchmark.extra_info.update(status=sol.status, iterations=sol.iterations, variables=nlp.nw,
                                 constraints=int(nlp.g.shape[0]), build_s=nlp.build_time_s)
 
