@@ -5,34 +5,42 @@ leaderboard. This package holds the core; planners, terrains and metrics registe
 through entry points (docs/DESIGN.md §1–2); the core never imports them.
 """
 
-from .errors import (
-    EarthbenchError,
-    PlanFormatError,
-    PluginError,
-    ScenarioError,
-    StoreError,
-    SuiteError,
-    UnknownNameError,
-)
-from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
-from .planner import NoConfig, Planner
-from .referee import Verdict, Violation, judge
-from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
-from .sensing import observe
-from .world import (
-    Budget,
-    ExcavatorSpec,
-    Heightmap,
-    LoaderSpec,
-    Machines,
-    Pose,
-    Scenario,
-    Sensing,
-    Site,
-    Soil,
-    Task,
-    TruckSpec,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name → the module that defines it, imported on first use: a case's process imports
+#: only the world model, the plan format and what its planner uses, not the referee or the
+#: registry's entry-point machinery (importlib.metadata, email, zipfile). Issue 18's start-up goal.
+_EXPORTS = {
+    **dict.fromkeys(("EarthbenchError", "PlanFormatError", "PluginError", "ScenarioError", "StoreError", "SuiteError",
+                     "UnknownNameError"), "errors"),
+    **dict.fromkeys(("PLAN_SCHEMA", "Charge", "Dig", "Dump", "Move", "Plan", "Prediction"), "plan"),
+    **dict.fromkeys(("NoConfig", "Planner"), "planner"),
+    **dict.fromkeys(("Verdict", "Violation", "judge"), "referee"),
+    **dict.fromkeys(("METRICS", "PLANNERS", "TERRAINS", "load_plugin_file", "register_planner"), "registry"),
+    **dict.fromkeys(("Budget", "ExcavatorSpec", "Heightmap", "LoaderSpec", "Machines", "Pose", "Scenario", "Sensing", "Site",
+                     "Soil", "Task", "TruckSpec"), "world"),
+    "observe": "sensing",
+}
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .errors import (
+        EarthbenchError,
+        PlanFormatError,
+        PluginError,
+        ScenarioError,
+        StoreError,
+        SuiteError,
+        UnknownNameError,
+    )
+    from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
+    from .planner import NoConfig, Planner
+    from .referee import Verdict, Violation, judge
+    from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
+    from .sensing import observe
+    from .world import Budget, ExcavatorSpec, Heightmap, LoaderSpec, Machines, Pose, Scenario, Sensing, Site, Soil, Task, TruckSpec
 
 __version__ = "0.1.0"
 
@@ -43,3 +51,12 @@ __all__ = [
     "TERRAINS", "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
     "observe", "register_planner",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value

@@ -96,17 +96,11 @@ def path_cells(
     order, with each centre's distance along the path."""
     r = terrain.resolution
     x0, y0 = terrain.origin
-    ny, nx = shape[0], shape[1]
     cx, cy = contact
     ux, uy = math.cos(heading), math.sin(heading)
     half = width / 2
-    xs = (cx, cx + ux * length)
-    ys = (cy, cy + uy * length)
-    pad = half + r
-    i0 = max(int(math.floor((min(xs) - pad - x0) / r)), 0)
-    i1 = min(int(math.ceil((max(xs) + pad - x0) / r)), nx)
-    j0 = max(int(math.floor((min(ys) - pad - y0) / r)), 0)
-    j1 = min(int(math.ceil((max(ys) + pad - y0) / r)), ny)
+    rows, cols = path_window(terrain, shape, contact, heading, width, length)
+    j0, j1, i0, i1 = rows.start, rows.stop, cols.start, cols.stop
     empty = np.zeros(0, dtype=int)
     if i0 >= i1 or j0 >= j1:
         return empty, empty, np.zeros(0)
@@ -118,6 +112,24 @@ def path_cells(
     jj, ii = np.nonzero(inside)
     order = np.argsort(along[jj, ii], kind="stable")
     return jj[order] + j0, ii[order] + i0, along[jj, ii][order]
+
+
+def path_window(
+    terrain: Heightmap, shape: tuple[int, ...], contact: tuple[float, float], heading: float, width: float, length: float
+) -> tuple[slice, slice]:
+    """The rows and columns of the grid that hold every cell of :func:`path_cells`: all a cut
+    along this path can change (the replay viewer compares only these, not the whole map)."""
+    r = terrain.resolution
+    x0, y0 = terrain.origin
+    cx, cy = contact
+    xs = (cx, cx + math.cos(heading) * length)
+    ys = (cy, cy + math.sin(heading) * length)
+    pad = width / 2 + r
+    i0 = max(int(math.floor((min(xs) - pad - x0) / r)), 0)
+    i1 = min(int(math.ceil((max(xs) + pad - x0) / r)), shape[1])
+    j0 = max(int(math.floor((min(ys) - pad - y0) / r)), 0)
+    j1 = min(int(math.ceil((max(ys) + pad - y0) / r)), shape[0])
+    return slice(j0, max(j1, j0)), slice(i0, max(i1, i0))
 
 
 def charge_cut(

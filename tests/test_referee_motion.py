@@ -203,3 +203,22 @@ def test_a_timeline_pose_is_the_motion_models_pose(curvature, length, n, t):
     p = line.pose(t)
     q = poses_at(line.path, np.array([t]))[0]
     assert (p.x, p.y, p.yaw) == pytest.approx(tuple(q), abs=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(start=st.tuples(st.floats(0.0, 50.0), st.floats(0.0, 50.0), st.floats(-math.pi, math.pi)),
+       goal=st.tuples(st.floats(0.0, 50.0), st.floats(0.0, 50.0)), later=st.floats(0.0, 100.0))
+def test_a_machine_at_rest_stands_exactly_where_its_last_move_ended(start, goal, later):
+    """The arc's end is 1e-15 m off the sample for about half of all drives; the station a
+    planner checked (tilt, track level) must be the one the referee judges, bit for bit."""
+    from earthbench.motion import turn_drive_turn
+    from earthbench.referee.replay import Timeline
+
+    path = turn_drive_turn(Pose(*start), goal, 0.0, 0.5, 0.5)
+    line = Timeline(Pose(*start), [Move("excavator", tuple(path))] if len(path) > 1 else [])
+    t_end, x, y, yaw = path[-1]
+    p = line.pose(t_end + later)
+    assert (p.x, p.y) == (x, y)
+    assert math.cos(p.yaw) == math.cos(yaw) and math.sin(p.yaw) == math.sin(yaw)
+    assert tuple(poses_at(line.path, np.array([t_end + later]))[0, :2]) == (x, y)
+

@@ -94,3 +94,44 @@ def test_pick_runs_takes_a_success_and_an_invalid_run_per_planner(tmp_path):
     jumpy = picked[picked["planner"] == "jumpy"]
     assert "invalid" in set(jumpy["reason"])
     assert len(pick_runs(runs, 0)) == 0
+
+
+def _prefix_frames(sc, plan):
+    """The definition the viewer's frames must meet: the referee's judgement of the digs,
+    charges and dumps up to each action (moves cut nothing), one judgement per action."""
+    order = sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n))
+    work, frames = [], []
+    z, loaded = sc.terrain.z, 0.0
+    for n in order:
+        if plan.actions[n].kind in ("dig", "charge", "dump"):
+            work.append(plan.actions[n])
+            v = judge(sc, Plan(tuple(work)))
+            z, loaded = v.final_terrain.z, v.loaded_volume
+        frames.append((n, z, loaded))
+    return frames
+
+
+def _loader_case():
+    from earthbench.suite import load_suite
+    from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+
+    sc = load_suite("pile").scenarios[0]
+    return sc, SinghCannonLoader().plan(sc)
+
+
+@pytest.mark.parametrize("which", ["greedy", "teleporting", "loader"])
+def test_one_judgement_gives_the_frames_of_judging_every_prefix(case, which):
+    if which == "loader":
+        sc, plan = _loader_case()
+    else:
+        sc, plan = case
+        if which == "teleporting":  # invalid: the frames still show what the referee cut
+            plan = Plan(tuple(a if a.kind != "move" else type(a)(a.machine, tuple((t, x + 3, y, w) for t, x, y, w in a.path))
+                              for a in plan.actions))
+    verdict, steps = replay(sc, plan)
+    assert verdict == judge(sc, plan)
+    expected = _prefix_frames(sc, plan)
+    assert [s.action for s in steps] == [n for n, _, _ in expected]
+    for s, (_, z, loaded) in zip(steps, expected):
+        np.testing.assert_array_equal(s.z, z)
+        assert s.loaded == loaded

@@ -55,10 +55,10 @@ def load_planner_class(source: str, name: str) -> type:
     installed planner's dependencies into every case, seconds of start-up that have nothing
     to do with the planner under test.)
     """
-    from earthbench.planner import Planner
-    from earthbench.registry import PLANNERS
-
     if source.endswith(".py"):
+        from earthbench.planner import Planner
+        from earthbench.registry import PLANNERS
+
         mod_name = f"earthbench_plugin_{os.path.splitext(os.path.basename(source))[0]}"
         spec = importlib.util.spec_from_file_location(mod_name, source)
         if spec is None or spec.loader is None:

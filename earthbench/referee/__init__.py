@@ -23,52 +23,74 @@ re-deriving them:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+import numpy as np
+
 from ..errors import PlanFormatError
 from ..motion import ABS_TOL, RATE_TOL
-from ..plan import Charge, Dig, Dump, Move, Plan
+from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Scenario
-from . import backhoe, loader
 from .replay import RULES, DigRecord, Replay, Verdict, Violation
 
-__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Verdict", "Violation", "judge"]
+__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Observer", "Verdict", "Violation", "judge"]
 
 
-def _run(r: Replay) -> Verdict:
+#: Called after each action, in the referee's time order, with the action's index, the heightmap
+#: as it then stands (read-only, current only during the call) and the m³ in the truck.
+Observer = Callable[[int, np.ndarray, float], None]
+
+
+def _run(r: Replay, observe: Observer | None = None) -> Verdict:
     plan = r.plan
+    z = r.z.view()  # the rules cut r.z in place, so this view stays current
+    z.flags.writeable = False
     for n in sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n)):
         a = plan.actions[n]
         if a.machine not in r.pose:
             r.flag(n, "unknown_machine", 1.0, f"no machine {a.machine!r}; on site: {', '.join(r.pose)}")
-            continue
-        if a.t_start < r.busy_until[a.machine] - ABS_TOL:
-            gap = r.busy_until[a.machine] - a.t_start
-            r.flag(n, "overlap", gap, f"{a.machine} is busy until t={r.busy_until[a.machine]:.3f} s")
-        spec = r.specs.get(a.machine)
-        if isinstance(a, Move):
-            arc = r.move(n, a)
-            if isinstance(spec, LoaderSpec):
-                loader.move(r, n, a, spec, arc)
-        elif isinstance(a, Dig):
-            backhoe.dig(r, n, a)
-        elif isinstance(a, Dump):
-            if isinstance(spec, LoaderSpec):
-                loader.dump(r, n, a, spec)
-            elif a.machine == "excavator" and spec is not None:
-                backhoe.dump(r, n, a, spec)  # type: ignore[arg-type]
-            else:
-                r.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot dump into the truck")
-        elif isinstance(a, Charge):
-            loader.charge(r, n, a)
-        r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
+        else:
+            _act(r, n, a)
+        if observe is not None:
+            observe(n, z, r.loaded)
     r.collisions()
     return r.verdict()
 
 
-def judge(scenario: Scenario, plan: Plan | dict | str) -> Verdict:
+def _act(r: Replay, n: int, a: Action) -> None:
+    # each track's rules load with the first judgement, not with every planner that calls one
+    # of them (a case's start-up, issue 18)
+    from . import backhoe, loader
+
+    if a.t_start < r.busy_until[a.machine] - ABS_TOL:
+        gap = r.busy_until[a.machine] - a.t_start
+        r.flag(n, "overlap", gap, f"{a.machine} is busy until t={r.busy_until[a.machine]:.3f} s")
+    spec = r.specs.get(a.machine)
+    if isinstance(a, Move):
+        arc = r.move(n, a)
+        if isinstance(spec, LoaderSpec):
+            loader.move(r, n, a, spec, arc)
+    elif isinstance(a, Dig):
+        backhoe.dig(r, n, a)
+    elif isinstance(a, Dump):
+        if isinstance(spec, LoaderSpec):
+            loader.dump(r, n, a, spec)
+        elif a.machine == "excavator" and spec is not None:
+            backhoe.dump(r, n, a, spec)  # type: ignore[arg-type]
+        else:
+            r.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot dump into the truck")
+    elif isinstance(a, Charge):
+        loader.charge(r, n, a)
+    r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
+
+
+def judge(scenario: Scenario, plan: Plan | dict | str, observe: Observer | None = None) -> Verdict:
     """Replay ``plan`` on ``scenario`` and return the verdict.
 
     ``plan`` may be a :class:`Plan`, a plan document (dict) or JSON text; a document that
-    cannot be read gives an invalid verdict with a ``malformed`` violation, never an exception.
+    cannot be read gives an invalid verdict with a ``malformed`` violation, never an exception
+    (and ``observe`` is never called). ``observe`` sees the replay's state after every action
+    (:data:`Observer`), so the replay viewer's frames come from this one judgement.
     """
     try:
         if isinstance(plan, Plan):  # built in code: check its form the same way as a document's
@@ -78,4 +100,4 @@ def judge(scenario: Scenario, plan: Plan | dict | str) -> Verdict:
     except (PlanFormatError, TypeError, ValueError, AttributeError) as exc:
         v = Violation(None, "malformed", 1.0, str(exc))
         return Verdict((v,), scenario.terrain, 0.0, 0.0, 0.0)
-    return _run(Replay(scenario, plan))
+    return _run(Replay(scenario, plan), observe)

@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 
 from ..cut import Cut, cut_along, path_cells
-from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, wrap
+from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, sample_yaws, wrap
 from ..plan import Charge, Move, Plan
 from ..soil import cut_levels, slump, slump_box
 from ..world import ExcavatorSpec, LoaderSpec, Pose, Scenario, TruckSpec
@@ -187,7 +187,7 @@ class Timeline:
         self.path = np.array(samples, dtype=float)
         self.arc = arcs(self.path) if len(self.path) > 1 else None
         self.times = self.path[:, 0].tolist()
-        self.yaw0 = (self.path[0, 3] + np.concatenate([[0.0], np.cumsum(self.arc["dyaw"])])).tolist() if self.arc is not None else []
+        self.yaw0 = sample_yaws(self.path, self.arc).tolist() if self.arc is not None else []
         self.moves = [(m.t_start, m.t_end) for m in moves]
 
     def poses(self, times: np.ndarray) -> np.ndarray:
@@ -209,6 +209,8 @@ class Timeline:
         p, a = self.path, self.arc
         if a is None or t <= p[0, 0]:
             return Pose(float(p[0, 1]), float(p[0, 2]), float(p[0, 3]))
+        if t >= self.times[-1]:
+            return Pose(float(p[-1, 1]), float(p[-1, 2]), self.yaw0[-1])
         k = min(bisect.bisect_right(self.times, t) - 1, len(p) - 2)
         dt = float(a["dt"][k])
         f = min(max((t - p[k, 0]) / dt, 0.0), 1.0) if dt > 0 else 1.0
