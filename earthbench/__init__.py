@@ -15,7 +15,7 @@ from .errors import (
     UnknownNameError,
 )
 from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
-from .planner import NoConfig, Planner
+from .planner import NoConfig, Observation, Planner
 from .referee import Verdict, Violation, judge
 from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
 from .world import (
@@ -35,7 +35,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",
-    "Move", "NoConfig", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
+    "Move", "NoConfig", "Observation", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
     "Pose", "Prediction", "Scenario", "ScenarioError", "Site", "StoreError", "SuiteError", "TERRAINS",
     "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
     "register_planner",

@@ -3,19 +3,68 @@
 A planner is a class with a name, a version, the tracks it supports and a frozen ``Config``
 dataclass; ``plan(scenario)`` returns a :class:`~earthbench.plan.Plan`. The harness, not the
 planner, times the call, and the referee, not the planner, decides what the plan achieved.
+
+A planner may also run *closed loop* (docs/DESIGN.md §6): when its configuration says
+``closed_loop = True``, the harness calls :meth:`Planner.step` with an :class:`Observation`
+of the world after the actions executed so far and executes the actions it returns on the
+truth before it calls again, until the planner returns None ("done") or the step cap ends
+the run. Open and closed loop are two configurations with their own hashes.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from .errors import PluginError
 from .plan import Plan
-from .world import Scenario, canonical_json
+from .world import LATER, Scenario, canonical_json
+
+
+def closed_loop_setting() -> Any:
+    """The ``closed_loop`` field of a planner's ``Config`` (default False).
+
+    Left out of the configuration (and so of its hash) while False, so a planner that gains
+    a closed-loop mode keeps the hash, and the stored runs, of its open-loop configuration.
+    """
+    return dataclasses.field(default=False, metadata=LATER)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a closed-loop planner is told before each step; everything comes from the harness.
+
+    ``scenario`` is the planner's view of the world now: the terrain as observed after the
+    executed actions, the machines at their current poses, the task's full target. ``t`` is
+    the plan time the executed actions end at (the next actions may not start earlier),
+    ``loaded`` the volume the truck reports holding (m³), ``turn`` the excavator's upper body
+    relative to its base yaw (rad; what the next swing starts from), ``step`` 0 on the first call.
+    """
+
+    scenario: Scenario
+    step: int = 0
+    t: float = 0.0
+    loaded: float = 0.0
+    turn: float = 0.0
+
+    @property
+    def remaining(self) -> float:
+        """m³ still to load for the task's target."""
+        return max(self.scenario.task.target_volume - self.loaded, 0.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn, "scenario": self.scenario.to_dict()}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> Observation:
+        """Read the harness's message; a bare scenario document is the first observation."""
+        if "scenario" not in doc:
+            return cls(Scenario.from_dict(doc))
+        return cls(Scenario.from_dict(doc["scenario"]), int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]))
 
 
 @dataclass(frozen=True)
@@ -46,12 +95,29 @@ class Planner(ABC):
     def plan(self, scenario: Scenario) -> Plan:
         """Return a plan for ``scenario``. May raise; the harness records it as an error."""
 
+    def step(self, observation: Observation) -> Plan | None:
+        """Closed loop: the next actions (a non-empty plan starting no earlier than
+        ``observation.t``, e.g. up to the next dump), or None when the planner is done.
+
+        Called only when :attr:`closed_loop`; the harness times each call and executes the
+        actions on the truth before the next one. May raise; the harness records it as an error.
+        """
+        raise NotImplementedError(f"planner {self.name!r} has no closed-loop mode (no step method)")
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether the harness runs this configuration step by step (its ``closed_loop`` setting)."""
+        return bool(getattr(self.config, "closed_loop", False))
+
     def supports(self, scenario: Scenario) -> bool:
         return scenario.track in self.tracks
 
     @property
     def config_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.config) if dataclasses.is_dataclass(self.config) else dict(self.config)
+        """The configuration as JSON data (fields marked ``LATER`` left out at their defaults)."""
+        if dataclasses.is_dataclass(self.config):
+            return json.loads(canonical_json(self.config))
+        return dict(self.config)
 
     @property
     def config_hash(self) -> str:

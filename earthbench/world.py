@@ -361,11 +361,18 @@ class Task:
 
 @dataclass(frozen=True)
 class Budget:
-    """Resources a planner gets for one scenario; the harness enforces them."""
+    """Resources a planner gets for one scenario; the harness enforces them.
+
+    ``wall_s`` bounds the planner's compute, over all steps of a closed-loop run; ``step_s``
+    bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6). The two step
+    limits are left out of the JSON at their defaults, so scenarios keep their digests.
+    """
 
     wall_s: float = 300.0
     cores: int = 2
     memory_mb: int = 4096
+    step_s: float = _later(60.0)
+    max_steps: int = _later(1000)
 
 
 @dataclass(frozen=True)

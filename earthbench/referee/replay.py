@@ -88,6 +88,10 @@ class Verdict:
     travel: dict[str, float] = field(default_factory=dict)
     #: (end time, cumulative loaded volume) after each dump, in replay order: when the truck got what.
     load_curve: tuple[tuple[float, float], ...] = ()
+    #: Where each machine stands when the plan ends (what a closed-loop step continues from).
+    final_poses: dict[str, Pose] = field(default_factory=dict)
+    #: The excavator's upper body relative to its base yaw when the plan ends (rad).
+    final_turn: float = 0.0
 
     @property
     def valid(self) -> bool:
@@ -251,6 +255,8 @@ class Replay:
             dumps=self.dumps,
             travel=self.travel,
             load_curve=tuple(self.load_curve),
+            final_poses={mid: tl.pose(self.plan.makespan) for mid, tl in self.timelines.items()},
+            final_turn=self.turn,
         )
 
     # -- motion ------------------------------------------------------------------------------
