@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.plan import Plan
-from earthbench.planner import Planner
+from earthbench.planner import Observation, Planner
 from earthbench.world import Scenario
 from planners.loader_common import CycleBuilder, LoaderPlanConfig, box_volumes, pile_side
 
@@ -97,8 +97,16 @@ class SinghCannonLoader(Planner):
     Config = SinghCannonLoaderConfig
 
     def plan(self, scenario: Scenario) -> Plan:
+        return self._run(CycleBuilder(scenario, self.config))
+
+    def step(self, observation: Observation) -> Plan | None:
+        plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
+        return plan if plan.actions else None
+
+    def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:
+        """Cycles until the target is loaded (or ``max_dumps`` cycles: one closed-loop step)."""
         cfg: SinghCannonLoaderConfig = self.config
-        b = CycleBuilder(scenario, cfg)
+        scenario = b.sc
         spec = b.spec
         truck = scenario.machines.truck_pose
         target = scenario.task.target_volume
@@ -107,6 +115,9 @@ class SinghCannonLoader(Planner):
         while b.loaded < target - 1e-9:
             if len(b.cycles) >= cfg.max_cycles:
                 stop = "max_cycles"
+                break
+            if max_dumps is not None and len(b.cycles) >= max_dumps:
+                stop = "step done"
                 break
             lines = b.contours()
             if not lines:
