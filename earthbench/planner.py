@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 from .errors import PluginError
 from .plan import Plan
-from .world import LATER, Scenario, canonical_json
+from .world import LATER, Heightmap, Pose, Scenario, canonical_json
 
 
 def closed_loop_setting() -> Any:
@@ -56,15 +56,32 @@ class Observation:
         """m³ still to load for the task's target."""
         return max(self.scenario.task.target_volume - self.loaded, 0.0)
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn, "scenario": self.scenario.to_dict()}
+    def to_dict(self, *, compact: bool = False) -> dict[str, Any]:
+        """The harness's message. ``compact``: only what changes from step to step (the terrain
+        and the poses), to be read against the scenario of the first observation."""
+        d: dict[str, Any] = {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn}
+        if compact:
+            m = self.scenario.machines
+            d["terrain"] = self.scenario.terrain.to_dict()
+            d["poses"] = {mid: dataclasses.asdict(m.pose(mid)) for mid in m.ids}
+        else:
+            d["scenario"] = self.scenario.to_dict()
+        return d
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> Observation:
-        """Read the harness's message; a bare scenario document is the first observation."""
-        if "scenario" not in doc:
+    def from_dict(cls, doc: dict[str, Any], first: Scenario | None = None) -> Observation:
+        """Read the harness's message: a bare scenario document is the first observation, a
+        compact one is read against ``first`` (that observation's scenario)."""
+        if "step" not in doc:
             return cls(Scenario.from_dict(doc))
-        return cls(Scenario.from_dict(doc["scenario"]), int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]))
+        if "scenario" in doc:
+            sc = Scenario.from_dict(doc["scenario"])
+        elif first is not None:
+            poses = {f"{mid}_pose": Pose(**p) for mid, p in doc["poses"].items()}
+            sc = dataclasses.replace(first, terrain=Heightmap.from_dict(doc["terrain"]), machines=dataclasses.replace(first.machines, **poses))
+        else:
+            raise ValueError("a compact observation needs the first observation's scenario")
+        return cls(sc, int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]))
 
 
 @dataclass(frozen=True)

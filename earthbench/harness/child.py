@@ -152,8 +152,11 @@ def _steps(planner: Any, doc: dict[str, Any], send: Any) -> bool:
     from earthbench.plan import Plan
     from earthbench.planner import Observation
 
+    first = None
     while True:
-        actions = planner.step(Observation.from_dict(doc))
+        obs = Observation.from_dict(doc, first)
+        first = first or obs.scenario
+        actions = planner.step(obs)
         if actions is None:
             return True
         if not isinstance(actions, Plan):

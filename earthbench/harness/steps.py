@@ -3,8 +3,9 @@
 A closed-loop planner (docs/DESIGN.md §6) answers each :class:`~earthbench.planner.Observation`
 with its next actions. :class:`StepLoop` takes each answer as the harness received it, checks
 it (a readable plan, not empty, starting no earlier than the executed actions end, within the
-plan-size rule), executes it by judging the executed prefix with the referee on the scenario's
-truth, and builds the next observation from the referee's final state. The planner's process
+plan-size rule), executes it on the scenario's truth with the referee's
+:class:`~earthbench.referee.Execution` (the verdict :func:`~earthbench.referee.judge` gives the
+executed prefix, in time linear in the step), and builds the next observation from the referee's final state. The planner's process
 never sees the truth and never judges anything.
 
 :func:`observation` is the one place that turns the truth into what the planner sees.
@@ -21,7 +22,7 @@ from ..errors import PlanFormatError
 from ..motion import ABS_TOL
 from ..plan import Move, Plan, Prediction
 from ..planner import Observation
-from ..referee import Verdict, judge
+from ..referee import Execution, Verdict
 from ..world import Scenario
 
 
@@ -56,7 +57,7 @@ class StepLoop:
 
     def __init__(self, truth: Scenario, *, max_steps: int, max_bytes: int):
         self.truth, self.max_steps, self.max_bytes = truth, max_steps, max_bytes
-        self.actions: list = []
+        self.execution = Execution(truth)
         self.steps: list[tuple[int, float]] = []  # (actions, harness-measured compute seconds) per call
         self.predicted: list[float | None] = []
         self.bytes = 0
@@ -86,8 +87,7 @@ class StepLoop:
                 return f"step {k}: action {n} starts at t={start:.3f} s, before the executed actions end (t={t0:.3f} s)"
         self.steps.append((len(plan.actions), compute_s))
         self.predicted.append(plan.predicted.volume)
-        self.actions.extend(plan.actions)
-        self.verdict = judge(self.truth, self.plan())
+        self.verdict = self.execution.execute(plan.actions)
         if not self.verdict.valid:
             self.ended = f"step {k} broke the referee's rules; the run ended there"
         elif len(self.steps) >= self.max_steps:
@@ -101,10 +101,10 @@ class StepLoop:
         """The message that hands the planner its next observation (one line of JSON)."""
         assert self.verdict is not None
         obs = observation(self.truth, self.verdict, len(self.steps))
-        return json.dumps(obs.to_dict()).encode() + b"\n"
+        return json.dumps(obs.to_dict(compact=True)).encode() + b"\n"
 
     def plan(self) -> Plan:
         """The executed steps as one plan: what is stored, re-judged and replayed."""
         known = [v for v in self.predicted if v is not None]
         volume = sum(known) if known and len(known) == len(self.predicted) else None
-        return Plan(tuple(self.actions), Prediction(volume=volume), {"closed_loop": True, "steps": [n for n, _ in self.steps]})
+        return Plan(self.execution.plan.actions, Prediction(volume=volume), {"closed_loop": True, "steps": [n for n, _ in self.steps]})

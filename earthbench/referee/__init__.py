@@ -23,19 +23,22 @@ re-deriving them:
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from ..errors import PlanFormatError
 from ..motion import ABS_TOL, RATE_TOL
-from ..plan import Charge, Dig, Dump, Move, Plan
+from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Scenario
 from . import backhoe, loader
 from .replay import RULES, DigRecord, Replay, Verdict, Violation
 
-__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Verdict", "Violation", "judge"]
+__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Execution", "Verdict", "Violation", "judge"]
 
 
-def _run(r: Replay) -> Verdict:
+def _act(r: Replay, indices: Iterable[int]) -> None:
+    """Replay the plan's actions ``indices`` in time order."""
     plan = r.plan
-    for n in sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n)):
+    for n in sorted(indices, key=lambda n: (plan.actions[n].t_start, n)):
         a = plan.actions[n]
         if a.machine not in r.pose:
             r.flag(n, "unknown_machine", 1.0, f"no machine {a.machine!r}; on site: {', '.join(r.pose)}")
@@ -60,8 +63,38 @@ def _run(r: Replay) -> Verdict:
         elif isinstance(a, Charge):
             loader.charge(r, n, a)
         r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
+
+
+def _run(r: Replay) -> Verdict:
+    _act(r, range(len(r.plan.actions)))
     r.collisions()
     return r.verdict()
+
+
+class Execution:
+    """A plan judged step by step, as a closed loop executes it (docs/DESIGN.md §6).
+
+    Each :meth:`execute` replays one step's actions after those before, on the same replay
+    state, and returns the verdict :func:`judge` gives the plan executed so far — in time
+    linear in the step, not in the plan. The steps' actions must start no earlier than the
+    plan so far ends (the harness checks that before it executes a step).
+    """
+
+    def __init__(self, scenario: Scenario):
+        self.replay = Replay(scenario, Plan())
+
+    @property
+    def plan(self) -> Plan:
+        return self.replay.plan
+
+    def execute(self, actions: tuple[Action, ...]) -> Verdict:
+        r = self.replay
+        _act(r, r.extend(actions))
+        kept = len(r.violations)
+        r.collisions()  # along the whole of both paths so far; checked again after the next step
+        verdict = r.verdict()
+        del r.violations[kept:]
+        return verdict
 
 
 def judge(scenario: Scenario, plan: Plan | dict | str) -> Verdict:

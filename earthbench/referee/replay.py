@@ -220,15 +220,7 @@ class Replay:
             self.specs["excavator"] = m.excavator
         if m.loader is not None:
             self.specs["loader"] = m.loader
-        moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
-        for a in plan.actions:
-            if isinstance(a, Move) and a.machine in moves:
-                moves[a.machine].append(a)
-            elif isinstance(a, Charge) and a.machine in moves:  # a charge moves the loader too
-                (x, y, yaw), (ex, ey, _) = a.entry, a.end
-                if a.t_end > a.t_start:
-                    moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
-        self.timelines = {mid: Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
+        self.timelines = self._timelines()
         self.busy_until = {mid: 0.0 for mid in m.ids}
         self.pose = {mid: m.pose(mid) for mid in m.ids}
         self.turn = 0.0  # excavator's upper body angle relative to its base yaw
@@ -240,6 +232,27 @@ class Replay:
         self.load_curve: list[tuple[float, float]] = []
         self.travel = {mid: 0.0 for mid in m.ids}
         self.station: tuple[Pose, float, float] | None = None  # excavator: pose, track level, tilt
+
+    def _timelines(self) -> dict[str, Timeline]:
+        m = self.sc.machines
+        moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
+        for a in self.plan.actions:
+            if isinstance(a, Move) and a.machine in moves:
+                moves[a.machine].append(a)
+            elif isinstance(a, Charge) and a.machine in moves:  # a charge moves the loader too
+                (x, y, yaw), (ex, ey, _) = a.entry, a.end
+                if a.t_end > a.t_start:
+                    moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
+        return {mid: Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
+
+    def extend(self, actions: tuple[Any, ...]) -> range:
+        """Append a closed-loop step's actions to the plan being replayed (docs/DESIGN.md §6);
+        returns their indices. They start no earlier than the plan so far ends, so replaying
+        them next gives the state a replay of the whole plan would."""
+        n0 = len(self.plan.actions)
+        self.plan = Plan(self.plan.actions + tuple(actions))
+        self.timelines = self._timelines()
+        return range(n0, len(self.plan.actions))
 
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
         self.violations.append(Violation(n, rule, float(magnitude), message))
