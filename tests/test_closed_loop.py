@@ -125,3 +125,28 @@ def test_the_wall_budget_counts_compute_over_all_steps(tmp_path):
     df, _ = run(tmp_path, suite_toml("wall", wall_s=2.0, step_s=3.0), ["s-hang"])
     assert df.reason["s-hang"] == "timeout" and "wall budget of 2 s over 2 step(s)" in df.error["s-hang"]
     assert 2.0 <= df.solve_time_s["s-hang"] < 4.0
+
+
+@pytest.mark.parametrize("suite_name, planner", [("quick", "greedy"), ("pile", "greedy-loader")])
+def test_execution_step_by_step_is_judge_of_the_prefix(suite_name, planner):
+    from earthbench.plan import Dump, Plan
+    from earthbench.referee import Execution
+    from earthbench.registry import PLANNERS
+    from earthbench.suite import load_suite
+
+    sc = load_suite(suite_name).scenarios[0]
+    cycles, cur = [], []
+    for a in PLANNERS.get(planner)().plan(sc).actions:
+        cur.append(a)
+        if isinstance(a, Dump):
+            cycles.append(tuple(cur))
+            cur = []
+    assert len(cycles) >= 2
+    ex, done = Execution(sc), ()
+    for c in cycles:
+        v = ex.execute(c)
+        done += c
+        w = judge(sc, Plan(done))
+        assert v.violations == w.violations and v.digs == w.digs and v.load_curve == w.load_curve
+        assert v.loaded_volume == w.loaded_volume and v.final_terrain == w.final_terrain
+        assert v.final_poses == w.final_poses and v.final_turn == w.final_turn and v.makespan == w.makespan
