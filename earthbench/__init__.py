@@ -18,6 +18,7 @@ from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
 from .planner import NoConfig, Observation, Planner
 from .referee import Verdict, Violation, judge
 from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
+from .sensing import observe
 from .world import (
     Budget,
     ExcavatorSpec,
@@ -26,7 +27,9 @@ from .world import (
     Machines,
     Pose,
     Scenario,
+    Sensing,
     Site,
+    Soil,
     Task,
     TruckSpec,
 )
@@ -36,7 +39,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",
     "Move", "NoConfig", "Observation", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
-    "Pose", "Prediction", "Scenario", "ScenarioError", "Site", "StoreError", "SuiteError", "TERRAINS",
-    "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
-    "register_planner",
+    "Pose", "Prediction", "Scenario", "ScenarioError", "Sensing", "Site", "Soil", "StoreError", "SuiteError",
+    "TERRAINS", "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
+    "observe", "register_planner",
 ]

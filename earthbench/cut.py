@@ -62,12 +62,13 @@ def cut_along(
     heading: float,
     width: float,
     length: float,
-    level: float,
+    level: float | np.ndarray,
     capacity: float,
     cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Cut:
     """:func:`apply_cut`, also telling where along the path the bucket filled; ``cells`` is
-    :func:`path_cells` of the same path when the caller already has it."""
+    :func:`path_cells` of the same path when the caller already has it. ``level`` may also be
+    an array, one level per path cell (the referee's soil: a harder layer, ``earthbench.soil``)."""
     if capacity <= 0:
         return Cut(0.0, 0.0)
     r = terrain.resolution
@@ -77,7 +78,7 @@ def cut_along(
     excess = np.maximum(z[jj, ii] - level, 0.0) * (r * r)
     total = np.cumsum(excess)
     full = int(np.searchsorted(total, capacity, side="right"))
-    z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], level)
+    z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], level if np.ndim(level) == 0 else level[:full])
     removed = float(total[full - 1]) if full else 0.0
     if full < jj.size and removed < capacity:
         part = capacity - removed

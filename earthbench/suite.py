@@ -32,6 +32,10 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     seeds = [0, 1]                   # or "0-9"
     [family.params]
     n_bases = 14
+    [family.soil]                    # optional (realistic track): a material, drawn per seed
+    material = "loam"                # earthbench.soil.MATERIALS; other Soil fields fix a value
+    [family.sensing]                 # optional: earthbench.world.Sensing (seed: the scenario's)
+    noise = 0.01
     [config.NAME]                    # optional Planner(**overrides) per planner name
     steepness = 20.0
 
@@ -61,7 +65,8 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .world import TRACKS, Budget, Scenario
+from .soil import draw
+from .world import TRACKS, Budget, Scenario, Sensing
 
 SUITE_GROUP = "earthbench.suites"
 DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
@@ -70,7 +75,7 @@ DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
 #: when the suite is loaded, before anything is generated.
 MAX_CELLS = 4_000_000
 _TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include")
-_FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params")
+_FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params", "soil", "sensing")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
 
 
@@ -96,6 +101,18 @@ class Family:
     targets: tuple[float, ...]
     seeds: tuple[int, ...]
     params: dict[str, Any] = field(default_factory=dict, hash=False)
+    soil: dict[str, Any] | None = field(default=None, hash=False)
+    sensing: dict[str, Any] | None = field(default=None, hash=False)
+
+    def realism(self, seed: int) -> dict[str, Any]:
+        """The scenario sections of the realistic track for ``seed``: the soil drawn from its
+        material with that seed (:func:`earthbench.soil.draw`), the sensing seeded with it."""
+        out: dict[str, Any] = {}
+        if self.soil is not None:
+            out["soil"] = draw(self.soil, seed, f"family {self.name!r} soil")
+        if self.sensing is not None:
+            out["sensing"] = Sensing(**{"seed": seed, **self.sensing})
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,7 +153,7 @@ class Suite:
                     if sc.track != self.track:
                         raise SuiteError(f"{self._where}: family {fam.name!r} makes {sc.track!r} scenarios but the suite's track is {self.track!r}")
                     meta = {**sc.meta, "suite": self.name, "family": fam.name, "seed": seed, "target": target}
-                    out.append(sc.replace(id=sid, budget=self.budget, meta=meta))
+                    out.append(sc.replace(id=sid, budget=self.budget, meta=meta, **fam.realism(seed)))
         return tuple(out)
 
     @cached_property
@@ -334,6 +351,20 @@ def _split(text: str, sep: str) -> list[str]:
     return [*out, cur]
 
 
+def _check_realism(fam: Family, where: str) -> None:
+    """Refuse a family's ``soil`` or ``sensing`` table that no scenario could carry, naming the key."""
+    for key in ("soil", "sensing"):
+        table = getattr(fam, key)
+        if table is not None and not isinstance(table, dict):
+            raise SuiteError(f"{where}: {key} must be a table, got {table!r:.40}")
+    if fam.sensing is not None:
+        _unknown(fam.sensing, [f.name for f in dataclasses.fields(Sensing)], f"{where} sensing")
+    try:
+        fam.realism(fam.seeds[0])
+    except EarthbenchError as exc:
+        raise SuiteError(f"{where}: {exc}") from None
+
+
 def _included_families(names: Any, where: str, path: str, track: str, stack: tuple[str, ...]) -> list[Family]:
     """The families of the suites named in ``include``, renamed ``SUITE.FAMILY``."""
     if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
@@ -424,7 +455,10 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         if not isinstance(params, dict):
             raise SuiteError(f"{fwhere}: params must be a table")
         params = _check_params(gen, params, fwhere, path)
-        families.append(Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params))
+        fam = Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params,
+                     fd.get("soil"), fd.get("sensing"))
+        _check_realism(fam, fwhere)
+        families.append(fam)
     if "include" in doc:
         families.extend(_included_families(doc["include"], where, path, track, _stack + (name,)))
     if len({f.name for f in families}) != len(families):

@@ -389,6 +389,83 @@ class Budget:
     max_steps: int = _later(1000)
 
 
+def _number(value: Any, where: str, *, lo: float | None = None, hi: float | None = None,
+            lo_open: bool = False, hi_open: bool = False, integer: bool = False) -> Any:
+    """``value`` checked as a finite number (an integer when ``integer``) in the given range;
+    a :class:`ScenarioError` naming ``where`` (the field's path) otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
+        want = "an integer" if integer else "a number"
+        raise ScenarioError(f"scenario field {where} must be {want}, got {type(value).__name__} {value!r:.40}")
+    if not math.isfinite(value):
+        raise ScenarioError(f"scenario field {where} must be finite, got {value}")
+    if lo is not None and (value < lo or (lo_open and value == lo)):
+        raise ScenarioError(f"scenario field {where} must be {'>' if lo_open else '≥'} {lo:g}, got {value:g}")
+    if hi is not None and (value > hi or (hi_open and value == hi)):
+        raise ScenarioError(f"scenario field {where} must be {'<' if hi_open else '≤'} {hi:g}, got {value:g}")
+    return value if integer else float(value)
+
+
+@dataclass(frozen=True)
+class Soil:
+    """How the ground really responds to digging; known to the referee only (docs/DESIGN.md §3).
+
+    ``material`` names the class (``earthbench.soil.MATERIALS``), the one thing a planner is
+    told. ``fill_factor``: the bank volume a full stroke or charge really holds, as a fraction of
+    the machine's ``bucket_capacity``. ``swell``: loose ÷ bank volume (the truck's capacity
+    counts loose m³). ``repose_deg``: the angle of repose; after each cut every slope between
+    neighbouring cells steeper than it slumps (mass-conserving). ``hard_depth``: a harder
+    layer starts this far below the initial surface (``None``: none); one stroke penetrates at
+    most ``hard_penetration`` m into it. Values out of range are refused with the field's path.
+    """
+
+    material: str
+    fill_factor: float
+    swell: float
+    repose_deg: float
+    hard_depth: float | None = None
+    hard_penetration: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.material, str) or not self.material:
+            raise ScenarioError(f"scenario field soil.material must be a non-empty string, got {self.material!r:.40}")
+        object.__setattr__(self, "fill_factor", _number(self.fill_factor, "soil.fill_factor", lo=0.0, hi=2.0, lo_open=True))
+        object.__setattr__(self, "swell", _number(self.swell, "soil.swell", lo=1.0, hi=3.0))
+        object.__setattr__(self, "repose_deg", _number(self.repose_deg, "soil.repose_deg", lo=0.0, hi=90.0, lo_open=True, hi_open=True))
+        if self.hard_depth is not None:
+            object.__setattr__(self, "hard_depth", _number(self.hard_depth, "soil.hard_depth", lo=0.0))
+        object.__setattr__(self, "hard_penetration", _number(self.hard_penetration, "soil.hard_penetration", lo=0.0, lo_open=True))
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """The scan a planner receives instead of the true heightmap (docs/DESIGN.md §3;
+    :func:`earthbench.sensing.observe`).
+
+    ``cell_size``: the scan's grid (a whole multiple of the terrain's resolution; ``None``: the
+    terrain's). ``noise``: σ (m) of the independent Gaussian error of each scanned cell;
+    ``bias``: a constant height offset (m). ``occlusion``: cells hidden from a sensor
+    ``sensor_height`` m above the ground at the working machine's pose are not measured (filled
+    from the nearest measured cell). ``seed`` seeds the noise (mixed with the scan's step).
+    """
+
+    noise: float = 0.0
+    bias: float = 0.0
+    cell_size: float | None = None
+    occlusion: bool = True
+    sensor_height: float = 2.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "noise", _number(self.noise, "sensing.noise", lo=0.0))
+        object.__setattr__(self, "bias", _number(self.bias, "sensing.bias"))
+        if self.cell_size is not None:
+            object.__setattr__(self, "cell_size", _number(self.cell_size, "sensing.cell_size", lo=0.0, lo_open=True))
+        if self.occlusion not in (True, False):
+            raise ScenarioError(f"scenario field sensing.occlusion must be true or false, got {self.occlusion!r:.40}")
+        object.__setattr__(self, "sensor_height", _number(self.sensor_height, "sensing.sensor_height", lo=0.0, lo_open=True))
+        object.__setattr__(self, "seed", _number(self.seed, "sensing.seed", lo=0, integer=True))
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One benchmark problem. Immutable; ``digest`` identifies its content on every machine.
@@ -405,6 +482,8 @@ class Scenario:
     track: Track = "backhoe"
     budget: Budget = Budget()
     meta: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    soil: Soil | None = _later(None)
+    sensing: Sensing | None = _later(None)
 
     def __post_init__(self) -> None:
         if self.track not in TRACKS:
@@ -412,6 +491,16 @@ class Scenario:
         needed = {"backhoe": "excavator", "wheel_loader": "loader"}[self.track]
         if getattr(self.machines, needed, None) is None:
             raise ScenarioError(f"a {self.track} scenario needs machines.{needed}")
+        cell = self.sensing.cell_size if self.sensing is not None else None
+        if cell is not None:
+            k = cell / self.terrain.resolution
+            if abs(k - round(k)) > 1e-9 * k or round(k) < 1:
+                raise ScenarioError(f"scenario field sensing.cell_size ({cell:g} m) must be a whole multiple of the terrain's resolution ({self.terrain.resolution:g} m)")
+
+    @property
+    def worker(self) -> str:
+        """The machine that digs: ``excavator`` (backhoe track) or ``loader`` (wheel-loader track)."""
+        return "excavator" if self.track == "backhoe" else "loader"
 
     @property
     def outside_open(self) -> bool:
@@ -484,6 +573,8 @@ class Scenario:
                 track=d.get("track", "backhoe"),
                 budget=_checked(Budget, d.get("budget", {}), "budget"),
                 meta=dict(d.get("meta", {})),
+                soil=_checked(Soil, d["soil"], "soil") if d.get("soil") is not None else None,
+                sensing=_checked(Sensing, d["sensing"], "sensing") if d.get("sensing") is not None else None,
             )
         except ScenarioError:
             raise
@@ -535,7 +626,7 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
             hint = f" (did you mean {path}.{close[0]}?)" if close else f"; its fields: {', '.join(fields)}"
             raise ScenarioError(f"scenario field {where} is unknown{hint}")
         kind = str(f.type)
-        if kind not in ("float", "int"):
+        if kind not in ("float", "int") or cls in (Soil, Sensing):  # these check their own ranges
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind == "int" and not isinstance(value, int)):
             want = "an integer" if kind == "int" else "a number"

@@ -25,7 +25,13 @@ PINNED = {
     "scale": ("bba4c64802b31e045fa16718ded99996bd69f0cffc70bca0b93c9a88e828cbb0", 40),
     "standard": ("ee060f3ffea5a59bde3690940dabe22d47930d1fe85dc85a313d5a1d04d36b55", 110),
     "paper-separate-sweep": ("2b7c6f2a2ff0652b89206f0b399c5a4e90d6b4262b6f603a5bd050cd26b6bfa8", 10),
+    "paper-extensive-realistic": ("1566b145ff463b710cd4f99697eec18c6adbee98f548b693a7aed5828d6dce1a", 24),
+    "bench-realistic": ("885c776aee8be79d087be2459681ae462fd6a0e94d043920e481cb07b4877943", 12),
+    "dem-realistic": ("ec1d302612121fcb2e84b1753fdf81fada050ad8e611405a284636bb94813cf2", 12),
+    "standard-realistic": ("bada4b0e98754785279bfe0c9ed464d53e7f97ec67b24c7dc68243d98b0de11c", 48),
 }
+#: The realistic loader suite (a wheel-loader suite, so outside the backhoe checks below).
+PILE_REALISTIC = ("03f40951c961f54705214a82d1d3a5c19c2ff3163efdf1e162ad609cbc602711", 12)
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +101,21 @@ def test_standard_is_the_union_and_shares_digests(suites):
     assert sorted(sc.digest for sc in suites["standard"].scenarios) == union
     ids = {sc.id for sc in suites["standard"].scenarios}
     assert "standard/paper-extensive.rbf30/s0/v4" in ids
+
+
+def test_realistic_suites_carry_soil_and_sensing_on_their_exact_terrains(suites):
+    pile = load_suite("pile-realistic")
+    assert (pile.digest, len(pile.scenarios)) == PILE_REALISTIC
+    parts = ("paper-extensive-realistic", "bench-realistic", "dem-realistic")
+    union = sorted(sc.digest for p in parts for sc in suites[p].scenarios)
+    assert sorted(sc.digest for sc in suites["standard-realistic"].scenarios) == union
+    for name, plain in (("paper-extensive-realistic", "paper-extensive"), ("bench-realistic", "bench"), ("dem-realistic", "dem")):
+        terrains = {sc.meta["seed"]: sc.terrain for sc in suites[plain].scenarios}
+        for sc in suites[name].scenarios:
+            assert sc.soil is not None and sc.sensing is not None and sc.sensing.seed == sc.meta["seed"]
+            assert sc.terrain == terrains[sc.meta["seed"]]  # the exact suite's map, now with soil and a scan
+    combos = {(sc.soil.material, sc.sensing.occlusion) for sc in suites["standard-realistic"].scenarios + pile.scenarios}
+    assert combos == {(m, o) for m in ("sand", "loam", "clay") for o in (False, True)}
 
 
 def test_include_errors(tmp_path):

@@ -7,6 +7,7 @@ import sys
 import time
 
 from ..registry import PLANNERS
+from ..sensing import observe
 from ._common import add_config_arg, add_plugin_arg, add_scenario_args, load_plugins, load_scenario, parse_config
 
 
@@ -33,8 +34,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args)
     if args.save_scenario:
         scenario.to_json(args.save_scenario)
+    view = observe(scenario)  # the planner sees the scan and the nominal soil, as under the harness
     t0 = time.perf_counter()
-    plan = cls(**overrides).plan(scenario)
+    plan = cls(**overrides).plan(view)
     dt = time.perf_counter() - t0
     text = plan.to_json(args.out)
     if not args.out:

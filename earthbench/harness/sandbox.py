@@ -21,7 +21,9 @@ What ``run_case`` enforces (the trust model is in the README, "What a plugin can
   kernel's CPU accounting of the case's process tree over the same span (never negative);
 * every message validated: anything malformed, out of order or larger than
   :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
-* the referee runs here, in the harness process, never inside the planner's process.
+* the referee runs here, in the harness process, never inside the planner's process;
+* the planner gets :func:`earthbench.sensing.observe` of the scenario (the scan and the
+  soil's nominal class), computed here; the referee judges on the truth.
 
 Termination reasons: ``ok`` (a valid plan), ``invalid`` (the referee found violations),
 ``timeout``, ``memory``, ``error`` (with the traceback or the protocol fault), ``crashed``
@@ -57,6 +59,7 @@ from .cases import Case, CaseResult, utc_now
 from .child import BOOTSTRAP
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
+from ..sensing import observe
 from .slots import SlotPool
 from .steps import StepLoop, step_metrics
 
@@ -162,7 +165,7 @@ def run_case(
             log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-        scenario = json.dumps(case.scenario.to_dict()).encode() + b"\n"
+        scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
         loop = StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES) if case.planner.config.get("closed_loop") else None
         mr, mw = os.pipe()
         rr, rw = os.pipe()

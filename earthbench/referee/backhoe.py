@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..cut import cut_along, cut_level, footprint, path_cells
+from ..cut import cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
 from ..world import ExcavatorSpec, Heightmap, Pose, Scenario
@@ -86,12 +86,14 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     level = cut_level(r.terrain, r.z, a.contact, a.depth)
     floor = r.sc.site.floor
     if floor is not None and level < floor - ABS_TOL:
-        r.flag(n, "below_floor", floor - level, f"cut level {level:.4f} m is below the floor {floor} m")
+        if r.sc.sensing is None:  # with a scan, the machine's grade control holds the floor (README, "The referee")
+            r.flag(n, "below_floor", floor - level, f"cut level {level:.4f} m is below the floor {floor} m")
         level = floor
     cells = path_cells(r.terrain, r.z.shape, a.contact, a.heading, spec.bucket_width, a.drag_length)
     jj, ii, _ = cells
     before = r.z[jj, ii]
-    vol = cut_along(r.terrain, r.z, a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity - r.bucket, cells).volume
+    cut, nominal = r.cut(a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity, a.depth, cells)
+    vol = cut.volume
     # no cut reaches below the undermining line while its level is at or above the tracks' ground
     excess = -math.inf
     if level < level_under - ABS_TOL:
@@ -99,9 +101,10 @@ def dig(r: Replay, n: int, a: Dig) -> None:
         excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj[cut], ii[cut])
     if excess > ABS_TOL:
         r.flag(n, "undermining", excess, f"the cut leaves ground {excess:.3f} m below the line falling {spec.undermine_slope:g} m per m from the tracks (ground under them {level_under:.3f} m)")
+    r.settle()
     r.bucket += vol
     r.removed += vol
-    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity))
+    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, nominal))
     r.turn = math.atan2(a.contact[1] - base.y, a.contact[0] - base.x) - base.yaw
 
 
@@ -130,7 +133,7 @@ def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     need = min_dump_time(base, r.turn, (tpos.x, tpos.y), spec)
     if a.t_end - a.t_start < need - ABS_TOL:
         r.flag(n, "duration", need - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the swing and dump need {need:.3f} s")
-    take = min(r.bucket, max(truck_spec.capacity - r.loaded, 0.0))
+    take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
     r.loaded += take
     r.bucket -= take
     r.dumps += 1

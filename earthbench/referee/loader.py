@@ -159,7 +159,7 @@ def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, 
 
 def step(r: Replay, n: int, machine: str, spec: LoaderSpec, path: np.ndarray, arc: dict[str, np.ndarray] | None = None) -> None:
     base = loader_base_level(r.sc)
-    excess, x, y = wheel_step_excess(r.terrain, r.z, spec, path, base, arc)
+    excess, x, y = wheel_step_excess(r.terrain, r.ground, spec, path, base, arc)
     if excess > ABS_TOL:
         r.flag(n, "step", excess, f"{machine}'s wheels cross a cell {spec.max_step + excess:.3f} m above the base level {base:g} m at ({x:.2f}, {y:.2f}); traversable step {spec.max_step} m")
 
@@ -202,15 +202,27 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     charge_arc = arcs(path)
     r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
     level = r.sc.site.floor if r.sc.site.floor is not None else loader_base_level(r.sc)
-    cut = charge_along(r.terrain, r.z, spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket)
-    if cut.full_at is not None:
-        _overfill(r, n, spec, edge, yaw, a.penetration, level, cut.full_at)
+    if r.soil is None:
+        cut, nominal = charge_along(r.terrain, r.z, spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket), None
+        full_at = cut.full_at
+    else:  # overfill is judged on the public cut model: where the plan could know the bucket fills
+        full_at = charge_along(r.terrain, r.z.copy(), spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket).full_at
+        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, edge, yaw, a.penetration, level))
+    if full_at is not None:
+        _overfill(r, n, spec, edge, yaw, a.penetration, level, full_at)
     r.bucket += cut.volume
     r.removed += cut.volume
-    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity))
+    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity, nominal))
     step(r, n, a.machine, spec, path, charge_arc)
+    r.settle()  # the face slumps as the bucket withdraws: into the channel it cut, ahead of the wheels
     r.travel[a.machine] += a.penetration
     r.pose[a.machine] = Pose(ex, ey, yaw)
+
+
+def _pile_height(r: Replay, edge: tuple[float, float], yaw: float, penetration: float, level: float) -> float:
+    """The highest face a charge can leave: the pile's height above ``level`` along its path."""
+    jj, ii, _ = path_cells(r.terrain, r.z.shape, edge, yaw, r.specs["loader"].bucket_width, penetration)  # type: ignore[union-attr]
+    return float(np.max(r.z[jj, ii] - level, initial=0.0))
 
 
 def _overfill(r: Replay, n: int, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float, full_at: float) -> None:
@@ -237,7 +249,7 @@ def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
         r.flag(n, "dump_reach", off, f"the truck lies {math.degrees(off + math.pi / 4):.1f}° off the loader's heading; at most 45°")
     if a.t_end - a.t_start < spec.min_dump_time - ABS_TOL:
         r.flag(n, "duration", spec.min_dump_time - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s")
-    take = min(r.bucket, max(truck_spec.capacity - r.loaded, 0.0))
+    take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
     r.loaded += take
     r.bucket -= take
     r.dumps += 1

@@ -9,6 +9,7 @@ moves more than that between two poses), so a plan cannot pass by being sampled 
 from __future__ import annotations
 
 import bisect
+import hashlib
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,8 +17,10 @@ from typing import Any
 import numpy as np
 import shapely
 
+from ..cut import Cut, cut_along, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, wrap
 from ..plan import Charge, Move, Plan
+from ..soil import cut_levels, slump, slump_box
 from ..world import ExcavatorSpec, LoaderSpec, Pose, Scenario, TruckSpec
 
 Spec = ExcavatorSpec | TruckSpec | LoaderSpec
@@ -69,9 +72,20 @@ class Violation:
 
 @dataclass(frozen=True)
 class DigRecord:
+    """One dig or charge: the bank volume it really removed, that ÷ the bucket's capacity, and
+    (only on a scenario with soil) ``nominal``: what the public cut model
+    (:mod:`earthbench.cut`) removes on the same ground, the planner's best prediction."""
+
     action: int
     volume: float
     fill: float
+    nominal: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"action": self.action, "volume": self.volume, "fill": self.fill}
+        if self.nominal is not None:
+            d["nominal"] = self.nominal
+        return d
 
 
 @dataclass(frozen=True)
@@ -96,6 +110,23 @@ class Verdict:
     @property
     def valid(self) -> bool:
         return not self.violations
+
+    def to_dict(self) -> dict[str, Any]:
+        """The verdict as plain JSON values; the final terrain as the sha256 of its heights
+        (little-endian float64), so two verdicts compare byte for byte."""
+        z = np.ascontiguousarray(self.final_terrain.z, dtype="<f8")
+        return {
+            "valid": self.valid,
+            "violations": [v.to_dict() for v in self.violations],
+            "loaded_volume": self.loaded_volume,
+            "removed_volume": self.removed_volume,
+            "makespan": self.makespan,
+            "digs": [d.to_dict() for d in self.digs],
+            "dumps": self.dumps,
+            "travel": dict(self.travel),
+            "load_curve": [list(p) for p in self.load_curve],
+            "final_terrain_sha256": hashlib.sha256(z.tobytes()).hexdigest(),
+        }
 
     def summary(self) -> str:
         if self.valid:
@@ -232,6 +263,12 @@ class Replay:
         self.load_curve: list[tuple[float, float]] = []
         self.travel = {mid: 0.0 for mid in m.ids}
         self.station: tuple[Pose, float, float] | None = None  # excavator: pose, track level, tilt
+        self.soil = scenario.soil
+        #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
+        self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
+        self._unsettled: tuple[tuple[int, int, int, int], np.ndarray] | None = None
+        #: with soil, the firm ground: the heights less the loose material slumping left on top
+        self.firm: np.ndarray | None = None if self.soil is None else self.z.copy()
 
     def _timelines(self) -> dict[str, Timeline]:
         m = self.sc.machines
@@ -271,6 +308,49 @@ class Replay:
             final_poses={mid: tl.pose(self.plan.makespan) for mid, tl in self.timelines.items()},
             final_turn=self.turn,
         )
+
+    # -- cutting -----------------------------------------------------------------------------
+    def cut(self, contact: tuple[float, float], heading: float, width: float, length: float, level: float,
+            bucket_capacity: float, depth: float, cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[Cut, float | None]:
+        """Cut the grid along a stroke or charge into a bucket of ``bucket_capacity`` that
+        already holds ``self.bucket``; returns the cut and, with soil, the nominal volume.
+
+        Without soil this is :func:`~earthbench.cut.cut_along`. With soil the bucket really
+        holds ``fill_factor × bucket_capacity`` bank m³, the harder layer limits the level
+        (:func:`~earthbench.soil.cut_levels`), and :meth:`settle` must follow once the rules
+        that look at the fresh cut have been checked; the nominal volume is what the public
+        cut model removes from the same ground.
+        """
+        if cells is None:
+            cells = path_cells(self.terrain, self.z.shape, contact, heading, width, length)
+        if self.soil is None:
+            return cut_along(self.terrain, self.z, contact, heading, width, length, level, bucket_capacity - self.bucket, cells), None
+        nominal = cut_along(self.terrain, self.z.copy(), contact, heading, width, length, level, bucket_capacity - self.bucket, cells).volume
+        jj, ii, _ = cells
+        if jj.size:
+            box = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg)
+            self._unsettled = (box, self.z[box[0]:box[1], box[2]:box[3]].copy())
+        levels = cut_levels(self.soil, self.sc.terrain.z, self.z, jj, ii, level)
+        real = cut_along(self.terrain, self.z, contact, heading, width, length, levels,
+                         self.soil.fill_factor * bucket_capacity - self.bucket, cells)
+        if self.firm is not None and jj.size:
+            self.firm[jj, ii] = np.minimum(self.firm[jj, ii], self.z[jj, ii])
+        return real, nominal
+
+    def settle(self) -> None:
+        """Slump the faces the last cut left steeper than the soil's angle of repose."""
+        if self.soil is not None and self._unsettled is not None:
+            (j0, j1, i0, i1), before = self._unsettled
+            slump(self.z, self.terrain.resolution, self.soil.repose_deg, before, (j0, j1, i0, i1))
+            if self.firm is not None:  # what fell is loose: the firm ground only ever goes down
+                np.minimum(self.firm[j0:j1, i0:i1], self.z[j0:j1, i0:i1], out=self.firm[j0:j1, i0:i1])
+        self._unsettled = None
+
+    @property
+    def ground(self) -> np.ndarray:
+        """The ground a wheel stands on: the heights, less (with soil) the loose material that
+        slumped, which a loader drives over and through."""
+        return self.z if self.firm is None else self.firm
 
     # -- motion ------------------------------------------------------------------------------
     def move(self, n: int, a: Move) -> dict[str, np.ndarray]:
