@@ -150,3 +150,13 @@ def test_execution_step_by_step_is_judge_of_the_prefix(suite_name, planner):
         assert v.violations == w.violations and v.digs == w.digs and v.load_curve == w.load_curve
         assert v.loaded_volume == w.loaded_volume and v.final_terrain == w.final_terrain
         assert v.final_poses == w.final_poses and v.final_turn == w.final_turn and v.makespan == w.makespan
+
+
+def test_run_closed_loop_in_process_on_the_exact_world_gives_the_open_loop_plan():
+    from earthbench.harness.steps import run_closed_loop
+    from earthbench.registry import PLANNERS
+
+    sc = parse_suite(suite_toml("inproc")).scenarios[0]
+    greedy = PLANNERS.get("greedy")
+    closed = run_closed_loop(greedy(closed_loop=True), sc)
+    assert closed.actions == greedy().plan(sc).actions and closed.info["steps"][0] >= 2

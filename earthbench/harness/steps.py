@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from ..errors import PlanFormatError
 from ..motion import ABS_TOL
 from ..plan import Move, Plan, Prediction
-from ..planner import Observation
+from ..planner import Observation, Planner
 from ..referee import Execution, Verdict
 from ..sensing import observe
 from ..world import Scenario
@@ -113,3 +113,21 @@ class StepLoop:
         known = [v for v in self.predicted if v is not None]
         volume = sum(known) if known and len(known) == len(self.predicted) else None
         return Plan(self.execution.plan.actions, Prediction(volume=volume), {"closed_loop": True, "steps": [n for n, _ in self.steps]})
+
+
+def run_closed_loop(planner: Planner, truth: Scenario, *, max_steps: int | None = None) -> Plan:
+    """A closed-loop planner's run in this process, without the sandbox or its clocks (for
+    ``earthbench plan`` and notebooks): the same observations and checks as under the harness.
+    Raises :class:`~earthbench.errors.PlanFormatError` for a step the harness would refuse."""
+    loop = StepLoop(truth, max_steps=max_steps or truth.budget.max_steps, max_bytes=2**62)
+    first = observe(truth)
+    obs = Observation(first)
+    while not loop.ended:
+        actions = planner.step(obs)
+        if actions is None:
+            break
+        problem = loop.take(actions.to_json(), 0.0)
+        if problem:
+            raise PlanFormatError(problem)
+        obs = Observation.from_dict(json.loads(loop.next_observation()), first)
+    return loop.plan()
