@@ -5,7 +5,8 @@ handed out one dig cycle per step) runs one paper-extensive scenario closed loop
 baseline, open loop (the same plan in one call). What the closed loop costs beyond the open
 loop, divided by its steps, is the harness's overhead per step: executing the step on the
 truth (the referee judges the executed prefix), building and sending the observation, the
-planner process reading it. Run with
+planner process reading it — and, on the realistic suite, the scan each observation holds
+(``earthbench.sensing.observe``, the sensing model's own cost). Run with
 ``python -m pytest tests/bench/test_bench_closed_loop.py --benchmark-only -s``.
 """
 
@@ -28,11 +29,16 @@ PLUGIN = str(Path(__file__).parents[1] / "plugins" / "step_planners.py")
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
-def test_overhead_per_step(benchmark):
+@pytest.mark.parametrize("suite_name, family", [
+    ("paper-extensive", "rbf30"),  # the exact world: the protocol's own cost
+    ("paper-extensive-realistic", "rbf30-sand-survey"),  # plus a survey scan per step (earthbench.sensing)
+    ("paper-extensive-realistic", "rbf30-sand-cab"),  # plus a cab scan with occlusion per step
+])
+def test_overhead_per_step(benchmark, suite_name, family):
     load_plugin_file(PLUGIN)
-    suite = load_suite("paper-extensive")
+    suite = load_suite(suite_name)
     cases, _ = build_cases(suite, ["s-digs"], plugins=[PLUGIN])
-    case = max(cases, key=lambda c: c.scenario.task.target_volume)
+    case = max((c for c in cases if c.scenario.meta.get("family") == family), key=lambda c: c.scenario.task.target_volume)
     closed = case
     opened = dataclasses.replace(case, planner=PlannerRef.resolve("s-digs", {"closed_loop": False}))
 
