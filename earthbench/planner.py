@@ -42,7 +42,9 @@ class Observation:
     executed actions, the machines at their current poses, the task's full target. ``t`` is
     the plan time the executed actions end at (the next actions may not start earlier),
     ``loaded`` the volume the truck reports holding (m³), ``turn`` the excavator's upper body
-    relative to its base yaw (rad; what the next swing starts from), ``step`` 0 on the first call.
+    relative to its base yaw (rad; what the next swing starts from), ``bucket`` the volume
+    still in the bucket (m³; more than 0 after a dump into a full truck), ``step`` 0 on the
+    first call.
     """
 
     scenario: Scenario
@@ -50,16 +52,22 @@ class Observation:
     t: float = 0.0
     loaded: float = 0.0
     turn: float = 0.0
+    bucket: float = 0.0
 
     @property
     def remaining(self) -> float:
         """m³ still to load for the task's target."""
         return max(self.scenario.task.target_volume - self.loaded, 0.0)
 
+    @property
+    def truck_full(self) -> bool:
+        """The last dump left material in the bucket: the truck takes no more."""
+        return self.bucket > 1e-9
+
     def to_dict(self, *, compact: bool = False) -> dict[str, Any]:
         """The harness's message. ``compact``: only what changes from step to step (the terrain
         and the poses), to be read against the scenario of the first observation."""
-        d: dict[str, Any] = {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn}
+        d: dict[str, Any] = {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn, "bucket": self.bucket}
         if compact:
             m = self.scenario.machines
             d["terrain"] = self.scenario.terrain.to_dict()
@@ -81,7 +89,7 @@ class Observation:
             sc = dataclasses.replace(first, terrain=Heightmap.from_dict(doc["terrain"]), machines=dataclasses.replace(first.machines, **poses))
         else:
             raise ValueError("a compact observation needs the first observation's scenario")
-        return cls(sc, int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]))
+        return cls(sc, int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]), float(doc.get("bucket", 0.0)))
 
 
 @dataclass(frozen=True)

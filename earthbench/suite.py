@@ -23,7 +23,7 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     wall_s = 60
     cores = 2
     memory_mb = 4096
-    step_s = 60                      # optional: one closed-loop step's limit (s)
+    step_s = 60                      # optional: one closed-loop step's limit (s; default 300)
     max_steps = 1000                 # optional: the closed-loop step cap
     [[family]]
     name = "rbf14"

@@ -385,7 +385,7 @@ class Budget:
     wall_s: float = 300.0
     cores: int = 2
     memory_mb: int = 4096
-    step_s: float = _later(60.0)
+    step_s: float = _later(300.0)
     max_steps: int = _later(1000)
 
 

@@ -71,6 +71,8 @@ class GreedyPlanner(Planner):
         return _Greedy(scenario, self.config).run()
 
     def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
         g = _Greedy(observation.scenario, self.config)
         g.t, g.turn, g.loaded = observation.t, observation.turn, observation.loaded
         if observation.step == 0:

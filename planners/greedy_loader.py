@@ -55,6 +55,8 @@ class GreedyLoader(Planner):
         return self._run(CycleBuilder(scenario, self.config))
 
     def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
         plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
         return plan if plan.actions else None
 

@@ -31,13 +31,13 @@ def observation(truth: Scenario, verdict: Verdict, step: int) -> Observation:
     """What the planner sees after the actions ``verdict`` judged: :func:`~earthbench.sensing.observe`
     of the true terrain they left (a scan from where the working machine now stands, seeded
     with ``step``; the soil's nominal class), the machines where they stand, the truck's load,
-    the plan time they end at."""
+    the plan time they end at, what is left in the bucket."""
     m = truth.machines
     poses = {f"{mid}_pose": verdict.final_poses[mid] for mid in m.ids if mid in verdict.final_poses}
     now = dataclasses.replace(truth, terrain=verdict.final_terrain)
     view = observe(now, pose=verdict.final_poses.get(truth.worker), step=step)
     view = dataclasses.replace(view, machines=dataclasses.replace(view.machines, **poses))
-    return Observation(view, step, verdict.makespan, verdict.loaded_volume, verdict.final_turn)
+    return Observation(view, step, verdict.makespan, verdict.loaded_volume, verdict.final_turn, verdict.final_bucket)
 
 
 def step_metrics(steps: Sequence[Sequence[float]]) -> dict[str, float | int]:

@@ -106,6 +106,8 @@ class Verdict:
     final_poses: dict[str, Pose] = field(default_factory=dict)
     #: The excavator's upper body relative to its base yaw when the plan ends (rad).
     final_turn: float = 0.0
+    #: Bank m³ left in the bucket when the plan ends (a dump into a full truck leaves some).
+    final_bucket: float = 0.0
 
     @property
     def valid(self) -> bool:
@@ -307,6 +309,7 @@ class Replay:
             load_curve=tuple(self.load_curve),
             final_poses={mid: tl.pose(self.plan.makespan) for mid, tl in self.timelines.items()},
             final_turn=self.turn,
+            final_bucket=self.bucket,
         )
 
     # -- cutting -----------------------------------------------------------------------------

@@ -166,6 +166,8 @@ class SinghCannonBackhoe(Planner):
         return Session(scenario, self.config).run()
 
     def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
         s = Session(observation.scenario, self.config)
         if observation.step == 0:
             self._floor, self._depleted = s.floor, s.depleted

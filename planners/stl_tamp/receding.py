@@ -52,7 +52,7 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     c, sc = planner.config, observation.scenario
     exc = sc.machines.excavator
     remaining = observation.remaining
-    if remaining <= c.volume_tol:
+    if remaining <= c.volume_tol or observation.truck_full:
         return None
     st = SimState.start(sc)
     st.t, st.turn, st.loaded = observation.t, observation.turn, observation.loaded
