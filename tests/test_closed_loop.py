@@ -91,6 +91,7 @@ def test_observation_is_the_referee_state_after_the_executed_actions(tmp_path):
     verdict = judge(sc, plan)
     obs = observation(sc, verdict, 3)
     assert obs.step == 3 and obs.t == pytest.approx(plan.makespan) and obs.loaded == pytest.approx(verdict.loaded_volume)
+    assert obs.bucket == verdict.final_bucket == 0.0 and not obs.truck_full
     assert (obs.scenario.terrain.z == verdict.final_terrain.z).all() and obs.scenario.task == sc.task
     for mid in sc.machines.ids:
         assert obs.scenario.machines.pose(mid) == verdict.final_poses[mid]
