@@ -17,7 +17,7 @@ _EXPORTS = {
     **dict.fromkeys(("EarthbenchError", "PlanFormatError", "PluginError", "ScenarioError", "StoreError", "SuiteError",
                      "UnknownNameError"), "errors"),
     **dict.fromkeys(("PLAN_SCHEMA", "Charge", "Dig", "Dump", "Move", "Plan", "Prediction"), "plan"),
-    **dict.fromkeys(("NoConfig", "Planner"), "planner"),
+    **dict.fromkeys(("NoConfig", "Observation", "Planner"), "planner"),
     **dict.fromkeys(("Verdict", "Violation", "judge"), "referee"),
     **dict.fromkeys(("METRICS", "PLANNERS", "TERRAINS", "load_plugin_file", "register_planner"), "registry"),
     **dict.fromkeys(("Budget", "ExcavatorSpec", "Heightmap", "LoaderSpec", "Machines", "Pose", "Scenario", "Sensing", "Site",
@@ -36,7 +36,7 @@ if TYPE_CHECKING:  # pragma: no cover
         UnknownNameError,
     )
     from .plan import PLAN_SCHEMA, Charge, Dig, Dump, Move, Plan, Prediction
-    from .planner import NoConfig, Planner
+    from .planner import NoConfig, Observation, Planner
     from .referee import Verdict, Violation, judge
     from .registry import METRICS, PLANNERS, TERRAINS, load_plugin_file, register_planner
     from .sensing import observe
@@ -46,7 +46,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",
-    "Move", "NoConfig", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
+    "Move", "NoConfig", "Observation", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
     "Pose", "Prediction", "Scenario", "ScenarioError", "Sensing", "Site", "Soil", "StoreError", "SuiteError",
     "TERRAINS", "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
     "observe", "register_planner",

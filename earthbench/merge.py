@@ -40,7 +40,7 @@ from typing import Any
 
 from .errors import StoreError
 from .harness.cases import Case, CaseResult, PlannerRef
-from .store import Store, decompress
+from .store import Store, decompress, stored_steps
 from .verify import Judgement, audit
 
 
@@ -150,7 +150,7 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
         violations=tuple(json.loads(row["violations"] or "[]")), plan_json=decompress(row["plan"]),
         error=row["error"] or "", log_tail=row["log_tail"] or "", exit_status=row["exit_status"],
         cores=tuple(int(c) for c in (row["cores"] or "").split(",") if c.strip()), started_at=row["started_at"] or "",
-        finished_at=row["finished_at"] or "", environment=env,
+        finished_at=row["finished_at"] or "", environment=env, steps=stored_steps(row),
     )
     return case, res
 

@@ -3,19 +3,93 @@
 A planner is a class with a name, a version, the tracks it supports and a frozen ``Config``
 dataclass; ``plan(scenario)`` returns a :class:`~earthbench.plan.Plan`. The harness, not the
 planner, times the call, and the referee, not the planner, decides what the plan achieved.
+
+A planner may also run *closed loop* (docs/DESIGN.md §6): when its configuration says
+``closed_loop = True``, the harness calls :meth:`Planner.step` with an :class:`Observation`
+of the world after the actions executed so far and executes the actions it returns on the
+truth before it calls again, until the planner returns None ("done") or the step cap ends
+the run. Open and closed loop are two configurations with their own hashes.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from .errors import PluginError
 from .plan import Plan
-from .world import Scenario, canonical_json
+from .world import LATER, Heightmap, Pose, Scenario, canonical_json
+
+
+def closed_loop_setting() -> Any:
+    """The ``closed_loop`` field of a planner's ``Config`` (default False).
+
+    Left out of the configuration (and so of its hash) while False, so a planner that gains
+    a closed-loop mode keeps the hash, and the stored runs, of its open-loop configuration.
+    """
+    return dataclasses.field(default=False, metadata=LATER)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a closed-loop planner is told before each step; everything comes from the harness.
+
+    ``scenario`` is the planner's view of the world now: the terrain as observed after the
+    executed actions, the machines at their current poses, the task's full target. ``t`` is
+    the plan time the executed actions end at (the next actions may not start earlier),
+    ``loaded`` the volume the truck reports holding (m³), ``turn`` the excavator's upper body
+    relative to its base yaw (rad; what the next swing starts from), ``bucket`` the volume
+    still in the bucket (m³; more than 0 after a dump into a full truck), ``step`` 0 on the
+    first call.
+    """
+
+    scenario: Scenario
+    step: int = 0
+    t: float = 0.0
+    loaded: float = 0.0
+    turn: float = 0.0
+    bucket: float = 0.0
+
+    @property
+    def remaining(self) -> float:
+        """m³ still to load for the task's target."""
+        return max(self.scenario.task.target_volume - self.loaded, 0.0)
+
+    @property
+    def truck_full(self) -> bool:
+        """The last dump left material in the bucket: the truck takes no more."""
+        return self.bucket > 1e-9
+
+    def to_dict(self, *, compact: bool = False) -> dict[str, Any]:
+        """The harness's message. ``compact``: only what changes from step to step (the terrain
+        and the poses), to be read against the scenario of the first observation."""
+        d: dict[str, Any] = {"step": self.step, "t": self.t, "loaded": self.loaded, "turn": self.turn, "bucket": self.bucket}
+        if compact:
+            m = self.scenario.machines
+            d["terrain"] = self.scenario.terrain.to_dict()
+            d["poses"] = {mid: dataclasses.asdict(m.pose(mid)) for mid in m.ids}
+        else:
+            d["scenario"] = self.scenario.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], first: Scenario | None = None) -> Observation:
+        """Read the harness's message: a bare scenario document is the first observation, a
+        compact one is read against ``first`` (that observation's scenario)."""
+        if "step" not in doc:
+            return cls(Scenario.from_dict(doc))
+        if "scenario" in doc:
+            sc = Scenario.from_dict(doc["scenario"])
+        elif first is not None:
+            poses = {f"{mid}_pose": Pose(**p) for mid, p in doc["poses"].items()}
+            sc = dataclasses.replace(first, terrain=Heightmap.from_dict(doc["terrain"]), machines=dataclasses.replace(first.machines, **poses))
+        else:
+            raise ValueError("a compact observation needs the first observation's scenario")
+        return cls(sc, int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]), float(doc.get("bucket", 0.0)))
 
 
 @dataclass(frozen=True)
@@ -46,13 +120,30 @@ class Planner(ABC):
     def plan(self, scenario: Scenario) -> Plan:
         """Return a plan for ``scenario``. May raise; the harness records it as an error."""
 
+    def step(self, observation: Observation) -> Plan | None:
+        """Closed loop: the next actions (a non-empty plan starting no earlier than
+        ``observation.t``, e.g. up to the next dump), or None when the planner is done.
+
+        Called only when :attr:`closed_loop`; the harness times each call and executes the
+        actions on the truth before the next one. May raise; the harness records it as an error.
+        """
+        raise NotImplementedError(f"planner {self.name!r} has no closed-loop mode (no step method)")
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether the harness runs this configuration step by step (its ``closed_loop`` setting)."""
+        return bool(getattr(self.config, "closed_loop", False))
+
     def supports(self, scenario: Scenario) -> bool:
         return scenario.track in self.tracks
 
     @property
     def config_dict(self) -> dict[str, Any]:
+        """The configuration as JSON data (fields marked ``LATER`` left out at their defaults)."""
         config = self.config
-        return dataclasses.asdict(config) if dataclasses.is_dataclass(config) and not isinstance(config, type) else dict(config)
+        if dataclasses.is_dataclass(config) and not isinstance(config, type):
+            return json.loads(canonical_json(config))
+        return dict(config)
 
     @property
     def config_hash(self) -> str:

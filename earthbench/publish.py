@@ -41,6 +41,7 @@ import base64
 import hashlib
 import html
 import io
+import json
 import math
 import re
 import warnings
@@ -106,10 +107,19 @@ def load_runs_empty() -> pd.DataFrame:
 
 
 def solver_labels(runs: pd.DataFrame) -> pd.Series:
-    """``planner version``, plus ``[config hash]`` where one planner version ran several configs."""
-    n_cfg = runs.groupby(["planner", "planner_version"])["config_hash"].transform("nunique")
-    base = runs["planner"].astype(str) + " " + runs["planner_version"].astype(str)
+    """``planner version``, `` closed-loop`` for a closed-loop configuration (docs/DESIGN.md §6),
+    plus ``[config hash]`` where one label still covers several configs."""
+    closed = runs["config"].map(_closed_loop) if "config" in runs else pd.Series(False, index=runs.index)
+    base = runs["planner"].astype(str) + " " + runs["planner_version"].astype(str) + closed.map({True: " closed-loop", False: ""})
+    n_cfg = runs.groupby(base)["config_hash"].transform("nunique")
     return base.where(n_cfg <= 1, base + " [" + runs["config_hash"].astype(str).str[:8] + "]")
+
+
+def _closed_loop(config: Any) -> bool:
+    try:
+        return bool(json.loads(config).get("closed_loop")) if isinstance(config, str) else False
+    except (ValueError, AttributeError):
+        return False
 
 
 # -- formatting ------------------------------------------------------------------------------------

@@ -9,7 +9,9 @@ pandas. Tables:
   ``reason``, ``success`` (under that suite's threshold), the main metrics as real columns,
   every metric as JSON (``metrics``), the referee's ``violations`` (JSON), the plan itself
   (zlib-compressed JSON, so any run can be re-scored), the error text and the tail of the
-  case's output. ``UNIQUE(scenario_digest, planner, planner_version, config_hash)`` is the
+  case's output, and for a closed-loop run its ``steps`` (JSON: ``[actions, compute seconds]``
+  per planner call, in order, so the stored plan splits back into its steps; docs/DESIGN.md §6).
+  ``UNIQUE(scenario_digest, planner, planner_version, config_hash)`` is the
   resume key: a case is stored once, whichever suite ran it (the budget is part of the
   scenario digest, so runs under different budgets never mix).
 * ``suites`` and ``suite_scenarios`` — each suite version (name, digest, threshold) that was
@@ -21,7 +23,9 @@ pandas. Tables:
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered.
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
+version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
+read as open-loop runs.
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -98,7 +102,7 @@ CREATE TABLE runs (
     valid INTEGER, volume_ratio REAL, loaded_volume REAL, makespan_s REAL, time_per_m3 REAL,
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
-    exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT,
+    exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
@@ -210,6 +214,12 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
+            if version == 1:  # version 2 added the closed-loop steps of a run; nothing else changed
+                with self.db:
+                    self.db.execute("BEGIN IMMEDIATE")
+                    if "steps" not in {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}:
+                        self.db.execute("ALTER TABLE runs ADD COLUMN steps TEXT")
+                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
@@ -298,6 +308,7 @@ class Store:
                     "error": result.error, "log_tail": result.log_tail, "exit_status": result.exit_status,
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
+                    "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -408,6 +419,12 @@ class Store:
         if row is None:
             raise StoreError(f"scenario {digest[:12]}… is not in {str(self.path)!r}")
         return Scenario.from_json(decompress(row[0]))
+
+
+def stored_steps(row: Any) -> tuple[tuple[int, float], ...] | None:
+    """A ``runs`` row's closed-loop steps ``((actions, compute seconds), …)``, None for an open-loop run."""
+    text = row["steps"] if "steps" in row.keys() else None
+    return None if not text else tuple((int(n), float(c)) for n, c in json.loads(text))
 
 
 def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite3.Row]]:

@@ -23,6 +23,8 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     wall_s = 60
     cores = 2
     memory_mb = 4096
+    step_s = 60                      # optional: one closed-loop step's limit (s; default 300)
+    max_steps = 1000                 # optional: the closed-loop step cap
     [[family]]
     name = "rbf14"
     generator = "rbf"
@@ -419,8 +421,11 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         raise SuiteError(f"{where} [budget]: cores must be an integer, got {budget_doc['cores']!r}")
     if "memory_mb" in budget_doc and not isinstance(budget_doc["memory_mb"], int):
         raise SuiteError(f"{where} [budget]: memory_mb must be an integer, got {budget_doc['memory_mb']!r}")
-    if "wall_s" in budget_doc:  # 60 and 60.0 must give the same scenario digest
-        budget_doc = {**budget_doc, "wall_s": float(budget_doc["wall_s"])}
+    if "max_steps" in budget_doc and not isinstance(budget_doc["max_steps"], int):
+        raise SuiteError(f"{where} [budget]: max_steps must be an integer, got {budget_doc['max_steps']!r}")
+    for k in ("wall_s", "step_s"):  # 60 and 60.0 must give the same scenario digest
+        if k in budget_doc:
+            budget_doc = {**budget_doc, k: float(budget_doc[k])}
     budget = Budget(**budget_doc)
     planners = doc.get("planners")
     if planners is not None and (not isinstance(planners, list) or not all(isinstance(p, str) for p in planners)):

@@ -34,7 +34,8 @@ from datetime import datetime, UTC
 from typing import Any
 
 from .errors import EarthbenchError, StoreError
-from .store import METRIC_COLUMNS, Store, decompress
+from .harness.steps import step_metrics
+from .store import METRIC_COLUMNS, Store, decompress, stored_steps
 from .suite import suite_digest
 from .world import Scenario
 
@@ -42,7 +43,7 @@ from .world import Scenario
 REL_TOL = 1e-9
 ABS_TOL = 1e-9
 #: Metrics only the harness measures: carried from the machine that ran the case, never re-judged.
-HARNESS_METRICS = ("solve_time_s", "solve_cpu_s")
+HARNESS_METRICS = ("solve_time_s", "solve_cpu_s", "steps", "replans", "step_compute_median_s", "step_compute_max_s")
 #: Reasons that carry a referee verdict, hence need a stored plan.
 JUDGED_REASONS = ("ok", "invalid")
 
@@ -73,8 +74,10 @@ def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, d
 
 
 def rejudge(scenario: Scenario, plan_json: str, threshold: float, *,
-            solve_time_s: float | None = None, solve_cpu_s: float | None = None) -> Judgement:
-    """Judge a stored plan again; the harness's solve times are carried in as they were measured.
+            solve_time_s: float | None = None, solve_cpu_s: float | None = None,
+            steps: Sequence[Sequence[float]] | None = None) -> Judgement:
+    """Judge a stored plan again; the harness's solve times (and a closed-loop run's steps) are
+    carried in as they were measured. A closed-loop run's plan is its steps concatenated.
 
     A referee failure is an ``error`` judgement with its traceback, as when the case first ran.
     """
@@ -83,6 +86,8 @@ def rejudge(scenario: Scenario, plan_json: str, threshold: float, *,
     except Exception:  # noqa: BLE001 - a referee bug is reported on the run, never a crash
         return Judgement("error", None, (), "the referee failed on this plan:\n" + traceback.format_exc())
     metrics.update(solve_time_s=solve_time_s, solve_cpu_s=solve_cpu_s)
+    if steps is not None:
+        metrics.update(step_metrics(steps))
     return Judgement("ok" if verdict.valid else "invalid", metrics, tuple(v.to_dict() for v in verdict.violations))
 
 
@@ -255,7 +260,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
         except Exception:  # noqa: BLE001 - an edited blob
             result.broken.append(Finding(r["id"], label, "its stored plan cannot be decompressed"))
             continue
-        judged = rejudge(sc, plan, r["threshold"], solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
+        judged = rejudge(sc, plan, r["threshold"], solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"], steps=stored_steps(r))
         result.judgements[r["id"]] = judged
         diff = differences(r, judged)
         if r["reason"] == "error" and judged.reason == "error":

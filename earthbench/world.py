@@ -160,6 +160,20 @@ class Heightmap:
     def with_z(self, z: np.ndarray) -> Heightmap:
         return Heightmap(self.origin, self.resolution, z)
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form: origin, resolution, and the heights as base64 of little-endian float64."""
+        z = np.ascontiguousarray(self.z, dtype="<f8")
+        return {"origin": list(self.origin), "resolution": self.resolution,
+                "z": {"shape": list(z.shape), "f8_base64": base64.b64encode(z.tobytes()).decode()}}
+
+    @classmethod
+    def from_dict(cls, t: dict[str, Any]) -> Heightmap:
+        """Read :meth:`to_dict`'s form (or heights as nested lists)."""
+        z = t["z"]
+        if isinstance(z, dict):
+            z = np.frombuffer(base64.b64decode(z["f8_base64"]), dtype="<f8").reshape(z["shape"])
+        return cls(tuple(t["origin"]), t["resolution"], np.asarray(z, dtype=float))
+
 
 def _polygon(points: Any, what: str) -> Polygon:
     try:
@@ -361,11 +375,18 @@ class Task:
 
 @dataclass(frozen=True)
 class Budget:
-    """Resources a planner gets for one scenario; the harness enforces them."""
+    """Resources a planner gets for one scenario; the harness enforces them.
+
+    ``wall_s`` bounds the planner's compute, over all steps of a closed-loop run; ``step_s``
+    bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6). The two step
+    limits are left out of the JSON at their defaults, so scenarios keep their digests.
+    """
 
     wall_s: float = 300.0
     cores: int = 2
     memory_mb: int = 4096
+    step_s: float = _later(300.0)
+    max_steps: int = _later(1000)
 
 
 def _number(value: Any, where: str, *, lo: float | None = None, hi: float | None = None,
@@ -516,8 +537,6 @@ class Scenario:
     # -- JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         d = _drop_absent_loader(_to_plain(self))
-        z = np.ascontiguousarray(self.terrain.z, dtype="<f8")
-        d["terrain"]["z"] = {"shape": list(z.shape), "f8_base64": base64.b64encode(z.tobytes()).decode()}
         return {"schema": SCENARIO_SCHEMA, **d}
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -533,11 +552,7 @@ class Scenario:
         if d.get("schema", SCENARIO_SCHEMA) != SCENARIO_SCHEMA:
             raise ScenarioError(f"unsupported scenario schema {d.get('schema')!r}; expected {SCENARIO_SCHEMA!r}")
         try:
-            t = _section(d["terrain"], "terrain")
-            z = t["z"]
-            if isinstance(z, dict):
-                z = np.frombuffer(base64.b64decode(z["f8_base64"]), dtype="<f8").reshape(z["shape"])
-            terrain = Heightmap(tuple(t["origin"]), t["resolution"], np.asarray(z, dtype=float))
+            terrain = Heightmap.from_dict(_section(d["terrain"], "terrain"))
             s = _section(d["site"], "site")
             site = Site(tuple(s["dig_area"]), s.get("floor"), tuple(s.get("keep_outs", ())), s.get("open_outside"))
             m = _section(d["machines"], "machines")
@@ -625,6 +640,8 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
 
 def _to_plain(obj: Any) -> Any:
     """Dataclasses → dicts, tuples → lists, numpy → Python; the JSON form of the world model."""
+    if isinstance(obj, Heightmap):
+        return obj.to_dict()
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {
             f.name: _to_plain(getattr(obj, f.name))

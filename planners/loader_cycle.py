@@ -40,6 +40,7 @@ import numpy as np
 
 from earthbench.motion import dense_poses, wrap
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
+from earthbench.planner import Observation, closed_loop_setting
 from earthbench.cut import charge_cut
 from earthbench.referee.loader import cell_heights, densify, loader_base_level, step_excess, wheel_step_excess
 from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
@@ -449,6 +450,8 @@ class LoaderPlanConfig:
     max_cycles: int = 60
     dump_sector: float = math.radians(160.0)
     """Dump poses lie within this sector around the bearing from the truck to the charge's end."""
+    closed_loop: bool = closed_loop_setting()
+    """Replan every bucket from the observed terrain and truck load (docs/DESIGN.md §6)."""
 
 
 @dataclass
@@ -474,7 +477,7 @@ class CycleBuilder:
         self.t = 0.0
         self.pose = scenario.machines.loader_pose
         self.actions: list = []
-        self.loaded = 0.0
+        self.loaded = self.loaded0 = 0.0
         self.rays, self.d_lo, self.d_hi, self.d_target = dump_rays(scenario)
         self.cycles: list[Cycle] = []
         self.tried = 0
@@ -557,15 +560,19 @@ class CycleBuilder:
         self.pose = c.to_truck.end
         self.cycles.append(c)
 
-    def load_until_target(self, max_cycles: int, choose: Callable[[list[np.ndarray], float], Cycle | str]) -> str:
+    def load_until_target(self, max_cycles: int, choose: Callable[[list[np.ndarray], float], Cycle | str],
+                          max_dumps: int | None = None) -> str:
         """The loop both loader planners share: while the truck lacks its target, ask ``choose``
         for the next cycle given the pile's contours and the bucket's capacity for this cycle
         (never much more than the target still needs), and commit it. ``choose`` returns a
-        feasible :class:`Cycle`, or the reason to stop. Returns why loading stopped."""
+        feasible :class:`Cycle`, or the reason to stop. ``max_dumps`` ends a closed-loop step
+        after that many cycles. Returns why loading stopped."""
         target = self.sc.task.target_volume
         while self.loaded < target - 1e-9:
             if len(self.cycles) >= max_cycles:
                 return "max_cycles"
+            if max_dumps is not None and len(self.cycles) >= max_dumps:
+                return "step done"
             lines = self.contours()
             if not lines:
                 return "no contour left"
@@ -577,4 +584,12 @@ class CycleBuilder:
 
     def plan(self, info: dict) -> Plan:
         info = dict(info, cycles=len(self.cycles), candidates_tried=self.tried)
-        return Plan(tuple(self.actions), Prediction(volume=self.loaded, makespan=self.t), info)
+        return Plan(tuple(self.actions), Prediction(volume=self.loaded - self.loaded0, makespan=self.t), info)
+
+    @classmethod
+    def observed(cls, observation: Observation, cfg: LoaderPlanConfig) -> CycleBuilder:
+        """A closed-loop step's builder: from the observed terrain and pose, at the plan time
+        and truck load the harness reports."""
+        b = cls(observation.scenario, cfg)
+        b.t, b.loaded, b.loaded0 = observation.t, observation.loaded, observation.loaded
+        return b

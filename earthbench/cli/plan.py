@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 
+from ..harness.steps import run_closed_loop
 from ..registry import PLANNERS
 from ..sensing import observe
 from ._common import add_config_arg, add_plugin_arg, add_scenario_args, load_plugins, load_scenario, parse_config
@@ -36,7 +37,9 @@ def run(args: argparse.Namespace) -> int:
         scenario.to_json(args.save_scenario)
     view = observe(scenario)  # the planner sees the scan and the nominal soil, as under the harness
     t0 = time.perf_counter()
-    plan = cls(**overrides).plan(view)
+    planner = cls(**overrides)
+    # a closed-loop configuration is run step by step, each step executed on the truth as the harness does
+    plan = run_closed_loop(planner, scenario) if planner.closed_loop else planner.plan(view)
     dt = time.perf_counter() - t0
     text = plan.to_json(args.out)
     if not args.out:

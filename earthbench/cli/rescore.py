@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..store import Store, decompress
+from ..store import Store, decompress, stored_steps
 from ..verify import rejudge
 from .run import default_db
 
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
             if digest not in scenarios:
                 scenarios[digest] = store.scenario(digest)
             judged = rejudge(scenarios[digest], decompress(r["plan"]), r["threshold"],
-                             solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"])
+                             solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"], steps=stored_steps(r))
             if judged.metrics is None:  # the referee failed on it: keep the row, say so
                 failed += 1
                 print(f"run {r['id']} {r['scenario_id']} × {r['planner']}: {judged.error.strip().splitlines()[-1]}", file=sys.stderr)

@@ -117,6 +117,9 @@ class CaseResult:
     environment: dict[str, Any] = field(default_factory=dict)
     #: What the case itself reported (its own timings): information only, never stored or trusted.
     detail: dict[str, Any] = field(default_factory=dict, compare=False)
+    #: A closed-loop run's planner calls: (actions executed, harness-measured compute seconds)
+    #: each, in order (0 actions: the call that said done or was cut short); None when open loop.
+    steps: tuple[tuple[int, float], ...] | None = None
 
     @classmethod
     def failure(cls, case: Case, reason: str, error: str) -> CaseResult:

@@ -21,11 +21,16 @@ Python that imports nothing of earthbench, numpy or the plugin; it becomes the c
 
 The planner process talks to the harness over another inherited pipe, one JSON object per
 line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has read the
-scenario that the harness writes to its stdin in answer, ``{"event": "done", "outcome":
-"plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The harness
-validates every message and owns every time: it starts the wall budget when it hands over the
-scenario and stops it when the result arrives; ``detail`` (the child's own timings) is kept
-for information only. The child never judges its own plan.
+scenario that the harness writes to its stdin in answer (one line of JSON), ``{"event": "done",
+"outcome": "plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The
+harness validates every message and owns every time: it starts the wall budget when it hands
+over the scenario and stops it when the result arrives; ``detail`` (the child's own timings) is
+kept for information only. The child never judges its own plan.
+
+A closed-loop configuration (docs/DESIGN.md §6) answers instead with ``{"event": "step",
+"plan": JSON}`` per step; the harness executes the step on the truth and writes the next
+observation as the next line of stdin, or closes stdin to end the run. When ``step()``
+returns None the child sends ``{"event": "done", "outcome": "steps"}``.
 """
 
 from __future__ import annotations
@@ -103,9 +108,15 @@ def main(case_file: str, fd: int) -> None:
     outcome, error, plan = "plan", "", None
     t0, c0 = time.perf_counter(), _cpu()
     try:
-        scenario = Scenario.from_dict(json.load(sys.stdin))
+        doc = json.loads(sys.stdin.buffer.readline())
         planner = cls(**overrides)
-        plan = planner.plan(scenario)
+        if planner.closed_loop:
+            if not _steps(planner, doc, send):
+                out.close()
+                return  # the harness ended the run (step cap, broken rules): nothing more to say
+            outcome = "steps"
+        else:
+            plan = planner.plan(Scenario.from_dict(doc))
     except MemoryError:
         plan = None
         outcome, error = "memory", "MemoryError: the planner exceeded the memory budget\n" + _short_tb()
@@ -130,6 +141,31 @@ def main(case_file: str, fd: int) -> None:
     except (TypeError, ValueError) as exc:  # e.g. a to_json() that returned something JSON cannot write
         send({"event": "done", "outcome": "error", "error": "the plan could not be written as JSON:\n" + _tb(exc)})
     out.close()
+
+
+def _steps(planner: Any, doc: dict[str, Any], send: Any) -> bool:
+    """The closed loop: answer each observation with the next actions, one message per step.
+
+    Returns True when the planner said done (returned None), False when the harness ended
+    the run (it closed our stdin instead of sending the next observation).
+    """
+    from earthbench.plan import Plan
+    from earthbench.planner import Observation
+
+    first = None
+    while True:
+        obs = Observation.from_dict(doc, first)
+        first = first or obs.scenario
+        actions = planner.step(obs)
+        if actions is None:
+            return True
+        if not isinstance(actions, Plan):
+            raise TypeError(f"step() returned {type(actions).__module__}.{type(actions).__qualname__}, not an earthbench.Plan or None")
+        send({"event": "step", "plan": actions.to_json()})
+        line = sys.stdin.buffer.readline()
+        if not line:
+            return False
+        doc = json.loads(line)
 
 
 def _tb(exc: BaseException) -> str:

@@ -36,6 +36,7 @@ import functools
 import glob
 import json
 import os
+import queue
 import selectors
 import shutil
 import signal
@@ -47,18 +48,20 @@ import threading
 import time
 import traceback
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import psutil
 
 from ..errors import EarthbenchError
+from ..world import Budget
 from .cases import Case, CaseResult, utc_now
 from .child import BOOTSTRAP
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
 from ..sensing import observe
 from .slots import SlotPool
+from .steps import StepLoop, step_metrics
 
 #: Seconds a case may spend starting (interpreter, imports of the planner's code) before it is ready.
 STARTUP_S = 60.0
@@ -162,7 +165,8 @@ def run_case(
             log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-        scenario = json.dumps(observe(case.scenario).to_dict()).encode()  # the planner's view; the referee keeps the truth
+        scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
+        loop = StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES) if case.planner.config.get("closed_loop") else None
         mr, mw = os.pipe()
         rr, rw = os.pipe()
         mem = int(budget.memory_mb) * 1024 * 1024
@@ -183,7 +187,7 @@ def run_case(
             os.close(rw)
             log.close()
         try:
-            out = _Supervisor(proc, mr, rr, scenario, tag, budget.wall_s, startup_s, stop, t_spawn).run()
+            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop).run()
         finally:
             os.close(mr)
             os.close(rr)
@@ -205,6 +209,13 @@ class _Outcome:
     t_ready: float | None = None
     t_done: float | None = None
     t_end: float | None = None
+    #: When the planner's current call began (the hand-over of the scenario or of an observation).
+    t_given: float | None = None
+    #: Harness-measured seconds of each finished planner call (one for an open-loop run).
+    calls: list[float] = field(default_factory=list)
+    #: Which limit the current deadline is: "wall" (the budget over all calls) or "step".
+    limit: str = "wall"
+    loop: StepLoop | None = None
     cpu_ready: float = 0.0
     done: dict[str, Any] | None = None
     fault: str = ""
@@ -217,9 +228,18 @@ class _Outcome:
 
     @property
     def solve_time_s(self) -> float | None:
+        """The planner's compute: every call from hand-over to reply (the call cut short by a deadline too)."""
         if self.t_ready is None:
             return None
-        return max(0.0, (self.t_done if self.t_done is not None else self.t_end or self.t_ready) - self.t_ready)
+        running = (self.t_end or self.t_given) - self.t_given if self.t_given is not None else 0.0
+        return max(0.0, sum(self.calls) + running)
+
+    def replied(self, now: float) -> float:
+        """End the planner's current call at ``now``; returns its length."""
+        took = now - (self.t_given if self.t_given is not None else now)
+        self.calls.append(took)
+        self.t_given = None
+        return took
 
     @property
     def solve_cpu_s(self) -> float | None:
@@ -238,10 +258,11 @@ class _Supervisor:
     """Hands the scenario over, reads and validates the case's messages, enforces the deadlines."""
 
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
-                 wall_s: float, startup_s: float, stop: threading.Event | None, t_spawn: float):
+                 budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
-        self.wall_s, self.stop = wall_s, stop
-        self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s)
+        self.budget, self.stop = budget, stop
+        self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s, loop=loop)
+        self.outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
         self.deadline = t_spawn + startup_s
         self.buf = bytearray()
         self.scanned = 0
@@ -289,6 +310,7 @@ class _Supervisor:
                 self._end()
             self._read_report()
             if self.writer is not None:
+                self.outbox.put(None)
                 self.writer.join(timeout=1.0)
         return o
 
@@ -339,33 +361,81 @@ class _Supervisor:
         elif event == "ready":
             o.fault = "the case said 'ready' twice"
         elif event == "done":
-            problem = _check_done(msg, o.t_ready is not None)
+            problem = _check_done(msg, o.t_ready is not None, o.loop is not None)
             if problem:
                 o.fault = problem
             else:
-                o.t_done = time.monotonic()
-                o.done = msg
-                self.deadline = o.t_done + EXIT_GRACE_S
+                self._finish(msg)
+                if o.loop is not None and msg["outcome"] == "steps":
+                    o.loop.said_done(o.calls[-1])
+        elif event == "step":
+            self._step(msg)
         else:
             o.fault = f"the case sent a message that is not an earthbench message: {_clip(line)}"
+
+    def _finish(self, msg: dict[str, Any]) -> None:
+        """The run's result is in: stop the clock, close the case's stdin, give it time to exit."""
+        o = self.o
+        o.t_done = time.monotonic()
+        o.replied(o.t_done)
+        o.done = msg
+        self.deadline = o.t_done + EXIT_GRACE_S
+        self.outbox.put(None)
+
+    def _give(self, data: bytes, now: float) -> None:
+        """Hand the planner its next input and start its call's clock: the wall budget left over
+        all calls, and for a closed-loop run at most the per-step limit."""
+        o = self.o
+        o.t_given = now
+        left = self.budget.wall_s - sum(o.calls)
+        o.limit = "step" if o.loop is not None and self.budget.step_s < left else "wall"
+        self.deadline = now + (min(self.budget.step_s, left) if o.loop is not None else left)
+        self.outbox.put(data)
 
     def _hand_over(self) -> None:
         """The planner's code is loaded: start the clock and give the case its scenario."""
         o = self.o
         o.t_ready = time.monotonic()
         o.cpu_ready = self._tree_cpu()
-        self.deadline = o.t_ready + self.wall_s
-        stdin, data = self.proc.stdin, self.scenario
+        stdin, outbox = self.proc.stdin, self.outbox
 
-        def write() -> None:
+        def write() -> None:  # one writer, so a case that stops reading never blocks the supervisor
             try:
-                stdin.write(data)
-                stdin.close()
+                while (data := outbox.get()) is not None:
+                    stdin.write(data)
+                    stdin.flush()
             except OSError:  # the case ended (or closed its stdin) before reading it all
                 pass
+            try:
+                stdin.close()
+            except OSError:
+                pass
 
-        self.writer = threading.Thread(target=write, name="earthbench-scenario", daemon=True)
+        self.writer = threading.Thread(target=write, name="earthbench-stdin", daemon=True)
         self.writer.start()
+        self._give(self.scenario, o.t_ready)
+
+    def _step(self, msg: dict[str, Any]) -> None:
+        """One closed-loop step: time it, execute it on the truth, hand over the next observation."""
+        o, loop = self.o, self.o.loop
+        now = time.monotonic()
+        if loop is None:
+            o.fault = "the case sent a step, but its configuration does not run closed loop"
+        elif o.t_given is None:
+            o.fault = "the case sent a step before it was given an observation" if o.t_ready is None else "the case sent a step it was not asked for"
+        elif not isinstance(msg.get("plan"), str):
+            o.fault = f"the case's step has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
+        else:
+            problem = loop.take(msg["plan"], o.replied(now))
+            if problem:
+                o.fault = problem
+            elif loop.ended:
+                o.done = {"event": "done", "outcome": "steps"}
+                o.t_done = now
+                self.deadline = now + EXIT_GRACE_S
+                self.outbox.put(None)
+            else:
+                self._give(loop.next_observation(), time.monotonic())
 
     # -- the process tree ----------------------------------------------------------------------
     def _tree(self) -> list[psutil.Process]:
@@ -488,11 +558,15 @@ def _sweep(tag: str) -> None:
             continue
 
 
-def _check_done(msg: dict[str, Any], ready: bool) -> str:
+def _check_done(msg: dict[str, Any], ready: bool, closed_loop: bool = False) -> str:
     """Why a result message is malformed, or '' when it is well formed."""
     outcome = msg.get("outcome")
-    if outcome not in ("plan", "error", "memory"):
-        return f"the case's result has outcome {_clip(outcome)}, not one of plan, error, memory"
+    if outcome not in ("plan", "error", "memory", "steps"):
+        return f"the case's result has outcome {_clip(outcome)}, not one of plan, error, memory, steps"
+    if outcome == "steps" and not (closed_loop and ready):
+        return "the case said its steps are done, but it " + ("runs open loop" if ready else "was not ready")
+    if outcome == "plan" and closed_loop:
+        return "the case sent a whole plan, but its configuration runs closed loop (one step at a time)"
     if not isinstance(msg.get("error", ""), str):
         return f"the case's result has an error text of type {type(msg['error']).__name__}, not a string"
     if not isinstance(msg.get("detail", {}), dict):
@@ -527,12 +601,16 @@ def _mentions_memory(text: str) -> bool:
 def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
     budget = case.scenario.budget
     times = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
+    loop = o.loop
+    if loop is not None and o.t_given is not None and o.t_end is not None:  # the call a deadline or a fault cut short
+        loop.steps.append((0, o.t_end - o.t_given))
     common: dict[str, Any] = dict(
         key=case.key, scenario_id=case.scenario.id, cores=cores, started_at=started_at, finished_at=utc_now(),
         log_tail=log_tail, exit_status=o.status, peak_rss_mb=o.maxrss_mb,
         startup_s=(o.t_ready - o.t_spawn) if o.t_ready is not None else None,
         environment=environment(case.planner.source),
         detail=dict(o.done.get("detail") or {}) if o.done else {},
+        steps=tuple(loop.steps) if loop is not None else None,
     )
     if o.cancelled and o.done is None:
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)
@@ -540,8 +618,11 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         return CaseResult(reason="error", error=o.fault + "; the case was ended", **times, **common)
     if o.done is None:
         if o.timed_out:
-            if o.t_ready is not None:
-                msg = f"the planner ran past its wall budget of {budget.wall_s:g} s and was ended"
+            if o.t_ready is not None and o.limit == "step":
+                msg = f"step {len(loop.steps) - 1 if loop else 0} ran past the per-step limit of {budget.step_s:g} s and was ended"
+            elif o.t_ready is not None:
+                over = f" over {len(loop.steps)} step(s)" if loop is not None else ""
+                msg = f"the planner ran past its wall budget of {budget.wall_s:g} s{over} and was ended"
             else:
                 msg = f"the case did not reach the planner call within {o.startup_s:g} s of start-up"
             return CaseResult(reason="timeout", error=msg, **times, **common)
@@ -556,13 +637,15 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
     if d["outcome"] in ("error", "memory"):
         reason = "memory" if d["outcome"] == "memory" or _mentions_memory(d.get("error", "")) else "error"
         return CaseResult(reason=reason, error=d.get("error", ""), **times, **common)
-    plan_json = d["plan"]
+    plan_json = loop.plan().to_json() if loop is not None else d["plan"]
     try:
         verdict, metrics = score(case.scenario, plan_json, case.threshold)
     except Exception:  # noqa: BLE001 - a referee bug must not lose the plan; `earthbench rescore` can retry
         return CaseResult(reason="error", error="the referee failed on this plan:\n" + traceback.format_exc(), plan_json=plan_json, **times, **common)
     metrics.update(times)
+    if loop is not None:
+        metrics.update(step_metrics(loop.steps))
     return CaseResult(
-        reason="ok" if verdict.valid else "invalid", metrics=metrics,
+        reason="ok" if verdict.valid else "invalid", metrics=metrics, error=loop.ended if loop is not None else "",
         violations=tuple(v.to_dict() for v in verdict.violations), plan_json=plan_json, **times, **common,
     )

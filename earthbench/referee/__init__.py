@@ -23,7 +23,7 @@ re-deriving them:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Scenario
 from .replay import RULES, DigRecord, Replay, Verdict, Violation
 
-__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Observer", "Verdict", "Violation", "judge"]
+__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 
 
 #: Called after each action, in the referee's time order, with the action's index, the heightmap
@@ -41,23 +41,22 @@ __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Observer", "Verdict", "
 Observer = Callable[[int, np.ndarray, float], None]
 
 
-def _run(r: Replay, observe: Observer | None = None) -> Verdict:
+def _act(r: Replay, indices: Iterable[int], observe: Observer | None = None) -> None:
+    """Replay the plan's actions ``indices`` in time order, telling ``observe`` after each."""
     plan = r.plan
     z = r.z.view()  # the rules cut r.z in place, so this view stays current
     z.flags.writeable = False
-    for n in sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n)):
+    for n in sorted(indices, key=lambda n: (plan.actions[n].t_start, n)):
         a = plan.actions[n]
         if a.machine not in r.pose:
             r.flag(n, "unknown_machine", 1.0, f"no machine {a.machine!r}; on site: {', '.join(r.pose)}")
         else:
-            _act(r, n, a)
+            _apply(r, n, a)
         if observe is not None:
             observe(n, z, r.loaded)
-    r.collisions()
-    return r.verdict()
 
 
-def _act(r: Replay, n: int, a: Action) -> None:
+def _apply(r: Replay, n: int, a: Action) -> None:
     # each track's rules load with the first judgement, not with every planner that calls one
     # of them (a case's start-up, issue 18)
     from . import backhoe, loader
@@ -82,6 +81,38 @@ def _act(r: Replay, n: int, a: Action) -> None:
     elif isinstance(a, Charge):
         loader.charge(r, n, a)
     r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
+
+
+def _run(r: Replay, observe: Observer | None = None) -> Verdict:
+    _act(r, range(len(r.plan.actions)), observe)
+    r.collisions()
+    return r.verdict()
+
+
+class Execution:
+    """A plan judged step by step, as a closed loop executes it (docs/DESIGN.md §6).
+
+    Each :meth:`execute` replays one step's actions after those before, on the same replay
+    state, and returns the verdict :func:`judge` gives the plan executed so far — in time
+    linear in the step, not in the plan. The steps' actions must start no earlier than the
+    plan so far ends (the harness checks that before it executes a step).
+    """
+
+    def __init__(self, scenario: Scenario):
+        self.replay = Replay(scenario, Plan())
+
+    @property
+    def plan(self) -> Plan:
+        return self.replay.plan
+
+    def execute(self, actions: tuple[Action, ...]) -> Verdict:
+        r = self.replay
+        _act(r, r.extend(actions))
+        kept = len(r.violations)
+        r.collisions()  # along the whole of both paths so far; checked again after the next step
+        verdict = r.verdict()
+        del r.violations[kept:]
+        return verdict
 
 
 def judge(scenario: Scenario, plan: Plan | dict | str, observe: Observer | None = None) -> Verdict:

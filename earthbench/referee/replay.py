@@ -102,6 +102,12 @@ class Verdict:
     travel: dict[str, float] = field(default_factory=dict)
     #: (end time, cumulative loaded volume) after each dump, in replay order: when the truck got what.
     load_curve: tuple[tuple[float, float], ...] = ()
+    #: Where each machine stands when the plan ends (what a closed-loop step continues from).
+    final_poses: dict[str, Pose] = field(default_factory=dict)
+    #: The excavator's upper body relative to its base yaw when the plan ends (rad).
+    final_turn: float = 0.0
+    #: Bank m³ left in the bucket when the plan ends (a dump into a full truck leaves some).
+    final_bucket: float = 0.0
 
     @property
     def valid(self) -> bool:
@@ -249,15 +255,7 @@ class Replay:
             self.specs["excavator"] = m.excavator
         if m.loader is not None:
             self.specs["loader"] = m.loader
-        moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
-        for a in plan.actions:
-            if isinstance(a, Move) and a.machine in moves:
-                moves[a.machine].append(a)
-            elif isinstance(a, Charge) and a.machine in moves:  # a charge moves the loader too
-                (x, y, yaw), (ex, ey, _) = a.entry, a.end
-                if a.t_end > a.t_start:
-                    moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
-        self.timelines = {mid: Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
+        self.timelines = self._timelines()
         self.busy_until = {mid: 0.0 for mid in m.ids}
         self.pose = {mid: m.pose(mid) for mid in m.ids}
         self.turn = 0.0  # excavator's upper body angle relative to its base yaw
@@ -276,6 +274,27 @@ class Replay:
         #: with soil, the firm ground: the heights less the loose material slumping left on top
         self.firm: np.ndarray | None = None if self.soil is None else self.z.copy()
 
+    def _timelines(self) -> dict[str, Timeline]:
+        m = self.sc.machines
+        moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
+        for a in self.plan.actions:
+            if isinstance(a, Move) and a.machine in moves:
+                moves[a.machine].append(a)
+            elif isinstance(a, Charge) and a.machine in moves:  # a charge moves the loader too
+                (x, y, yaw), (ex, ey, _) = a.entry, a.end
+                if a.t_end > a.t_start:
+                    moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
+        return {mid: Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
+
+    def extend(self, actions: tuple[Any, ...]) -> range:
+        """Append a closed-loop step's actions to the plan being replayed (docs/DESIGN.md §6);
+        returns their indices. They start no earlier than the plan so far ends, so replaying
+        them next gives the state a replay of the whole plan would."""
+        n0 = len(self.plan.actions)
+        self.plan = Plan(self.plan.actions + tuple(actions))
+        self.timelines = self._timelines()
+        return range(n0, len(self.plan.actions))
+
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
         self.violations.append(Violation(n, rule, float(magnitude), message))
 
@@ -290,6 +309,9 @@ class Replay:
             dumps=self.dumps,
             travel=self.travel,
             load_curve=tuple(self.load_curve),
+            final_poses={mid: tl.pose(self.plan.makespan) for mid, tl in self.timelines.items()},
+            final_turn=self.turn,
+            final_bucket=self.bucket,
         )
 
     # -- cutting -----------------------------------------------------------------------------

@@ -8,6 +8,11 @@ clear of the excavator. Every action is sequential: one machine acts at a time. 
 are screened with a vectorised estimate and the best few confirmed with the referee's own cut
 model, so the planner's predicted volume equals the referee's.
 
+Closed loop (``closed_loop = true``, docs/DESIGN.md §6): each step plans from the observation
+(the terrain as it now is, the machines where they stand, the load the truck reports) up to
+and including the next dump, so the planner digs on until the truck really holds the target.
+The stations it has visited are remembered from step to step.
+
 Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array
 operations (heights looked up for all contacts at once; only the strokes whose cut level or
 points a dig has changed estimated again; trial cuts made on the planner's grid and put back
@@ -28,7 +33,7 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.cut import apply_cut, path_cells
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
-from earthbench.planner import Planner
+from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
@@ -50,6 +55,8 @@ class GreedyConfig:
     travel_penalty: float = 0.05
     """m³ of reachable material worth one metre of travel when choosing a station."""
     max_actions: int = 2000
+    closed_loop: bool = closed_loop_setting()
+    """Replan after every dump from the observed terrain and truck load."""
 
 
 class GreedyPlanner(Planner):
@@ -62,6 +69,16 @@ class GreedyPlanner(Planner):
 
     def plan(self, scenario: Scenario) -> Plan:
         return _Greedy(scenario, self.config).run()
+
+    def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
+        g = _Greedy(observation.scenario, self.config)
+        g.t, g.turn, g.loaded = observation.t, observation.turn, observation.loaded
+        if observation.step == 0:
+            self._visited: set[tuple[float, float]] = set()
+        plan = g.run(self._visited, max_dumps=1)
+        return plan if plan.actions else None
 
 
 class _Greedy:
@@ -91,10 +108,12 @@ class _Greedy:
         self._dug_since: list[tuple[slice, slice]] = []  # grid windows dug since the stations were scored
 
     # -- the loop ----------------------------------------------------------------------------
-    def run(self) -> Plan:
+    def run(self, visited: set[tuple[float, float]] | None = None, max_dumps: int | None = None) -> Plan:
+        """Plan until the goal is loaded (or ``max_dumps`` dumps: one closed-loop step)."""
         target = self.sc.task.target_volume
         goal = min(target, self.truck_spec.capacity)
-        visited: set[tuple[float, float]] = set()
+        visited = set() if visited is None else visited
+        start, dumps = self.loaded, 0
         while self.loaded < goal - 1e-9 and len(self.actions) < self.cfg.max_actions:
             need = goal - self.loaded
             best = self.best_dig(min(need, self.exc.bucket_capacity))
@@ -109,9 +128,12 @@ class _Greedy:
                 continue
             self.dig(best)
             self.dump()
+            dumps += 1
+            if max_dumps is not None and dumps >= max_dumps:
+                break
         return Plan(
             tuple(self.actions),
-            Prediction(volume=self.loaded, makespan=self.t),
+            Prediction(volume=self.loaded - start, makespan=self.t),
             {"planner": "greedy", "stations": len(visited)},
         )
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.plan import Plan
-from earthbench.planner import Planner
+from earthbench.planner import Observation, Planner
 from earthbench.world import Scenario
 from ..loader_cycle import Cycle, CycleBuilder, LoaderPlanConfig, pile_side
 
@@ -52,8 +52,18 @@ class GreedyLoader(Planner):
     Config = GreedyLoaderConfig
 
     def plan(self, scenario: Scenario) -> Plan:
+        return self._run(CycleBuilder(scenario, self.config))
+
+    def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
+        plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
+        return plan if plan.actions else None
+
+    def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:
+        """Cycles until the target is loaded (or ``max_dumps`` cycles: one closed-loop step)."""
         cfg: GreedyLoaderConfig = self.config
-        b = CycleBuilder(scenario, cfg)
+        scenario = b.sc
         truck = scenario.machines.truck_pose
 
         def choose(lines: list[np.ndarray], capacity: float) -> Cycle | str:
@@ -68,5 +78,5 @@ class GreedyLoader(Planner):
             cycle.candidate = {"edge_centre": [float(M[k, 0]), float(M[k, 1])]}
             return cycle
 
-        stop = b.load_until_target(cfg.max_cycles, choose)
+        stop = b.load_until_target(cfg.max_cycles, choose, max_dumps)
         return b.plan({"stop": stop, "digs": [c.candidate for c in b.cycles]})

@@ -42,6 +42,12 @@ Refined planner (:mod:`.backhoe_model`)
 Without a design grade (``site.floor`` None) the lowest ground in the dig area serves as the
 floor, so the planner never digs a pit below the surrounding site.
 
+Closed loop (``closed_loop = true``, docs/DESIGN.md §6): the planner is reactive by design
+(the paper plans each dig from the terrain as the excavator finds it), so each step makes a
+new coarse plan from the observation — the terrain as now observed, the machines where they
+stand, the load the truck reports — and returns the next dig with its dump (and any move
+before it). The floor taken at the first step and the exhausted stations are remembered.
+
 Execution model: the chosen dig is applied to the planner's copy of the grid with the referee's
 own :func:`~earthbench.cut.apply_cut`, so the predicted volume of every dig is the one the
 referee will measure. Each dig is followed by a dump into the truck. When nothing worth
@@ -60,7 +66,7 @@ from shapely.geometry import LineString, Point, Polygon
 
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
-from earthbench.planner import Planner
+from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
 from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
@@ -116,6 +122,8 @@ class SinghCannonBackhoeConfig:
     truck_distance: float = 5.0
     """Preferred centre distance (m) from the excavator to the truck when the truck must move."""
     max_digs: int = 1000
+    closed_loop: bool = closed_loop_setting()
+    """Replan every dig from the observed terrain and truck load."""
 
 
 @dataclass(frozen=True)
@@ -156,6 +164,18 @@ class SinghCannonBackhoe(Planner):
 
     def plan(self, scenario: Scenario) -> Plan:
         return Session(scenario, self.config).run()
+
+    def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
+        s = Session(observation.scenario, self.config)
+        if observation.step == 0:
+            self._floor, self._depleted = s.floor, s.depleted
+        s.floor, s.depleted = self._floor, self._depleted
+        s.t = s.truck_ready = observation.t
+        s.turn, s.loaded = observation.turn, observation.loaded
+        plan = s.run(max_dumps=1)
+        return plan if plan.actions else None
 
     def session(self, scenario: Scenario) -> "Session":
         """A planning session at the scenario's initial state, to call the coarse and refined
@@ -517,8 +537,10 @@ class Session:
         return False
 
     # -- the loop -----------------------------------------------------------------------------------
-    def run(self) -> Plan:
+    def run(self, max_dumps: int | None = None) -> Plan:
+        """Plan until the target is loaded (or ``max_dumps`` dumps: one closed-loop step)."""
         sc = self.sc
+        start = self.loaded
         target = sc.task.target_volume
         fills = (self.cfg.fill_min,) + tuple(f for f in self.cfg.relax_fills if f < self.cfg.fill_min)
         level = 0
@@ -557,9 +579,12 @@ class Session:
             vol = self.do_dig(ch)
             digs += 1
             self.do_dump(vol)
+            if max_dumps is not None and digs >= max_dumps:
+                status = "step done"
+                break
         plan = Plan(
             tuple(self.actions),
-            Prediction(volume=self.loaded, makespan=max((a.t_end for a in self.actions), default=0.0)),
+            Prediction(volume=self.loaded - start, makespan=max((a.t_end for a in self.actions), default=0.0)),
             info={"planner": "singh-cannon-backhoe", "status": status, "digs": self.log, "events": self.events,
                   "stations": self.station},
         )

@@ -11,7 +11,7 @@ import numpy as np
 
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
-from earthbench.planner import Planner
+from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.world import Scenario
 from .surface import fit_rbf
 
@@ -122,6 +122,7 @@ class Config(LocalNLPConfig):
     # execute the NLP's own digs (contact, heading, depth, full drag) without contact repair or
     # last-bucket trimming: the paper's plans as they are (its Table I); the referee judges them
     as_planned: bool = False
+    closed_loop: bool = closed_loop_setting()  # receding horizon, one local area per step (.receding)
 
 
 class StlTampPlanner(Planner):
@@ -150,6 +151,14 @@ class StlTampPlanner(Planner):
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
 
     # -- the plan -------------------------------------------------------------------------------
+    def step(self, observation: Observation) -> Plan | None:
+        """Closed loop: one receding-horizon step (:mod:`.receding`)."""
+        from .receding import Horizon, step
+
+        if observation.step == 0:
+            self._horizon = Horizon()
+        return step(self, observation, self._horizon)
+
     def plan(self, scenario: Scenario) -> Plan:
         t_start = time.perf_counter()
         c = self.config

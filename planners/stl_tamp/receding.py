@@ -1,0 +1,102 @@
+"""STL-TAMP in receding horizon: the closed-loop mode of ``stl-tamp`` (docs/DESIGN.md §6).
+
+The paper plans the whole task up front (Algorithm 1: a global problem over local areas, then
+a local problem per area) and executes it open loop. Closed loop, each step is one pass of
+Algorithm 1 on what is now observed: the candidate areas are tiled on the observed terrain,
+the global problem over them is solved again for the volume still missing (the truck's
+reported load, not the model's), the first area it chooses gets its local problem, and that
+area's actions are the step. The next step re-solves the remaining areas on the terrain the
+referee left, warm-started from the previous solution: the areas it chose and did not dig
+yet lead the new tour, in its order, so the global problem's initial guess is the previous
+plan's tail. Areas that yielded nothing are not chosen again.
+
+Only the planner's own functions are called (:meth:`StlTampPlanner._global`,
+:meth:`StlTampPlanner._local` and :mod:`.hierarchy`); nothing of the open-loop path changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from earthbench.plan import Plan, Prediction
+from earthbench.planner import Observation
+from earthbench_planners.stl_tamp.surface import fit_rbf
+
+from .convert import Converter, SimState
+from .hierarchy import (
+    Area,
+    Trace,
+    candidate_areas,
+    global_blocks,
+    global_lattice,
+    greedy_tour,
+    in_box,
+    nearest_block,
+    site_box,
+)
+
+
+@dataclass
+class Horizon:
+    """What one closed-loop run of ``stl-tamp`` carries from step to step."""
+
+    ahead: list[Area] = field(default_factory=list)  # the previous solution's chosen areas not yet dug
+    done: list[tuple[float, float]] = field(default_factory=list)  # centres of areas that yielded nothing
+    joints: tuple[float, float] = (0.3, -1.5)
+    trace: Trace = field(default_factory=Trace)
+
+
+def step(planner, observation: Observation, h: Horizon) -> Plan | None:
+    """One receding-horizon step of ``planner`` (a :class:`~.planner.StlTampPlanner`); None when done."""
+    c, sc = planner.config, observation.scenario
+    exc = sc.machines.excavator
+    remaining = observation.remaining
+    if remaining <= c.volume_tol or observation.truck_full:
+        return None
+    st = SimState.start(sc)
+    st.t, st.turn, st.loaded = observation.t, observation.turn, observation.loaded
+    side = planner.area_side(sc)
+    box = site_box(sc)
+    conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
+                     retime=c.retime_moves)
+    areas = [a for a in candidate_areas(sc, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
+             if all(math.dist(a.centre, d) > side / 2 for d in h.done)]
+    if not areas:
+        return None
+    vmax = c.area_vmax if len(areas) > 1 else max(c.area_vmax, c.m_local * exc.bucket_capacity)
+    blocks = global_blocks(box, c.global_window)
+    block = nearest_block(blocks, areas, (st.exc.x, st.exc.y))
+    in_block = [a for a in areas if in_box(a.centre, block)]
+    v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
+                                                     (c.block_phases - 1) * c.area_vmax)
+    work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
+    tour = _warm(greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3), h.ahead, side)
+    if c.global_layer and len(tour) > 1:
+        if len(blocks) == 1:
+            surf = fit_rbf(sc.terrain.with_z(st.z), spacing=c.global_fit_spacing, solver="cholesky")
+        else:
+            surf = fit_rbf(sc.terrain.with_z(st.z), spacing=c.global_fit_spacing, window=block,
+                           shape=global_lattice(c.global_window, c.global_fit_spacing), solver="cholesky")
+        chosen, _ = planner._global(sc, st, surf, tour, v_block, side, box, block, len(blocks) > 1, h.trace)
+    else:
+        chosen = tour
+    area = chosen[0]
+    nxt = chosen[1].base if len(chosen) > 1 else area.base
+    got, _, h.joints = planner._local(sc, st, conv, area, nxt, remaining, vmax, h.joints, box, h.trace)
+    h.ahead = chosen[1:]
+    if got <= c.volume_tol:
+        h.done.append(area.centre)
+    if not st.actions:
+        return None
+    return Plan(tuple(st.actions), Prediction(volume=got), {"planner": planner.name, "area": list(area.centre)})
+
+
+def _warm(tour: list[Area], ahead: list[Area], side: float) -> list[Area]:
+    """``tour`` with the areas near the previous solution's remaining choices first, in its order."""
+    first: list[Area] = []
+    for prev in ahead:
+        near = [a for a in tour if a not in first and math.dist(a.centre, prev.centre) <= side / 2]
+        if near:
+            first.append(min(near, key=lambda a: math.dist(a.centre, prev.centre)))
+    return first + [a for a in tour if a not in first]

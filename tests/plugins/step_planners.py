@@ -1,0 +1,147 @@
+"""Closed-loop planners, honest and hostile, for the step protocol (docs/DESIGN.md §6).
+
+Loaded as a plugin file, like :mod:`faulty_planners`. The honest ones replay the ``greedy``
+planner's plan one dig cycle per step, so the harness's cost per step can be measured with a
+planner that costs nothing per step.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+from earthbench import PLANNERS, Dump, Move, Plan, Planner
+from earthbench.planner import Observation
+
+
+@dataclass(frozen=True)
+class StepConfig:
+    closed_loop: bool = True
+
+
+def cycles(scenario) -> list[Plan]:
+    """The greedy plan of ``scenario`` cut after each dump: one dig cycle (moves, dig, dump) each."""
+    out, cur = [], []
+    for a in PLANNERS.get("greedy")().plan(scenario).actions:
+        cur.append(a)
+        if isinstance(a, Dump):
+            out.append(Plan(tuple(cur)))
+            cur = []
+    return out
+
+
+class StepPlanner(Planner):
+    name = "s-base"
+    Config = StepConfig
+
+    def plan(self, scenario):
+        return Plan(tuple(a for c in cycles(scenario) for a in c.actions))
+
+    def step(self, observation: Observation) -> Plan | None:
+        if observation.step == 0:
+            self.todo = cycles(observation.scenario)
+        return self.todo.pop(0) if self.todo else None
+
+
+class Digs(StepPlanner):
+    """One dig cycle per step, then done: what a reactive planner returns, at no cost."""
+
+    name = "s-digs"
+
+
+class Hangs(StepPlanner):
+    """Answers step 0, then hangs in step 1."""
+
+    name = "s-hang"
+
+    def step(self, observation):
+        if observation.step >= 1:
+            time.sleep(60)
+        return super().step(observation)
+
+
+class Garbage(StepPlanner):
+    """Returns a number instead of actions."""
+
+    name = "s-garbage"
+
+    def step(self, observation):
+        return 42
+
+
+class Empty(StepPlanner):
+    """Returns no actions without saying done."""
+
+    name = "s-empty"
+
+    def step(self, observation):
+        return Plan()
+
+
+class Past(StepPlanner):
+    """Returns the first cycle again every step: from step 1 on it starts in the past."""
+
+    name = "s-past"
+
+    def step(self, observation):
+        return cycles(observation.scenario)[0]
+
+
+class Raises(StepPlanner):
+    name = "s-raise"
+
+    def step(self, observation):
+        if observation.step == 2:
+            raise RuntimeError("step 2 went wrong")
+        return super().step(observation)
+
+
+class NeverDone(StepPlanner):
+    """Keeps the truck waiting where it stands, one second per step, and never says done."""
+
+    name = "s-never-done"
+
+    def step(self, observation):
+        p = observation.scenario.machines.truck_pose
+        t = observation.t
+        return Plan((Move("truck", ((t, p.x, p.y, p.yaw), (t + 1.0, p.x, p.y, p.yaw))),))
+
+
+class ForgesDictStep(StepPlanner):
+    """Writes its own step message with a plan object instead of JSON text, then waits."""
+
+    name = "s-forge-dict"
+
+    def step(self, observation):
+        os.write(int(sys.argv[2]), b'{"event": "step", "plan": {"actions": []}}\n')
+        time.sleep(60)
+
+
+class ForgesExtraStep(StepPlanner):
+    """Sends a forged step before its real one: two answers to one observation."""
+
+    name = "s-forge-extra"
+
+    def step(self, observation):
+        first = super().step(observation)
+        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": first.to_json()}) + "\n").encode())
+        return first
+
+
+@dataclass(frozen=True)
+class OpenConfig:
+    closed_loop: bool = False
+
+
+class OpenLoopSendsStep(StepPlanner):
+    """Configured open loop, yet writes a step message."""
+
+    name = "s-open-step"
+    Config = OpenConfig
+
+    def plan(self, scenario):
+        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": Plan().to_json()}) + "\n").encode())
+        time.sleep(60)
+        return Plan()
