@@ -65,12 +65,12 @@ def markdown(runs: pd.DataFrame, command: str) -> str:
     ]
     for _, r in t.iterrows():
         p = PAPER.get(float(r["target_volume"]), (float("nan"),) * 3)
-        lines.append(f"| {r['target_volume']:g} | {r['runs']} | {r['valid']} | {r['success']} | {r['loaded m³ (mean)']:.2f} ± {r['loaded m³ (SD)']:.2f} "
+        lines.append(f"| {r['target_volume']:g} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} | {r['loaded m³ (mean)']:.2f} ± {r['loaded m³ (SD)']:.2f} "
                      f"| {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} | {p[0]:.2f} | {p[1]:.1f} | {p[2]:.3f} |")
     for key, title in (("material", "By soil class"), ("scan", "By scan (`survey`: whole site, σ 0.01 m; `cab`: occluded from the cab, σ 0.03 m, bias 0.02 m, 0.1 m cells)")):
         lines += ["", f"## {title}", "", f"| {key} | runs | valid | success | ratio %, mean ± SD | prediction error m³ (mean) |", "|---|---:|---:|---:|---:|---:|"]
         for _, r in by(runs, key).iterrows():
-            lines.append(f"| {r[key]} | {r['runs']} | {r['valid']} | {r['success']} | {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} | {r['prediction error m³ (mean)']:.2f} |")
+            lines.append(f"| {r[key]} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} | {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} | {r['prediction error m³ (mean)']:.2f} |")
     lines += ["", "Prediction error: the plan's own predicted volume less what the referee loaded (positive: the plan expected more).", ""]
     return "\n".join(lines)
 
