@@ -71,11 +71,10 @@ def _sight(terrain: Heightmap, sensor: tuple[float, float, float], outside_level
     radii = (np.arange(n_r) + 0.5) * step
     px = sx + np.cos(theta)[:, None] * radii[None, :]
     py = sy + np.sin(theta)[:, None] * radii[None, :]
-    i = np.floor((px - terrain.origin[0]) / r).astype(np.int64)
-    j = np.floor((py - terrain.origin[1]) / r).astype(np.int64)
-    on = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
-    h = np.full(px.shape, outside_level)
-    h[on] = z[j[on], i[on]]
+    # the map with a border of open ground: a sample off the map reads the border
+    i = np.clip(np.floor((px - terrain.origin[0]) / r), -1, nx).astype(np.int64) + 1
+    j = np.clip(np.floor((py - terrain.origin[1]) / r), -1, ny).astype(np.int64) + 1
+    h = np.pad(z, 1, constant_values=outside_level)[j, i]
     slope = np.maximum.accumulate((h - sz) / radii[None, :], axis=1)
     nearer = np.floor((dist - r) / step - 0.5).astype(np.int64)  # last sample more than a cell nearer
     blocked = np.where(nearer >= 0, slope[ray - first, np.clip(nearer, 0, n_r - 1)], -np.inf)

@@ -635,6 +635,9 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
             raise ScenarioError(f"scenario field {where} must be finite, got {value}")
         if cls is not Pose and (value < 0 or (value == 0 and key not in _MAY_BE_ZERO)):
             raise ScenarioError(f"scenario field {where} must be {'≥ 0' if key in _MAY_BE_ZERO else 'positive'}, got {value:g}")
+    for name, f in fields.items():
+        if name not in doc and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ScenarioError(f"scenario field {path}.{name} is missing")
     return cls(**doc)
 
 

@@ -81,6 +81,13 @@ def test_out_of_range_parameters_are_refused_with_the_field_path(section, field,
     assert message in str(err.value)
 
 
+def test_a_soil_without_its_material_names_the_missing_field():
+    doc = block_scenario().replace(soil=LOAM).to_dict()
+    del doc["soil"]["material"]
+    with pytest.raises(ScenarioError, match="scenario field soil.material is missing"):
+        Scenario.from_dict(doc)
+
+
 def test_a_suite_refuses_an_unknown_material_or_sensing_key(tmp_path):
     base = """name = "bad"\ntrack = "backhoe"\n[[family]]\nname = "f"\ngenerator = "rbf"\ntargets = [1.0]\nseeds = [0]\n"""
     with pytest.raises(SuiteError, match="family 'f'.*material must be one of sand, loam, clay, got 'granite'"):

@@ -92,8 +92,8 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     cells = path_cells(r.terrain, r.z.shape, a.contact, a.heading, spec.bucket_width, a.drag_length)
     jj, ii, _ = cells
     before = r.z[jj, ii]
-    cut, nominal = r.cut(a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity, a.depth, cells)
-    vol = cut.volume
+    got, nominal = r.cut(a.contact, a.heading, spec.bucket_width, a.drag_length, level, spec.bucket_capacity, a.depth, cells)
+    vol = got.volume
     # no cut reaches below the undermining line while its level is at or above the tracks' ground
     excess = -math.inf
     if level < level_under - ABS_TOL:

@@ -207,7 +207,7 @@ def charge(r: Replay, n: int, a: Charge) -> None:
         full_at = cut.full_at
     else:  # overfill is judged on the public cut model: where the plan could know the bucket fills
         full_at = charge_along(r.terrain, r.z.copy(), spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket).full_at
-        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, edge, yaw, a.penetration, level))
+        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, spec, edge, yaw, a.penetration, level))
     if full_at is not None:
         _overfill(r, n, spec, edge, yaw, a.penetration, level, full_at)
     r.bucket += cut.volume
@@ -219,9 +219,9 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     r.pose[a.machine] = Pose(ex, ey, yaw)
 
 
-def _pile_height(r: Replay, edge: tuple[float, float], yaw: float, penetration: float, level: float) -> float:
+def _pile_height(r: Replay, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float) -> float:
     """The highest face a charge can leave: the pile's height above ``level`` along its path."""
-    jj, ii, _ = path_cells(r.terrain, r.z.shape, edge, yaw, r.specs["loader"].bucket_width, penetration)  # type: ignore[union-attr]
+    jj, ii, _ = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, penetration)
     return float(np.max(r.z[jj, ii] - level, initial=0.0))
 
 
