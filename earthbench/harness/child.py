@@ -103,7 +103,7 @@ def main(case_file: str, fd: int) -> None:
     outcome, error, plan = "plan", "", None
     t0, c0 = time.perf_counter(), _cpu()
     try:
-        scenario = Scenario.from_dict(json.load(sys.stdin))
+        scenario = Scenario.from_dict(json.loads(sys.stdin.buffer.read()))
         planner = cls(**overrides)
         plan = planner.plan(scenario)
     except MemoryError:
