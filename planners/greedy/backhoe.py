@@ -30,7 +30,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.cut import apply_cut, path_cells
+from earthbench.cut import apply_cut, cut_along, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
@@ -253,9 +253,10 @@ class _Greedy:
         e = self.exc
         rows, cols = self._window(contact, heading)
         saved = self.z[rows, cols].copy()
-        jj, ii, _ = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
+        cells = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
+        jj, ii, _ = cells
         before = self.z[jj, ii]
-        apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
+        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity, cells)
         cut = self.z[jj, ii] < before
         excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
         self.z[rows, cols] = saved
@@ -264,13 +265,7 @@ class _Greedy:
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
         """Rows and columns of the grid holding every cell a stroke from ``contact`` may cut."""
         e = self.exc
-        r, (x0, y0), (ny, nx) = self.terrain.resolution, self.terrain.origin, self.z.shape
-        ends_x = (contact[0], contact[0] + math.cos(heading) * e.max_drag_length)
-        ends_y = (contact[1], contact[1] + math.sin(heading) * e.max_drag_length)
-        pad = e.bucket_width / 2 + 2 * r  # apply_cut touches cells within width/2 + r of the stroke
-        cols = slice(max(int((min(ends_x) - pad - x0) // r), 0), min(int((max(ends_x) + pad - x0) // r) + 2, nx))
-        rows = slice(max(int((min(ends_y) - pad - y0) // r), 0), min(int((max(ends_y) + pad - y0) // r) + 2, ny))
-        return rows, cols
+        return path_window(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
 
     def dig(self, best: tuple[float, tuple[float, float], float, float]) -> None:
         _, contact, heading, depth = best

@@ -67,7 +67,7 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
-from earthbench.cut import apply_cut, cut_level, footprint, path_cells
+from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
 from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
@@ -333,13 +333,18 @@ class Session:
         level = cut_level(self.terrain, self.z, contact, ch.depth)
         if level < self.floor + ABS_TOL:
             return False
-        # the referee's undermining rule, on a trial cut
-        trial = self.z.copy()
-        apply_cut(self.terrain, trial, contact, heading, e.bucket_width, ch.drag, level, self.cap)
-        jj, ii, _ = path_cells(self.terrain, trial.shape, contact, heading, e.bucket_width, ch.drag)
-        cut = trial[jj, ii] < self.z[jj, ii]
+        # the referee's undermining rule, on a trial cut made on the planner's grid and put back
+        # (a copy of the whole map per candidate made the cost grow with the map, not the work)
         track_level = track_level_and_tilt(self.sc, self.z, e, base)[0]
-        return undermining_excess(self.terrain, trial, e, base, track_level, jj[cut], ii[cut]) <= -ABS_TOL
+        cells = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, ch.drag)
+        jj, ii, _ = cells
+        window = path_window(self.terrain, self.z.shape, contact, heading, e.bucket_width, ch.drag)
+        saved, before = self.z[window].copy(), self.z[jj, ii]
+        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap, cells)
+        cut = self.z[jj, ii] < before
+        excess = undermining_excess(self.terrain, self.z, e, base, track_level, jj[cut], ii[cut])
+        self.z[window] = saved
+        return excess <= -ABS_TOL
 
     def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float) -> tuple[int, _Choice | None]:
         """The first region from ``start`` on with a feasible dig, and that dig."""

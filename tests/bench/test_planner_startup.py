@@ -14,13 +14,13 @@ from importlib.metadata import entry_points
 
 import pytest
 
-BUILT_IN = sorted((e.name, e.value) for e in entry_points(group="earthbench.planners") if e.value.startswith("planners."))
+BUILT_IN = sorted((e.name, e.value) for e in entry_points(group="earthbench.planners") if e.value.startswith("earthbench_planners."))
 BASELINES = [("interpreter", "pass"), ("earthbench core", "import earthbench")]
 
 
 def _code(target: str) -> str:
-    module, _, attr = target.partition(":")
-    return f"import importlib; getattr(importlib.import_module({module!r}), {attr!r})()"
+    """What a case's process runs before it says it is ready: the bootstrap loads the planner's class, which is made."""
+    return f"from earthbench.harness.child import load_planner_class; load_planner_class({target!r}, 'x')()"
 
 
 @pytest.mark.parametrize(("what", "code"), BASELINES + [(name, _code(t)) for name, t in BUILT_IN],
