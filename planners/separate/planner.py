@@ -110,12 +110,14 @@ class Config(LocalNLPConfig):
     trust_rounds: int = 2
     max_iter: int = 250  # an iteration cap only (no CPU-time cap: load must not change a plan)
     mu_strategy: str = "adaptive"
-    max_areas: int = 40
+    max_areas: int = 0  # a ceiling on the local areas (0: none; the loop ends when the target is met or no area loads)
     volume_tol: float = 1e-4
 
     def __post_init__(self) -> None:
         if self.divisions < 0:
             raise ValueError(f"divisions must be ≥ 0 (0: as many as the target needs), got {self.divisions}")
+        if self.max_areas < 0:
+            raise ValueError(f"max_areas must be ≥ 0 (0: no ceiling), got {self.max_areas}")
         if self.m_local < 1 or self.w_local <= 0 or self.drag_length <= 0:
             raise ValueError("m_local ≥ 1, w_local > 0 and drag_length > 0 are required")
 
@@ -222,7 +224,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.4.1"
+    version = "0.4.2"
     tracks = ("backhoe",)
     Config = Config
 
@@ -273,7 +275,7 @@ class SeparatePlanner(Planner):
         queue = list(order)
         joints = (0.3, -1.5)
         n_areas = 0
-        limit = c.max_areas if c.divisions == 0 else min(c.divisions, c.max_areas)
+        limit = min(c.divisions or math.inf, c.max_areas or math.inf)
         pass_loaded = 0.0
         while n_areas < limit and target - st.loaded > c.volume_tol and truck_cap - st.loaded > c.volume_tol:
             if not queue:  # every area dug once: go round again on the lowered grid, if the last round loaded

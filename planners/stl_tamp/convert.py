@@ -39,9 +39,10 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import arcs, min_dig_time, min_dump_time, wrap
+from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at, wrap
 from earthbench.plan import Dig, Dump, Move
 from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
+from earthbench.referee.replay import bodies_touch, reach_of
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
@@ -115,33 +116,42 @@ def _samples(nodes: np.ndarray, times: np.ndarray) -> list[tuple[float, float, f
     return [(float(t), float(x), float(y), float(yaw)) for t, (x, y, yaw) in zip(times, nodes)]
 
 
-def min_distance(a: list[tuple[float, float, float, float]] | Pose, b: list[tuple[float, float, float, float]] | Pose) -> float:
-    """Least centre distance of two piecewise-linear paths (or a path and a still pose)."""
-    def arr(p: Any) -> np.ndarray:
-        if isinstance(p, Pose):
-            return np.array([[0.0, p.x, p.y], [1e12, p.x, p.y]])
-        return np.array([(s[0], s[1], s[2]) for s in p])
+Path = list[tuple[float, float, float, float]]
 
-    A, B = arr(a), arr(b)
-    t0, t1 = max(A[0, 0], B[0, 0]), min(A[-1, 0], B[-1, 0])
-    if t1 < t0:
-        return math.inf
-    ts = np.unique(np.concatenate([A[:, 0], B[:, 0], [t0, t1]]))
-    ts = ts[(ts >= t0) & (ts <= t1)]
 
-    def pos(P: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return np.stack([np.interp(t, P[:, 0], P[:, 1]), np.interp(t, P[:, 0], P[:, 2])], axis=1)
+def _track(p: Path | Pose) -> np.ndarray | None:
+    return None if isinstance(p, Pose) else np.asarray(p, dtype=float).reshape(-1, 4)
 
-    d = pos(A, ts) - pos(B, ts)
-    best = float(np.min(np.hypot(d[:, 0], d[:, 1])))
-    for k in range(len(ts) - 1):  # relative motion is linear on each interval: minimise the quadratic
-        p0, p1 = d[k], d[k + 1]
-        dv = p1 - p0
-        den = float(dv @ dv)
-        if den > 0:
-            s = min(max(-float(p0 @ dv) / den, 0.0), 1.0)
-            best = min(best, float(np.hypot(*(p0 + s * dv))))
-    return best
+
+def min_distance(a: Path | Pose, b: Path | Pose, step: float = 0.025) -> float:
+    """Least centre distance of two machines moving along the motion model's arcs through their
+    samples (or standing still at a pose), over the time both paths share, sampled so that
+    neither moves more than ``step`` between two times (:func:`earthbench.motion.dense_poses`)."""
+    return _sampled(a, b, step, 0.0, 0.0)[0]
+
+
+def _sampled(a: Path | Pose, b: Path | Pose, step: float, reach_a: float,
+             reach_b: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """(least centre distance, poses of a, poses of b) at common times along both paths."""
+    A, B = _track(a), _track(b)
+    if A is None and B is None:
+        pa = np.array([[a.x, a.y, a.yaw]])
+        pb = np.array([[b.x, b.y, b.yaw]])
+    else:
+        t0 = max(A[0, 0] if A is not None else -math.inf, B[0, 0] if B is not None else -math.inf)
+        t1 = min(A[-1, 0] if A is not None else math.inf, B[-1, 0] if B is not None else math.inf)
+        if t1 < t0:
+            return math.inf, np.zeros((0, 3)), np.zeros((0, 3))
+        ts = [np.array([t0, t1])]
+        ts += [dense_poses(P, step, r)[:, 0] for P, r in ((A, reach_a), (B, reach_b)) if P is not None]
+        times = np.unique(np.concatenate(ts))
+        times = times[(times >= t0) & (times <= t1)]
+
+        def poses(P: np.ndarray | None, p: Path | Pose) -> np.ndarray:
+            return np.tile([p.x, p.y, p.yaw], (len(times), 1)) if P is None else poses_at(P, times)
+
+        pa, pb = poses(A, a), poses(B, b)
+    return float(np.min(np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]))), pa, pb
 
 
 class Converter:
@@ -181,6 +191,15 @@ class Converter:
         cut = z[jj, ii] < before
         return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -1e-4
 
+    def clear(self, exc: Path | Pose, truck: Path | Pose) -> bool:
+        """Whether the excavator and the truck keep the referee's clearance rule along both paths:
+        centres at least the clearance apart and footprints apart by half a cell (the referee's
+        sampling step, :func:`earthbench.referee.replay.bodies_touch`), on the arcs it drives."""
+        es, ts = self.exc_spec, self.truck_spec
+        step = max(self.sc.terrain.resolution / 2, 0.025)
+        d, pe, pt = _sampled(exc, truck, step, reach_of(es.body(0.0, 0.0, 0.0)), reach_of(ts.body(0.0, 0.0, 0.0)))
+        return d >= self.clearance and not (len(pe) and bodies_touch(es, pe, ts, pt, margin=step).any())
+
     def _skip(self, why: str) -> float:
         self.skips[why] = self.skips.get(why, 0) + 1
         return 0.0
@@ -197,7 +216,7 @@ class Converter:
             dts = fastest_steps(nodes, np.asarray(dts, float), es.travel_speed, es.yaw_rate)
         times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         path = _samples(nodes, times)
-        if min_distance(path, st.truck) < self.clearance:
+        if not self.clear(path, st.truck):
             self._skip("move_blocked")
             return False
         st.actions.append(Move("excavator", tuple(path)))
@@ -222,13 +241,13 @@ class Converter:
         times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
         pe, pt = _samples(ne, times), _samples(nt, times)
         if not e_moves:
-            if min_distance(pt, st.exc) < self.clearance:
+            if not self.clear(st.exc, pt):
                 return self._blocked()
             st.actions.append(Move("truck", tuple(pt)))
             st.truck = Pose(*nt[-1])
             st.t = max(st.t, float(times[-1]))  # the excavator waits for the truck before dumping
             return "truck"
-        if min_distance(pe, pt) >= self.clearance:
+        if self.clear(pe, pt):
             st.actions.append(Move("excavator", tuple(pe)))
             st.actions.append(Move("truck", tuple(pt)))
             st.exc, st.truck = Pose(*ne[-1]), Pose(*nt[-1])
@@ -237,11 +256,11 @@ class Converter:
         # one after the other: the truck first (it usually leaves the excavator's way), then the excavator
         for first in ("truck", "excavator"):
             if first == "truck":
-                if min_distance(pt, st.exc) < self.clearance:
+                if not self.clear(st.exc, pt):
                     continue
                 end_truck = Pose(*nt[-1])
                 pe2 = _samples(ne, times + (times[-1] - times[0]))
-                if min_distance(pe2, end_truck) < self.clearance:
+                if not self.clear(pe2, end_truck):
                     continue
                 st.actions.append(Move("truck", tuple(pt)))
                 st.actions.append(Move("excavator", tuple(pe2)))
@@ -249,10 +268,10 @@ class Converter:
                 st.t = float(pe2[-1][0])
                 return "truck-first"
             end_exc = Pose(*ne[-1])
-            if min_distance(pe, st.truck) < self.clearance:
+            if not self.clear(pe, st.truck):
                 continue
             pt2 = _samples(nt, times + (times[-1] - times[0]))
-            if min_distance(pt2, end_exc) < self.clearance:
+            if not self.clear(end_exc, pt2):
                 continue
             st.actions.append(Move("excavator", tuple(pe)))
             st.actions.append(Move("truck", tuple(pt2)))

@@ -40,7 +40,7 @@ _NLP_CACHE: dict[Any, PhaseNLP] = {}
 
 
 class StlTampSolveError(RuntimeError):
-    """A local or global solve failed and the configuration allows no (more) fallbacks."""
+    """A local solve failed and the configuration allows no fallback (``on_failure="raise"``)."""
 
 
 def get_nlp(shape: Shape, scenario: Scenario, box: tuple[float, float, float, float]) -> tuple[PhaseNLP, bool]:
@@ -113,7 +113,8 @@ def nearest_block(blocks: list[tuple[float, float, float, float]], areas: list[A
 def solve_counts(records: list[dict[str, Any]]) -> dict[str, int]:
     """How the local solves ended (the planner's own report, from IPOPT's status): succeeded
     (Solve_Succeeded at the planner's tolerance), acceptable (IPOPT's acceptable level), capped
-    (iteration cap, feasible iterate accepted), fallback (the IK guess executed), other."""
+    (iteration cap, feasible iterate accepted), fallback (the IK guess executed), other (failed
+    past the fallback bound: the area was left undug)."""
     out = {"succeeded": 0, "acceptable": 0, "capped": 0, "fallback": 0, "other": 0}
     for r in records:
         st = str(r.get("status", ""))

@@ -445,7 +445,10 @@ class PhaseNLP:
 
     # -- bounds --------------------------------------------------------------------------------------
     def bounds(self, box: tuple[float, float, float, float], fixed_tasks: dict[str, np.ndarray] | None = None,
-               max_dig_phases: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+               max_dig_phases: int | None = None,
+               stand: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Variable bounds. ``stand = (x, y, tol)``: the base ends phase 0 within ``tol`` of
+        (x, y) (with ``Shape.hold_base`` it then stands there for the whole horizon)."""
         sh, exc, tr = self.shape, self.exc, self.truck
         m1, n, N = self.m1, self.n, self.N
         mg = 0.999
@@ -455,6 +458,9 @@ class PhaseNLP:
         lbx[:, 5], ubx[:, 5] = ARM_BOUNDS
         ulim = np.array([exc.travel_speed, exc.yaw_rate, exc.swing_rate, exc.joint_rate, exc.joint_rate,
                          tr.travel_speed, tr.yaw_rate]) * mg
+        if stand is not None:  # node n is column n - 1 (node 0 is the parameter s0)
+            lbx[n - 1, :2] = (stand[0] - stand[2], stand[1] - stand[2])
+            ubx[n - 1, :2] = (stand[0] + stand[2], stand[1] + stand[2])
         lbu = np.tile(-ulim, (N, 1))
         ubu = np.tile(ulim, (N, 1))
         for i in range(m1):
@@ -512,11 +518,12 @@ class PhaseNLP:
     def solve(self, params: np.ndarray, w0: np.ndarray, box: tuple[float, float, float, float], *,
               fixed_tasks: dict[str, np.ndarray] | None = None, max_dig_phases: int | None = None,
               max_iter: int = 300, options: dict[str, Any] | None = None,
-              accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None) -> Solution:
+              accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None,
+              stand: tuple[float, float, float] | None = None) -> Solution:
         """Solve from ``w0``. ``success`` is IPOPT's own success, or an acceptable-level stop with
         violation < 1e-4, or — when ``accept_feasible`` > 0 — an iteration cap whose last
         iterate violates no constraint by more than ``accept_feasible`` (status says which)."""
-        lb, ub = self.bounds(box, fixed_tasks, max_dig_phases)
+        lb, ub = self.bounds(box, fixed_tasks, max_dig_phases, stand)
         params, w0 = quantize(params), np.clip(quantize(w0), lb, ub)
         S = self.solver(max_iter, options, casadi_options)
         t0 = time.perf_counter()
