@@ -147,10 +147,11 @@ def slug(text: str) -> str:
     return (s or "x") + "-" + hashlib.sha1(text.encode()).hexdigest()[:6]
 
 
-def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
+def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> list[dict[str, Any]]:
     """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
 
-    Medians and the success rate carry their 95 % bootstrap interval in brackets.
+    Medians and the success rate carry their 95 % bootstrap interval in brackets; a
+    configuration hash in ``closed`` (closed loop, docs/DESIGN.md §6) is labelled so.
     """
     rows = []
     for _, r in summary.iterrows():
@@ -161,7 +162,7 @@ def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
                 ("Rank", str(r["rank_label"]), r["rank"]),
                 ("Planner", str(r["planner"]), None),
                 ("Version", str(r["planner_version"]), None),
-                ("Config", str(r["config_hash"])[:8], None),
+                ("Config", str(r["config_hash"])[:8] + (" closed-loop" if str(r["config_hash"]) in closed else ""), None),
                 ("Runs", f"{r['runs']}/{r['of']}", r["runs"]),
                 ("Success", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
                  r["success_rate"]),
@@ -182,7 +183,7 @@ def table_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
     return rows
 
 
-def section_tables(summary: pd.DataFrame, all_versions: bool = False) -> dict[str, Any]:
+def section_tables(summary: pd.DataFrame, all_versions: bool = False, closed: frozenset[str] = frozenset()) -> dict[str, Any]:
     """One suite and track's tables: the main rows, one table per family and per target (the same
     configurations), and the history (older versions) unless ``all_versions`` ranks them all."""
     shown = summary if all_versions else summary[summary["latest"].astype(bool)]
@@ -196,10 +197,10 @@ def section_tables(summary: pd.DataFrame, all_versions: bool = False) -> dict[st
         parts = mine(shown[shown["scope"] == scope])
         if parts["group"].nunique() > 1:  # one family (or target) would repeat the suite's table
             for group, g in parts.groupby("group", sort=True):
-                breakdowns.append((f"{word} {group}", table_rows(g)))
+                breakdowns.append((f"{word} {group}", table_rows(g, closed)))
     history = summary[(summary["scope"] == "suite") & ~summary["latest"].astype(bool)] if not all_versions else summary.iloc[:0]
-    return {"rows": table_rows(main), "breakdowns": breakdowns,
-            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"))}
+    return {"rows": table_rows(main, closed), "breakdowns": breakdowns,
+            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"), closed)}
 
 
 @dataclass
@@ -834,9 +835,10 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
+        closed = frozenset(runs.loc[runs["config"].map(_closed_loop).astype(bool), "config_hash"].astype(str)) if "config" in runs else frozenset()
         for sec in sections:
             ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
-            tables = section_tables(ssum, all_versions)
+            tables = section_tables(ssum, all_versions, closed)
             mixed = sec["stamp"].mixed
             sec.update(rows=mark_mixed_solve_columns(tables["rows"], mixed),
                        breakdowns=[(h, mark_mixed_solve_columns(r, mixed)) for h, r in tables["breakdowns"]],

@@ -4,9 +4,9 @@ The paper plans the whole task up front (Algorithm 1: a global problem over loca
 a local problem per area) and executes it open loop. Closed loop, each step is one pass of
 Algorithm 1 on what is now observed: the candidate areas are tiled on the observed terrain,
 the global problem over them is solved again for the volume still missing (the truck's
-reported load, not the model's), the first area it chooses gets its local problem, and that
-area's actions are the step. The next step re-solves the remaining areas on the terrain the
-referee left, warm-started from the previous solution: the areas it chose and did not dig
+reported load, not the model's), the first area it chooses gets its local problem (the next
+one, up to :data:`TRIES`, when it yields nothing), and that area's actions are the step. The
+next step re-solves the remaining areas on the terrain the referee left, warm-started from the previous solution: the areas it chose and did not dig
 yet lead the new tour, in its order, so the global problem's initial guess is the previous
 plan's tail. Areas that yielded nothing are not chosen again.
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation
-from earthbench_planners.stl_tamp.surface import fit_rbf
+from .surface import fit_rbf
 
 from .convert import Converter, SimState
 from .hierarchy import (
@@ -35,6 +35,10 @@ from .hierarchy import (
     nearest_block,
     site_box,
 )
+
+
+#: Areas of one solution tried in a step before it gives up (each costs a local solve).
+TRIES = 3
 
 
 @dataclass
@@ -81,11 +85,13 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
         chosen, _ = planner._global(sc, st, surf, tour, v_block, side, box, block, len(blocks) > 1, h.trace)
     else:
         chosen = tour
-    area = chosen[0]
-    nxt = chosen[1].base if len(chosen) > 1 else area.base
-    got, _, h.joints = planner._local(sc, st, conv, area, nxt, remaining, vmax, h.joints, box, h.trace)
-    h.ahead = chosen[1:]
-    if got <= c.volume_tol:
+    got, h.ahead = 0.0, []
+    for k, area in enumerate(chosen[:TRIES]):  # an area that yields nothing: on to the next the solution chose
+        nxt = chosen[k + 1].base if k + 1 < len(chosen) else area.base
+        got, _, h.joints = planner._local(sc, st, conv, area, nxt, remaining, vmax, h.joints, box, h.trace)
+        if got > c.volume_tol:
+            h.ahead = chosen[k + 1:]
+            break
         h.done.append(area.centre)
     if not st.actions:
         return None
