@@ -78,7 +78,8 @@ def cut_along(
     excess = np.maximum(z[jj, ii] - level, 0.0) * (r * r)
     total = np.cumsum(excess)
     full = int(np.searchsorted(total, capacity, side="right"))
-    z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], level if np.ndim(level) == 0 else level[:full])
+    levels = np.asarray(level)
+    z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], levels if levels.ndim == 0 else levels[:full])
     removed = float(total[full - 1]) if full else 0.0
     if full < jj.size and removed < capacity:
         part = capacity - removed

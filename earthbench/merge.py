@@ -105,7 +105,9 @@ def check(out: Store | None, inputs: Sequence[Store]) -> list[str]:
         bad = st.db.execute("SELECT suite, suite_digest, COUNT(*) FROM runs GROUP BY suite, suite_digest").fetchall()
         for name, digest, n in bad:
             if (name, digest) not in known:
-                problems.append(f"{st.path}: {n} run(s) labelled suite {name!r} digest {digest[:12]}…, a suite version that store does not list")
+                problems.append(
+                    f"{st.path}: {n} run(s) labelled suite {name!r} digest {digest[:12]}…, a suite version that store does not list"
+                )
     for name, by_digest in sorted(digests.items()):
         if len(by_digest) > 1:
             where = "; ".join(f"{d[:12]}… in {', '.join(sorted(set(p)))}" for d, p in by_digest.items())
@@ -286,14 +288,20 @@ def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[
         if ver is None:
             known = [r[0] for r in src.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
             close = difflib.get_close_matches(suite, known, n=3, cutoff=0.5)
-            raise MergeError(f"suite {suite!r} has no runs in {str(db)!r}" + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
-                             + f" Suites there: {', '.join(known) or '(none)'}")
+            raise MergeError(
+                f"suite {suite!r} has no runs in {str(db)!r}"
+                + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
+                + f" Suites there: {', '.join(known) or '(none)'}"
+            )
         stored = [r[0] for r in src.db.execute("SELECT DISTINCT planner FROM runs ORDER BY planner")]
         for p in planners:
             if p not in stored:
                 close = difflib.get_close_matches(p, stored, n=3, cutoff=0.5)
-                raise MergeError(f"planner {p!r} has no runs in {str(db)!r}" + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
-                                 + f" Planners there: {', '.join(stored) or '(none)'}")
+                raise MergeError(
+                    f"planner {p!r} has no runs in {str(db)!r}"
+                    + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
+                    + f" Planners there: {', '.join(stored) or '(none)'}"
+                )
         members = {r[0] for r in src.db.execute("SELECT scenario_digest FROM suite_scenarios WHERE suite_id=?", (ver["id"],))}
         rows = [r for r in sorted(src.query(planner=planners), key=lambda r: r["id"]) if r["scenario_digest"] in members]
         if not rows:

@@ -165,7 +165,9 @@ def _on_arc(p0: np.ndarray, theta0: np.ndarray, dyaw: np.ndarray, length: np.nda
     return p0[:, 0] + ax, p0[:, 1] + ay
 
 
-def dense_poses(path: np.ndarray, spacing: float, reach: float = 0.0, only: np.ndarray | None = None, arc: dict[str, np.ndarray] | None = None) -> np.ndarray:
+def dense_poses(
+    path: np.ndarray, spacing: float, reach: float = 0.0, only: np.ndarray | None = None, arc: dict[str, np.ndarray] | None = None
+) -> np.ndarray:
     """Poses ``[m, 4]`` (t, x, y, yaw) along the motion model's curve through ``path[k, 4]``.
 
     Consecutive poses are at most ``spacing`` apart along the curve, and a point ``reach``

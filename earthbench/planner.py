@@ -85,8 +85,10 @@ class Observation:
         if "scenario" in doc:
             sc = Scenario.from_dict(doc["scenario"])
         elif first is not None:
-            poses = {f"{mid}_pose": Pose(**p) for mid, p in doc["poses"].items()}
-            sc = dataclasses.replace(first, terrain=Heightmap.from_dict(doc["terrain"]), machines=dataclasses.replace(first.machines, **poses))
+            poses: dict[str, Any] = {f"{mid}_pose": Pose(**p) for mid, p in doc["poses"].items()}
+            sc = dataclasses.replace(
+                first, terrain=Heightmap.from_dict(doc["terrain"]), machines=dataclasses.replace(first.machines, **poses)
+            )
         else:
             raise ValueError("a compact observation needs the first observation's scenario")
         return cls(sc, int(doc["step"]), float(doc["t"]), float(doc["loaded"]), float(doc["turn"]), float(doc.get("bucket", 0.0)))

@@ -419,7 +419,7 @@ def sample_runs(runs: pd.DataFrame) -> pd.DataFrame:
     order = sorted(counts.index, key=lambda d: (-counts[d], first_id[d]))
     best = order[0]
     picks = []
-    for solver, g in have.groupby("solver"):
+    for _, g in have.groupby("solver"):
         on = g[g["scenario_digest"] == best]
         if len(on):
             picks.append(on.iloc[0])
@@ -648,7 +648,9 @@ _JS = """
       var want = {};
       bar.querySelectorAll('select').forEach(function (s) { if (s.value) want[s.getAttribute('data-key')] = s.value; });
       section.querySelectorAll('table.sortable tbody tr').forEach(function (tr) {
-        var show = Object.keys(want).every(function (k) { return !tr.hasAttribute('data-' + k) || tr.getAttribute('data-' + k) === want[k]; });
+        var show = Object.keys(want).every(function (k) {
+          return !tr.hasAttribute('data-' + k) || tr.getAttribute('data-' + k) === want[k];
+        });
         tr.classList.toggle('hidden', !show);
       });
     }
@@ -835,7 +837,11 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
-        closed = frozenset(runs.loc[runs["config"].map(_closed_loop).astype(bool), "config_hash"].astype(str)) if "config" in runs else frozenset()
+        closed = (
+            frozenset(runs.loc[runs["config"].map(_closed_loop).astype(bool), "config_hash"].astype(str))
+            if "config" in runs
+            else frozenset()
+        )
         for sec in sections:
             ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
             tables = section_tables(ssum, all_versions, closed)
@@ -871,15 +877,20 @@ def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
 
 
 def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
-    lines = ["# earthbench leaderboard", "",
-             f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-             "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate). Columns: runs "
-             "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
-             "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
-             "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
-             "with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
-             "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
-             "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).", ""]
+    lines = [
+        "# earthbench leaderboard",
+        "",
+        f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
+        "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate)."
+        " Columns: runs "
+        "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
+        "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
+        "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
+        "with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
+        "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
+        "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).",
+        "",
+    ]
     if not sections:
         lines.append("No runs in the store.")
     for s in sections:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import PlanFormatError
-from .plan import Charge, Dig, Dump, Move, Plan
+from .plan import Charge, Dig, Move, Plan
 from .cut import footprint, path_window
 from .referee import Verdict, judge
 from .world import Scenario
@@ -465,7 +465,8 @@ SCRIPT = r"""
       ctx.lineWidth = red ? 3 : 1; ctx.strokeStyle = red ? '#d00' : '#000'; ctx.stroke();
       ctx.font = '12px sans-serif'; ctx.fillStyle = '#000';
       ctx.textAlign = cx > canvas.width / 2 ? 'right' : 'left';
-      ctx.fillText(mid + ' (' + p[0].toFixed(1) + ', ' + p[1].toFixed(1) + ')', cx + (cx > canvas.width / 2 ? -12 : 12), cy + (cy > canvas.height / 2 ? -10 : 16));
+      ctx.fillText(mid + ' (' + p[0].toFixed(1) + ', ' + p[1].toFixed(1) + ')',
+                   cx + (cx > canvas.width / 2 ? -12 : 12), cy + (cy > canvas.height / 2 ? -10 : 16));
       ctx.textAlign = 'left';
       return;
     }
@@ -526,7 +527,9 @@ SCRIPT = r"""
       var ev = active[mid];
       drawMachine(mid, pose(mid, t), !!(ev && ev.violations));
     });
-    nowEl.textContent = now.length ? 'now: ' + now.map(function (ev) { return ev.machine + ' ' + ev.type + ' (action ' + ev.a + ')'; }).join(', ') : '';
+    nowEl.textContent = now.length
+      ? 'now: ' + now.map(function (ev) { return ev.machine + ' ' + ev.type + ' (action ' + ev.a + ')'; }).join(', ')
+      : '';
     Array.prototype.forEach.call(logEl.children, function (li) {
       li.classList.toggle('rp-done', parseFloat(li.getAttribute('data-t')) <= t + 1e-9);
     });
@@ -625,4 +628,20 @@ CSS = """
 """
 
 
-__all__ = ["CSS", "QUANTUM", "SCRIPT", "Change", "Step", "bucket_footprint", "bucket_path", "changes", "machine_paths", "pick_runs", "pose_at", "replay", "replay_data", "viewer_html", "viewer_section"]
+__all__ = [
+    "CSS",
+    "QUANTUM",
+    "SCRIPT",
+    "Change",
+    "Step",
+    "bucket_footprint",
+    "bucket_path",
+    "changes",
+    "machine_paths",
+    "pick_runs",
+    "pose_at",
+    "replay",
+    "replay_data",
+    "viewer_html",
+    "viewer_section",
+]

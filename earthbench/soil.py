@@ -124,8 +124,8 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     them lost. Every other cell of the box within ``D / tan(repose)`` of the channel is cut back
     to the repose slope rising from the channel's new floor ``L`` (``L + tan(repose) × its
     distance to the nearest channel cell``), and what it loses fills the channel's cells up to
-    ``L``. ``L`` is the one level at which what falls equals what fills (:func:`_balance`); the fill is then scaled to the fallen volume exactly, so the box's volume is
-    conserved to rounding and no cell outside the box, or farther from the channel than the
+    ``L``. ``L`` is the one level at which what falls equals what fills (:func:`_balance`); the
+    fill is then scaled to the fallen volume exactly, so the box's volume is conserved to rounding and no cell outside the box, or farther from the channel than the
     run of the slope, changes. Ground the cut did not steepen stays as it was: natural,
     undisturbed bank may stand steeper than loose soil.
     """
@@ -187,7 +187,9 @@ def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
     return float(kinks[k - 1] + g[k - 1] / n) if n else float(kinks[k])
 
 
-def slump_box(shape: tuple[int, ...], jj: np.ndarray, ii: np.ndarray, resolution: float, depth: float, repose_deg: float) -> tuple[int, int, int, int]:
+def slump_box(
+    shape: tuple[int, ...], jj: np.ndarray, ii: np.ndarray, resolution: float, depth: float, repose_deg: float
+) -> tuple[int, int, int, int]:
     """The cells a cut at ``(jj, ii)`` up to ``depth`` deep can disturb, as a box ``(j0, j1, i0,
     i1)``: their bounding box grown by the run of a repose slope over that depth, plus two cells."""
     pad = int(math.ceil(depth / math.tan(math.radians(repose_deg)) / resolution)) + 2

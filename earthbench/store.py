@@ -368,15 +368,25 @@ class Store:
 
     def update_score(self, run_id: int, reason: str, metrics: dict[str, Any], violations: Iterable[dict[str, Any]]) -> None:
         """Replace the referee's findings of one run (``earthbench rescore``), in one transaction."""
-        cols = {c: (None if c not in metrics else (int(metrics[c]) if isinstance(metrics[c], bool) else metrics[c])) for c in METRIC_COLUMNS}
+        cols = {
+            c: (None if c not in metrics else (int(metrics[c]) if isinstance(metrics[c], bool) else metrics[c])) for c in METRIC_COLUMNS
+        }
         sets = ", ".join(f"{c}=:{c}" for c in cols)
         try:
             with self.db:
                 self.db.execute("BEGIN IMMEDIATE")
                 self.db.execute(
-                    f"UPDATE runs SET reason=:reason, success=:success, metrics=:metrics, violations=:violations, rescored_at=:at, {sets} WHERE id=:id",
-                    {**cols, "reason": reason, "success": int(bool(metrics.get("success"))), "metrics": _json(metrics),
-                     "violations": _json(list(violations)), "at": _now(), "id": run_id},
+                    f"UPDATE runs SET reason=:reason, success=:success, metrics=:metrics, violations=:violations,"
+                    f" rescored_at=:at, {sets} WHERE id=:id",
+                    {
+                        **cols,
+                        "reason": reason,
+                        "success": int(bool(metrics.get("success"))),
+                        "metrics": _json(metrics),
+                        "violations": _json(list(violations)),
+                        "at": _now(),
+                        "id": run_id,
+                    },
                 )
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None

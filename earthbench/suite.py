@@ -151,7 +151,9 @@ class Suite:
                     if not isinstance(sc, Scenario):
                         raise SuiteError(f"{self._where}: generator {fam.generator!r} returned {type(sc).__name__}, not a Scenario")
                     if sc.track != self.track:
-                        raise SuiteError(f"{self._where}: family {fam.name!r} makes {sc.track!r} scenarios but the suite's track is {self.track!r}")
+                        raise SuiteError(
+                            f"{self._where}: family {fam.name!r} makes {sc.track!r} scenarios but the suite's track is {self.track!r}"
+                        )
                     meta = {**sc.meta, "suite": self.name, "family": fam.name, "seed": seed, "target": target}
                     out.append(sc.replace(id=sid, budget=self.budget, meta=meta, **fam.realism(seed)))
         return tuple(out)
@@ -382,7 +384,9 @@ def _included_families(names: Any, where: str, path: str, track: str, stack: tup
         else:
             close = difflib.get_close_matches(name, list(suites), n=3, cutoff=0.5)
             hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-            raise SuiteError(f"{where}: include {name!r} is neither a known suite nor a file.{hint} Known suites: {', '.join(sorted(suites))}.")
+            raise SuiteError(
+                f"{where}: include {name!r} is neither a known suite nor a file.{hint} Known suites: {', '.join(sorted(suites))}."
+            )
         sub = parse_suite(_read(Path(file)), path=str(file), default_name=Path(file).stem, _stack=stack + (name,))
         if sub.track != track:
             raise SuiteError(f"{where}: included suite {sub.name!r} is a {sub.track!r} suite; this suite's track is {track!r}")

@@ -229,7 +229,9 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
     _check_suites(store, result)
     if rows is None:
         rows = store.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
-    suites = {(s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")}
+    suites = {
+        (s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")
+    }
     members = {(m[0], m[1]) for m in store.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
     scenarios = _scenarios(store, {r["scenario_digest"] for r in rows})
     result.scenarios = {d: sc for d, sc in scenarios.items() if isinstance(sc, Scenario)}

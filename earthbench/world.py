@@ -495,7 +495,10 @@ class Scenario:
         if cell is not None:
             k = cell / self.terrain.resolution
             if abs(k - round(k)) > 1e-9 * k or round(k) < 1:
-                raise ScenarioError(f"scenario field sensing.cell_size ({cell:g} m) must be a whole multiple of the terrain's resolution ({self.terrain.resolution:g} m)")
+                raise ScenarioError(
+                    f"scenario field sensing.cell_size ({cell:g} m)"
+                    f" must be a whole multiple of the terrain's resolution ({self.terrain.resolution:g} m)"
+                )
 
     @property
     def worker(self) -> str:

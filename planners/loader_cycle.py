@@ -38,11 +38,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from earthbench.motion import dense_poses, wrap
+from earthbench.motion import dense_poses
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, closed_loop_setting
 from earthbench.cut import charge_cut
-from earthbench.referee.loader import cell_heights, densify, loader_base_level, step_excess, wheel_step_excess
+from earthbench.referee.loader import cell_heights, loader_base_level, step_excess, wheel_step_excess
 from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
 
@@ -79,13 +79,17 @@ def pile_side(terrain: Heightmap, z: np.ndarray, M: np.ndarray, n: np.ndarray, b
     t = np.stack([-n[:, 1], n[:, 0]], axis=1)
     side = np.zeros(len(M))
     for sign in (1.0, -1.0):
-        pts = M[:, None, None, :] + sign * offs[None, :, None, None] * n[:, None, None, :] + across[None, None, :, None] * t[:, None, None, :]
+        pts = (
+            M[:, None, None, :] + sign * offs[None, :, None, None] * n[:, None, None, :] + across[None, None, :, None] * t[:, None, None, :]
+        )
         h = cell_heights(terrain, z, pts.reshape(-1, 2)).reshape(len(M), -1)
         side += sign * np.nansum(np.clip(h - base, 0.0, None), axis=1)
     return np.where(side >= 0, 1.0, -1.0)
 
 
-def box_volumes(terrain: Heightmap, z: np.ndarray, M: np.ndarray, h: np.ndarray, width: float, behind: float, ahead: float, base: float) -> tuple[np.ndarray, np.ndarray]:
+def box_volumes(
+    terrain: Heightmap, z: np.ndarray, M: np.ndarray, h: np.ndarray, width: float, behind: float, ahead: float, base: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Material above ``base`` in the left and right halves of the box ``width`` wide from
     ``behind`` metres behind to ``ahead`` metres ahead of each ``M`` along ``h`` (vectorised)."""
     d = terrain.resolution / 2
@@ -101,7 +105,9 @@ def box_volumes(terrain: Heightmap, z: np.ndarray, M: np.ndarray, h: np.ndarray,
 
 # -- charge --------------------------------------------------------------------------------------
 
-def entry_for(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, M: np.ndarray, h: np.ndarray, base: float, reach: float = 3.0, margin: float = 0.05) -> tuple[float, float, float] | None:
+def entry_for(
+    terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, M: np.ndarray, h: np.ndarray, base: float, reach: float = 3.0, margin: float = 0.05
+) -> tuple[float, float, float] | None:
     """The entry pose (front axle) whose cutting edge starts ``margin`` before the first material
     (> 1 cm above ``base``) in the bucket's corridor from ``reach`` behind to ``reach`` ahead of M."""
     r = terrain.resolution
@@ -131,7 +137,16 @@ class ChargeResult:
     end: tuple[float, float, float]
 
 
-def simulate_charge(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, entry: tuple[float, float, float], capacity: float, max_penetration: float, level: float, base: float) -> ChargeResult | None:
+def simulate_charge(
+    terrain: Heightmap,
+    z: np.ndarray,
+    spec: LoaderSpec,
+    entry: tuple[float, float, float],
+    capacity: float,
+    max_penetration: float,
+    level: float,
+    base: float,
+) -> ChargeResult | None:
     """The longest penetration (≤ ``max_penetration``) whose bucket path holds ≤ ``capacity`` in
     whole cells, cut with the referee's :func:`charge_cut`; None when it takes (almost) nothing
     or the axle's path would not be traversable."""
@@ -415,7 +430,14 @@ def search_dubins(
     idx = np.nonzero(ok)[0]
     order = idx[np.argsort(dur[idx], kind="stable")]
     for k in order[: opts.max_checked]:
-        segs = [(0.0, -S0[ci[k]]), (K0[ci[k], 0], -L0[ci[k], 0]), (s1[k] / R, R * a1[k]), (0.0, ell[k]), (s2[k] / R, R * a2[k]), (0.0, a[k])]
+        segs = [
+            (0.0, -S0[ci[k]]),
+            (K0[ci[k], 0], -L0[ci[k], 0]),
+            (s1[k] / R, R * a1[k]),
+            (0.0, ell[k]),
+            (s2[k] / R, R * a2[k]),
+            (0.0, a[k]),
+        ]
         route = _build(start, t0, spec, segs, (gx, gy), gth)
         if _clear(scenario, z, route, base):
             return route
@@ -502,7 +524,9 @@ class CycleBuilder:
         # dump poses on the side of the truck the loader comes from leave room to back out again
         bearing = math.atan2(ch.end[1] - self.sc.machines.truck_pose.y, ch.end[0] - self.sc.machines.truck_pose.x)
         side = np.abs(np.angle(np.exp(1j * (np.arctan2(self.rays[:, 3], self.rays[:, 2]) - bearing)))) <= self.cfg.dump_sector / 2
-        to_truck = search_routes(self.sc, ch.z, Pose(*ch.end), 0.0, self.rays[side], self.d_lo, 14.0, self.d_hi, self.d_target, self.opts, self.base)
+        to_truck = search_routes(
+            self.sc, ch.z, Pose(*ch.end), 0.0, self.rays[side], self.d_lo, 14.0, self.d_hi, self.d_target, self.opts, self.base
+        )
         if to_truck is None:
             return None
         ray = np.array([[ex, ey, -math.cos(eyaw), -math.sin(eyaw)]])

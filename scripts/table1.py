@@ -65,19 +65,35 @@ def markdown(runs: pd.DataFrame, command: str) -> str:
         command,
         "```",
         "",
-        "| target m³ | runs | valid | success | loaded m³, mean ± SD | ratio %, mean ± SD | ratio ÷ true fill factor, % | paper: mean m³ | paper: % | paper: SD m³ |",
+        "| target m³ | runs | valid | success | loaded m³, mean ± SD | ratio %, mean ± SD | ratio ÷ true fill factor, % "
+        "| paper: mean m³ | paper: % | paper: SD m³ |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for _, r in t.iterrows():
         p = PAPER.get(float(r["target_volume"]), (float("nan"),) * 3)
-        lines.append(f"| {r['target_volume']:g} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} | {r['loaded m³ (mean)']:.2f} ± {r['loaded m³ (SD)']:.2f} "
-                     f"| {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} | {r['per fill % (mean)']:.1f} | {p[0]:.2f} | {p[1]:.1f} | {p[2]:.3f} |")
-    for key, title in (("material", "By soil class"), ("scan", "By scan (`survey`: whole site, σ 0.01 m; `cab`: occluded from the cab, σ 0.03 m, bias 0.02 m, 0.1 m cells)")):
-        lines += ["", f"## {title}", "", f"| {key} | runs | valid | success | true fill factor (mean) | ratio %, mean ± SD | ratio ÷ true fill factor, % | prediction error m³ (mean) |",
-                  "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        lines.append(
+            f"| {r['target_volume']:g} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} "
+            f"| {r['loaded m³ (mean)']:.2f} ± {r['loaded m³ (SD)']:.2f} "
+            f"| {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} | {r['per fill % (mean)']:.1f} | {p[0]:.2f} | {p[1]:.1f} | {p[2]:.3f} |"
+        )
+    for key, title in (
+        ("material", "By soil class"),
+        ("scan", "By scan (`survey`: whole site, σ 0.01 m; `cab`: occluded from the cab, σ 0.03 m, bias 0.02 m, 0.1 m cells)"),
+    ):
+        lines += [
+            "",
+            f"## {title}",
+            "",
+            f"| {key} | runs | valid | success | true fill factor (mean) | ratio %, mean ± SD | ratio ÷ true fill factor, % "
+            "| prediction error m³ (mean) |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
         for _, r in by(runs, key).iterrows():
-            lines.append(f"| {r[key]} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} | {r['fill factor (mean)']:.3f} | {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} "
-                         f"| {r['per fill % (mean)']:.1f} | {r['prediction error m³ (mean)']:.2f} |")
+            lines.append(
+                f"| {r[key]} | {r['runs']:.0f} | {r['valid']:.0f} | {r['success']:.0f} | {r['fill factor (mean)']:.3f} "
+                f"| {r['ratio % (mean)']:.1f} ± {r['ratio % (SD)']:.1f} "
+                f"| {r['per fill % (mean)']:.1f} | {r['prediction error m³ (mean)']:.2f} |"
+            )
     lines += [
         "",
         "Reading it: the true fill factor is the bank volume a full stroke really holds ÷ the bucket's capacity at that "

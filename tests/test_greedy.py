@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from earthbench import judge
+from earthbench.cut import apply_cut
 from earthbench.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
-from earthbench_planners.greedy.backhoe import GreedyPlanner
+from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy
 from earthbench_terrains.rbf import rbf
 
 
@@ -27,7 +31,11 @@ def test_greedy_plans_are_valid_and_reach_the_target(seed):
 
 def test_greedy_respects_the_truck_capacity():
     sc = rbf(1, 6.0, n_bases=30)
-    sc = sc.replace(machines=sc.machines.__class__(truck=sc.machines.truck.__class__(capacity=1.0), truck_pose=sc.machines.truck_pose, excavator_pose=sc.machines.excavator_pose))
+    sc = sc.replace(
+        machines=sc.machines.__class__(
+            truck=sc.machines.truck.__class__(capacity=1.0), truck_pose=sc.machines.truck_pose, excavator_pose=sc.machines.excavator_pose
+        )
+    )
     v = judge(sc, GreedyPlanner().plan(sc))
     assert v.valid and v.loaded_volume == pytest.approx(1.0)
 
@@ -52,13 +60,6 @@ def test_time_per_m3_never_beats_the_lower_bound(seed):
 
 # -- the vectorised scoring is the per-point computation it replaced -------------------------
 
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
-import numpy as np
-
-from earthbench.cut import apply_cut
-from earthbench_planners.greedy.backhoe import _Greedy, GreedyConfig
 
 
 @settings(max_examples=60, deadline=None)
@@ -91,7 +92,9 @@ def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
     before = g.z.copy()
     for k in range(0, len(p), max(len(p) // 40, 1)):
         contact, e = (float(p[k, 0]), float(p[k, 1])), g.exc
-        on_copy = apply_cut(g.terrain, before.copy(), contact, float(h[k]), e.bucket_width, e.max_drag_length, float(level[k]), e.bucket_capacity)
+        on_copy = apply_cut(
+            g.terrain, before.copy(), contact, float(h[k]), e.bucket_width, e.max_drag_length, float(level[k]), e.bucket_capacity
+        )
         assert g.trial_cut(contact, float(h[k]), float(level[k])) == on_copy
         assert np.array_equal(g.z, before)
 

@@ -240,7 +240,9 @@ def test_cells_behind_a_wall_are_hidden_from_the_cab():
 
 
 def test_the_observation_holds_the_scan_and_the_nominal_soil_only():
-    truth = wall_scenario().replace(soil=draw({"material": "clay"}, 4), sensing=Sensing(noise=0.02, bias=0.01, seed=9), meta={"generator": "x", "seed": 4})
+    truth = wall_scenario().replace(
+        soil=draw({"material": "clay"}, 4), sensing=Sensing(noise=0.02, bias=0.01, seed=9), meta={"generator": "x", "seed": 4}
+    )
     view = observe(truth)
     assert view.soil == nominal("clay") != truth.soil
     assert view.sensing is None and view.meta == {}

@@ -54,7 +54,9 @@ def arc(start: tuple[float, float, float], curvature: float, length: float, t0: 
     return Move("loader", tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in zip(t, x, y, th)))
 
 
-def cycle(penetration: float = 0.4, radius: float = 4.0, dump_y: float = 6.0, dump_time: float = 3.0, charge_time: float | None = None) -> list:
+def cycle(
+    penetration: float = 0.4, radius: float = 4.0, dump_y: float = 6.0, dump_time: float = 3.0, charge_time: float | None = None
+) -> list:
     """Charge, reverse on a quarter circle, drive north to ``dump_y`` and dump; times from 0."""
     dur = charge_time if charge_time is not None else max(2.0, penetration / 0.5) + 1e-6
     c = Charge("loader", 0.0, dur, (START.x, START.y, START.yaw), penetration)
@@ -105,7 +107,11 @@ def test_the_loader_bound_holds_for_repeated_minimal_charges_and_dumps(pens):
         x, t = x + p, t + d
         acts.append(Dump("loader", t, t + 3.0))
         t += 3.0
-    sc = sc.replace(machines=Machines(excavator=None, excavator_pose=None, loader=sc.machines.loader, loader_pose=START, truck_pose=Pose(19.0, 5.0, 0.0)))
+    sc = sc.replace(
+        machines=Machines(
+            excavator=None, excavator_pose=None, loader=sc.machines.loader, loader_pose=START, truck_pose=Pose(19.0, 5.0, 0.0)
+        )
+    )
     v = judge(sc, Plan(tuple(acts)))
     assert v.valid, v.violations
     assert v.makespan / v.loaded_volume >= lower_bound_time_per_m3(sc) - 1e-9
@@ -167,7 +173,18 @@ def test_charge_needs_an_empty_bucket():
     assert rules(v) == {"bucket_not_empty"}
     d = Dump("loader", 2.0, 5.0)
     c2b = Charge("loader", 5.0, 7.0, (13.0, 5.0, 0.0), 0.2)
-    v = judge(sc.replace(machines=Machines(excavator=None, excavator_pose=None, loader=LoaderSpec(dump_reach=50.0, clearance=0.0), loader_pose=START, truck_pose=Pose(19.0, 5.0, 0.0))), Plan((c1, d, c2b)))
+    v = judge(
+        sc.replace(
+            machines=Machines(
+                excavator=None,
+                excavator_pose=None,
+                loader=LoaderSpec(dump_reach=50.0, clearance=0.0),
+                loader_pose=START,
+                truck_pose=Pose(19.0, 5.0, 0.0),
+            )
+        ),
+        Plan((c1, d, c2b)),
+    )
     assert v.valid, v.violations
 
 
@@ -313,7 +330,10 @@ def test_charge_round_trips_and_malformed_charges_are_rejected():
     plan = Plan(tuple(cycle()))
     back = Plan.from_json(plan.to_json())
     assert back == plan
-    doc = {"schema": "earthbench.plan/1", "actions": [{"type": "charge", "machine": "loader", "t_start": 0, "t_end": 2, "entry": [1, 2, 0], "penetration": 1.0}]}
+    doc = {
+        "schema": "earthbench.plan/1",
+        "actions": [{"type": "charge", "machine": "loader", "t_start": 0, "t_end": 2, "entry": [1, 2, 0], "penetration": 1.0}],
+    }
     assert isinstance(Plan.from_dict(doc).actions[0], Charge)
     for bad in ({"entry": [1, 2]}, {"penetration": -1.0}, {"penetration": float("nan")}, {"entry": [1, 2, "x"]}):
         d = json.loads(json.dumps(doc))

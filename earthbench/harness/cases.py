@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,7 @@ REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
 
 def utc_now() -> str:
     """The time stamp of ``started_at``/``finished_at``: UTC, to the second."""
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,9 @@ def _source_of(klass: type[Planner]) -> str:
     mod = sys.modules.get(klass.__module__)
     file = getattr(mod, "__file__", None)
     if "<locals>" in klass.__qualname__:
-        raise PluginError(f"planner class {klass.__qualname__} is defined inside a function; define it at module level so a case process can import it")
+        raise PluginError(
+            f"planner class {klass.__qualname__} is defined inside a function; define it at module level so a case process can import it"
+        )
     if klass.__module__ == "__main__" or klass.__module__.startswith("earthbench_plugin_"):
         if not file:
             raise PluginError(f"planner {klass.name!r} is defined interactively; put it in a file and pass --plugin FILE.py")

@@ -71,9 +71,10 @@ def load_planner_class(source: str, name: str) -> type:
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
         spec.loader.exec_module(module)
-        for obj in vars(module).values():
-            if isinstance(obj, type) and issubclass(obj, Planner) and obj.__module__ == mod_name and obj.name == name:
-                return obj
+        for candidate in vars(module).values():
+            if isinstance(candidate, type) and issubclass(candidate, Planner) and candidate.__module__ == mod_name \
+                    and candidate.name == name:
+                return candidate
         return PLANNERS.get(name)  # registered by a decorator under another class name
     module_name, _, qual = source.partition(":")
     obj: Any = importlib.import_module(module_name)
@@ -181,7 +182,8 @@ def _short_tb() -> str:
 
 BOOTSTRAP = r"""
 import ctypes, json, os, resource, signal, sys
-case_file, msg_fd, report_fd, cores, mem, harness = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5]), int(sys.argv[6])
+case_file, cores = sys.argv[1], sys.argv[4]
+msg_fd, report_fd, mem, harness = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[5]), int(sys.argv[6])
 try:
     prctl = ctypes.CDLL(None, use_errno=True).prctl
 except (OSError, AttributeError):

@@ -166,7 +166,11 @@ def run_case(
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
         scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
-        loop = StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES) if case.planner.config.get("closed_loop") else None
+        loop = (
+            StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES)
+            if case.planner.config.get("closed_loop")
+            else None
+        )
         mr, mw = os.pipe()
         rr, rw = os.pipe()
         mem = int(budget.memory_mb) * 1024 * 1024
@@ -398,6 +402,7 @@ class _Supervisor:
         o.t_ready = time.monotonic()
         o.cpu_ready = self._tree_cpu()
         stdin, outbox = self.proc.stdin, self.outbox
+        assert stdin is not None  # the case is started with stdin=PIPE
 
         def write() -> None:  # one writer, so a case that stops reading never blocks the supervisor
             try:
@@ -422,7 +427,11 @@ class _Supervisor:
         if loop is None:
             o.fault = "the case sent a step, but its configuration does not run closed loop"
         elif o.t_given is None:
-            o.fault = "the case sent a step before it was given an observation" if o.t_ready is None else "the case sent a step it was not asked for"
+            o.fault = (
+                "the case sent a step before it was given an observation"
+                if o.t_ready is None
+                else "the case sent a step it was not asked for"
+            )
         elif not isinstance(msg.get("plan"), str):
             o.fault = f"the case's step has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
         else:
@@ -600,7 +609,7 @@ def _mentions_memory(text: str) -> bool:
 
 def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
     budget = case.scenario.budget
-    times = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
+    times: dict[str, Any] = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
     loop = o.loop
     if loop is not None and o.t_given is not None and o.t_end is not None:  # the call a deadline or a fault cut short
         loop.steps.append((0, o.t_end - o.t_given))
@@ -641,7 +650,9 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
     try:
         verdict, metrics = score(case.scenario, plan_json, case.threshold)
     except Exception:  # noqa: BLE001 - a referee bug must not lose the plan; `earthbench rescore` can retry
-        return CaseResult(reason="error", error="the referee failed on this plan:\n" + traceback.format_exc(), plan_json=plan_json, **times, **common)
+        return CaseResult(
+            reason="error", error="the referee failed on this plan:\n" + traceback.format_exc(), plan_json=plan_json, **times, **common
+        )
     metrics.update(times)
     if loop is not None:
         metrics.update(step_metrics(loop.steps))

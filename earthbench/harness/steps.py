@@ -17,6 +17,7 @@ import dataclasses
 import json
 import statistics
 from collections.abc import Sequence
+from typing import Any
 
 from ..errors import PlanFormatError
 from ..motion import ABS_TOL
@@ -33,14 +34,14 @@ def observation(truth: Scenario, verdict: Verdict, step: int) -> Observation:
     with ``step``; the soil's nominal class), the machines where they stand, the truck's load,
     the plan time they end at, what is left in the bucket."""
     m = truth.machines
-    poses = {f"{mid}_pose": verdict.final_poses[mid] for mid in m.ids if mid in verdict.final_poses}
+    poses: dict[str, Any] = {f"{mid}_pose": verdict.final_poses[mid] for mid in m.ids if mid in verdict.final_poses}
     now = dataclasses.replace(truth, terrain=verdict.final_terrain)
     view = observe(now, pose=verdict.final_poses.get(truth.worker), step=step)
     view = dataclasses.replace(view, machines=dataclasses.replace(view.machines, **poses))
     return Observation(view, step, verdict.makespan, verdict.loaded_volume, verdict.final_turn, verdict.final_bucket)
 
 
-def step_metrics(steps: Sequence[Sequence[float]]) -> dict[str, float | int]:
+def step_metrics(steps: Sequence[Sequence[float]]) -> dict[str, float | int | None]:
     """The harness's figures of a closed-loop run from its stored steps ``[(actions, compute_s), …]``.
 
     ``steps``: planner calls answered with actions; ``replans``: those after the first;

@@ -41,7 +41,9 @@ def track_level_and_tilt(scenario: Scenario, z: np.ndarray, spec: ExcavatorSpec,
     return float(g[:, 2].min()), math.atan(math.hypot(gx, gy))
 
 
-def undermining_excess(terrain: Heightmap, z: np.ndarray, spec: ExcavatorSpec, base: Pose, track_level: float, jj: np.ndarray, ii: np.ndarray) -> float:
+def undermining_excess(
+    terrain: Heightmap, z: np.ndarray, spec: ExcavatorSpec, base: Pose, track_level: float, jj: np.ndarray, ii: np.ndarray
+) -> float:
     """How far (m) the cells ``(jj, ii)`` lie below the undermining line: ``track_level`` minus
     ``undermine_slope`` × each cell centre's horizontal distance from the tracks (≤ 0: safe)."""
     if jj.size == 0:
@@ -82,7 +84,9 @@ def dig(r: Replay, n: int, a: Dig) -> None:
             r.flag(n, "keep_out", max(fp.intersection(ko).area, ABS_TOL), "the bucket footprint enters a keep-out zone")
     need = min_dig_time(base, r.turn, a.contact, spec)
     if a.t_end - a.t_start < need - ABS_TOL:
-        r.flag(n, "duration", need - (a.t_end - a.t_start), f"dig lasts {a.t_end - a.t_start:.3f} s; the swing and stroke need {need:.3f} s")
+        r.flag(
+            n, "duration", need - (a.t_end - a.t_start), f"dig lasts {a.t_end - a.t_start:.3f} s; the swing and stroke need {need:.3f} s"
+        )
     level = cut_level(r.terrain, r.z, a.contact, a.depth)
     floor = r.sc.site.floor
     if floor is not None and level < floor - ABS_TOL:
@@ -100,7 +104,13 @@ def dig(r: Replay, n: int, a: Dig) -> None:
         cut = r.z[jj, ii] < before
         excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj[cut], ii[cut])
     if excess > ABS_TOL:
-        r.flag(n, "undermining", excess, f"the cut leaves ground {excess:.3f} m below the line falling {spec.undermine_slope:g} m per m from the tracks (ground under them {level_under:.3f} m)")
+        r.flag(
+            n,
+            "undermining",
+            excess,
+            f"the cut leaves ground {excess:.3f} m below the line falling {spec.undermine_slope:g} m per m"
+            f" from the tracks (ground under them {level_under:.3f} m)",
+        )
     r.settle()
     r.bucket += vol
     r.removed += vol
@@ -114,7 +124,12 @@ def _station(r: Replay, n: int, spec: ExcavatorSpec, base: Pose) -> tuple[float,
         level, tilt = track_level_and_tilt(r.sc, r.z, spec, base)
         r.station = (base, level, tilt)
         if tilt > spec.max_tilt + ABS_TOL:
-            r.flag(n, "tilt", tilt - spec.max_tilt, f"the excavator stands on ground tilted {math.degrees(tilt):.1f}°; limit {math.degrees(spec.max_tilt):.1f}°")
+            r.flag(
+                n,
+                "tilt",
+                tilt - spec.max_tilt,
+                f"the excavator stands on ground tilted {math.degrees(tilt):.1f}°; limit {math.degrees(spec.max_tilt):.1f}°",
+            )
     return r.station[1], r.station[2]
 
 

@@ -93,7 +93,9 @@ def _placed(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return np.column_stack([x.ravel(), y.ravel()])
 
 
-def wheel_step_excess(terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float, arc: dict[str, np.ndarray] | None = None) -> tuple[float, float, float]:
+def wheel_step_excess(
+    terrain: Heightmap, z: np.ndarray, spec: LoaderSpec, path: np.ndarray, base: float, arc: dict[str, np.ndarray] | None = None
+) -> tuple[float, float, float]:
     """Largest height above ``base + max_step`` of the cells under the wheels along ``path[k, 4]``
     on the motion model's arcs (≤ 0: traversable; at least :data:`STEP_FLOOR`), and where (x, y).
 
@@ -161,7 +163,13 @@ def step(r: Replay, n: int, machine: str, spec: LoaderSpec, path: np.ndarray, ar
     base = loader_base_level(r.sc)
     excess, x, y = wheel_step_excess(r.terrain, r.ground, spec, path, base, arc)
     if excess > ABS_TOL:
-        r.flag(n, "step", excess, f"{machine}'s wheels cross a cell {spec.max_step + excess:.3f} m above the base level {base:g} m at ({x:.2f}, {y:.2f}); traversable step {spec.max_step} m")
+        r.flag(
+            n,
+            "step",
+            excess,
+            f"{machine}'s wheels cross a cell {spec.max_step + excess:.3f} m above the base level {base:g} m"
+            f" at ({x:.2f}, {y:.2f}); traversable step {spec.max_step} m",
+        )
 
 
 def move(r: Replay, n: int, a: Move, spec: LoaderSpec, arc: dict[str, np.ndarray]) -> None:
@@ -170,7 +178,12 @@ def move(r: Replay, n: int, a: Move, spec: LoaderSpec, arc: dict[str, np.ndarray
     radius = arc["radius"][k]
     if radius < spec.min_turning_radius * (1 - RATE_TOL) - ABS_TOL:
         what = "turns in place" if arc["chord"][k] <= ABS_TOL else f"turns on a {radius:.3f} m radius"
-        r.flag(n, "turning_radius", spec.min_turning_radius - radius, f"{a.machine} {what} between samples {k} and {k + 1}; minimum {spec.min_turning_radius} m")
+        r.flag(
+            n,
+            "turning_radius",
+            spec.min_turning_radius - radius,
+            f"{a.machine} {what} between samples {k} and {k + 1}; minimum {spec.min_turning_radius} m",
+        )
     step(r, n, a.machine, spec, p, arc)
 
 
@@ -183,13 +196,24 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     x, y, yaw = a.entry
     gap, turn = math.hypot(x - here.x, y - here.y), abs(wrap(yaw - here.yaw))
     if gap > ABS_TOL or turn > ABS_TOL:
-        r.flag(n, "entry_pose", max(gap, turn), f"{a.machine} is at ({here.x:.3f}, {here.y:.3f}, yaw {here.yaw:.3f}) but the charge enters at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})")
+        r.flag(
+            n,
+            "entry_pose",
+            max(gap, turn),
+            f"{a.machine} is at ({here.x:.3f}, {here.y:.3f}, yaw {here.yaw:.3f})"
+            f" but the charge enters at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})",
+        )
     if r.bucket > ABS_TOL:
         r.flag(n, "bucket_not_empty", r.bucket, f"the bucket still holds {r.bucket:.4f} m³")
     dur = a.t_end - a.t_start
     speed = a.penetration / dur if dur > 0 else math.inf
     if speed > spec.penetration_speed * (1 + RATE_TOL):
-        r.flag(n, "penetration_speed", speed - spec.penetration_speed, f"the charge drives {a.penetration:.3f} m in {dur:.3f} s ({speed:.4f} m/s); limit {spec.penetration_speed} m/s")
+        r.flag(
+            n,
+            "penetration_speed",
+            speed - spec.penetration_speed,
+            f"the charge drives {a.penetration:.3f} m in {dur:.3f} s ({speed:.4f} m/s); limit {spec.penetration_speed} m/s",
+        )
     if dur < spec.min_charge_time - ABS_TOL:
         r.flag(n, "duration", spec.min_charge_time - dur, f"charge lasts {dur:.3f} s; the loader needs at least {spec.min_charge_time} s")
     edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
@@ -207,7 +231,9 @@ def charge(r: Replay, n: int, a: Charge) -> None:
         full_at = cut.full_at
     else:  # overfill is judged on the public cut model: where the plan could know the bucket fills
         full_at = charge_along(r.terrain, r.z.copy(), spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket).full_at
-        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, spec, edge, yaw, a.penetration, level))
+        cut, nominal = r.cut(
+            edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, spec, edge, yaw, a.penetration, level)
+        )
     if full_at is not None:
         _overfill(r, n, spec, edge, yaw, a.penetration, level, full_at)
     r.bucket += cut.volume
@@ -225,14 +251,22 @@ def _pile_height(r: Replay, spec: LoaderSpec, edge: tuple[float, float], yaw: fl
     return float(np.max(r.z[jj, ii] - level, initial=0.0))
 
 
-def _overfill(r: Replay, n: int, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float, full_at: float) -> None:
+def _overfill(
+    r: Replay, n: int, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float, full_at: float
+) -> None:
     """The bucket filled ``full_at`` along the edge's path: the edge may go at most one cell
     further; the material it would push through beyond that is the violation."""
     jj, ii, along = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, penetration)
     beyond = along > full_at + r.terrain.resolution + ABS_TOL
     left = float(np.maximum(r.z[jj[beyond], ii[beyond]] - level, 0.0).sum() * r.terrain.cell_area)
     if left > ABS_TOL:
-        r.flag(n, "overfill", left, f"the bucket is full {full_at:.2f} m along the charge, but the edge drives on {penetration - full_at:.2f} m through {left:.3f} m³ it cannot take")
+        r.flag(
+            n,
+            "overfill",
+            left,
+            f"the bucket is full {full_at:.2f} m along the charge, but the edge drives on {penetration - full_at:.2f} m"
+            f" through {left:.3f} m³ it cannot take",
+        )
 
 
 def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
@@ -244,11 +278,21 @@ def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
     tpos = truck.pose(a.t_start)
     gap, off = loader_dump_excess(pose, (tpos.x, tpos.y), spec, truck_spec)
     if gap > ABS_TOL:
-        r.flag(n, "dump_reach", gap, f"the bucket edge is {gap + spec.dump_reach:.3f} m from the truck's loading circle; dump reach {spec.dump_reach} m")
+        r.flag(
+            n,
+            "dump_reach",
+            gap,
+            f"the bucket edge is {gap + spec.dump_reach:.3f} m from the truck's loading circle; dump reach {spec.dump_reach} m",
+        )
     if off > ABS_TOL:
         r.flag(n, "dump_reach", off, f"the truck lies {math.degrees(off + math.pi / 4):.1f}° off the loader's heading; at most 45°")
     if a.t_end - a.t_start < spec.min_dump_time - ABS_TOL:
-        r.flag(n, "duration", spec.min_dump_time - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s")
+        r.flag(
+            n,
+            "duration",
+            spec.min_dump_time - (a.t_end - a.t_start),
+            f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s",
+        )
     take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
     r.loaded += take
     r.bucket -= take

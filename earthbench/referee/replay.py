@@ -315,8 +315,17 @@ class Replay:
         )
 
     # -- cutting -----------------------------------------------------------------------------
-    def cut(self, contact: tuple[float, float], heading: float, width: float, length: float, level: float,
-            bucket_capacity: float, depth: float, cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[Cut, float | None]:
+    def cut(
+        self,
+        contact: tuple[float, float],
+        heading: float,
+        width: float,
+        length: float,
+        level: float,
+        bucket_capacity: float,
+        depth: float,
+        cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[Cut, float | None]:
         """Cut the grid along a stroke or charge into a bucket of ``bucket_capacity`` that
         already holds ``self.bucket``; returns the cut and, with soil, the nominal volume.
 
@@ -330,7 +339,9 @@ class Replay:
             cells = path_cells(self.terrain, self.z.shape, contact, heading, width, length)
         if self.soil is None:
             return cut_along(self.terrain, self.z, contact, heading, width, length, level, bucket_capacity - self.bucket, cells), None
-        nominal = cut_along(self.terrain, self.z.copy(), contact, heading, width, length, level, bucket_capacity - self.bucket, cells).volume
+        nominal = cut_along(
+            self.terrain, self.z.copy(), contact, heading, width, length, level, bucket_capacity - self.bucket, cells
+        ).volume
         jj, ii, _ = cells
         if jj.size:
             box = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg)
@@ -367,19 +378,41 @@ class Replay:
         gap = math.hypot(x - here.x, y - here.y)
         turn = abs(wrap(yaw - here.yaw))
         if gap > ABS_TOL or turn > ABS_TOL:
-            self.flag(n, "discontinuous", max(gap, turn), f"{a.machine} is at ({here.x:.3f}, {here.y:.3f}, yaw {here.yaw:.3f}) but the move starts at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})")
+            self.flag(
+                n,
+                "discontinuous",
+                max(gap, turn),
+                f"{a.machine} is at ({here.x:.3f}, {here.y:.3f}, yaw {here.yaw:.3f})"
+                f" but the move starts at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})",
+            )
         arc = arcs(p)
         speed = arc["length"] / arc["dt"]
         rate = np.abs(arc["dyaw"]) / arc["dt"]
         k = int(np.argmax(speed))
         if speed[k] > spec.travel_speed * (1 + RATE_TOL):
-            self.flag(n, "speed", speed[k] - spec.travel_speed, f"{a.machine} at {speed[k]:.4f} m/s along the arc between samples {k} and {k + 1}; limit {spec.travel_speed} m/s")
+            self.flag(
+                n,
+                "speed",
+                speed[k] - spec.travel_speed,
+                f"{a.machine} at {speed[k]:.4f} m/s along the arc between samples {k} and {k + 1}; limit {spec.travel_speed} m/s",
+            )
         k = int(np.argmax(rate))
         if rate[k] > spec.yaw_rate * (1 + RATE_TOL):
-            self.flag(n, "yaw_rate", rate[k] - spec.yaw_rate, f"{a.machine} turns at {rate[k]:.4f} rad/s between samples {k} and {k + 1}; limit {spec.yaw_rate} rad/s")
+            self.flag(
+                n,
+                "yaw_rate",
+                rate[k] - spec.yaw_rate,
+                f"{a.machine} turns at {rate[k]:.4f} rad/s between samples {k} and {k + 1}; limit {spec.yaw_rate} rad/s",
+            )
         k = int(np.argmax(arc["lateral"]))
         if arc["lateral"][k] > spec.chord_tolerance:
-            self.flag(n, "heading", arc["lateral"][k], f"no arc along the headings joins samples {k} and {k + 1}: {a.machine} slides {arc['lateral'][k]:.3f} m sideways; tolerance {spec.chord_tolerance} m")
+            self.flag(
+                n,
+                "heading",
+                arc["lateral"][k],
+                f"no arc along the headings joins samples {k} and {k + 1}: {a.machine} slides {arc['lateral'][k]:.3f}"
+                f" m sideways; tolerance {spec.chord_tolerance} m",
+            )
         self.swept(n, a.machine, p, arc)
         self.travel[a.machine] += float(arc["length"].sum())
         self.pose[a.machine] = Pose(float(p[-1, 1]), float(p[-1, 2]), float(p[-1, 3]))
@@ -407,7 +440,13 @@ class Replay:
             out = off_map_excess(self.sc, spec, dense[:, 1:4])
             k = int(np.argmax(out))
             if out[k] > ABS_TOL:
-                self.flag(n, "off_map", out[k], f"{machine}'s footprint leaves the map by {out[k]:.3f} m at ({dense[k, 1]:.2f}, {dense[k, 2]:.2f}), t={dense[k, 0]:.2f} s")
+                self.flag(
+                    n,
+                    "off_map",
+                    out[k],
+                    f"{machine}'s footprint leaves the map by {out[k]:.3f} m"
+                    f" at ({dense[k, 1]:.2f}, {dense[k, 2]:.2f}), t={dense[k, 0]:.2f} s",
+                )
         if self.keep_outs:
             polys = _polygons(spec.outline(dense[:, 1], dense[:, 2], dense[:, 3]))
             for ko in self.keep_outs:
@@ -415,7 +454,12 @@ class Replay:
                 if hit.any():
                     k = int(np.argmax(hit))
                     depth = float(shapely.area(shapely.intersection(polys[hit], ko)).max())
-                    self.flag(n, "keep_out", max(depth, ABS_TOL), f"{machine}'s footprint enters a keep-out zone at ({dense[k, 1]:.2f}, {dense[k, 2]:.2f}), t={dense[k, 0]:.2f} s")
+                    self.flag(
+                        n,
+                        "keep_out",
+                        max(depth, ABS_TOL),
+                        f"{machine}'s footprint enters a keep-out zone at ({dense[k, 1]:.2f}, {dense[k, 2]:.2f}), t={dense[k, 0]:.2f} s",
+                    )
 
     # -- clearance ------------------------------------------------------------------------------
     def collisions(self) -> None:
@@ -435,6 +479,7 @@ class Replay:
         """
         me, truck = self.timelines[machine], self.timelines["truck"]
         spec, tspec = self.specs[machine], self.specs["truck"]
+        assert not isinstance(spec, TruckSpec)  # the excavator or the loader, each with its clearance to the truck
         reach_a, reach_b = reach_of(spec.body(0.0, 0.0, 0.0)), reach_of(tspec.body(0.0, 0.0, 0.0))
         step = max(self.spacing, 0.025)
         times = np.unique(np.concatenate([me.path[:, 0], truck.path[:, 0]]))
@@ -447,9 +492,9 @@ class Replay:
             near = (d[:-1] + d[1:] - S) / 2 <= max(spec.clearance, reach_a + reach_b) + ABS_TOL
             if near.any():
                 n = np.maximum(np.ceil(S[near] / step).astype(int), 1)
-                k = np.repeat(np.nonzero(near)[0], n)
+                at = np.repeat(np.nonzero(near)[0], n)
                 f = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
-                extra = times[k] + f * dt[k]
+                extra = times[at] + f * dt[at]
                 times = np.concatenate([times, extra])
                 pa, pb = np.vstack([pa, me.poses(extra)]), np.vstack([pb, truck.poses(extra)])
                 d = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])
@@ -457,7 +502,12 @@ class Replay:
         bad = d < clearance - ABS_TOL
         k = int(np.argmin(d))
         if bad.any():
-            self.flag(self._active(times[k]), "collision", clearance - d[k], f"{machine} and truck {d[k]:.3f} m apart at t={times[k]:.3f} s; clearance {clearance} m")
+            self.flag(
+                self._active(times[k]),
+                "collision",
+                clearance - d[k],
+                f"{machine} and truck {d[k]:.3f} m apart at t={times[k]:.3f} s; clearance {clearance} m",
+            )
             return
         touch = bodies_touch(spec, pa, tspec, pb)
         if touch.any():
@@ -465,5 +515,7 @@ class Replay:
             self.flag(self._active(t), "collision", 1.0, f"{machine}'s and the truck's footprints touch at t={t:.3f} s")
 
     def _active(self, t: float) -> int | None:
-        who = [n for n, a in enumerate(self.plan.actions) if isinstance(a, (Move, Charge)) and a.t_start - ABS_TOL <= t <= a.t_end + ABS_TOL]
+        who = [
+            n for n, a in enumerate(self.plan.actions) if isinstance(a, (Move, Charge)) and a.t_start - ABS_TOL <= t <= a.t_end + ABS_TOL
+        ]
         return who[0] if who else None

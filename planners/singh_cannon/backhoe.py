@@ -177,7 +177,7 @@ class SinghCannonBackhoe(Planner):
         plan = s.run(max_dumps=1)
         return plan if plan.actions else None
 
-    def session(self, scenario: Scenario) -> "Session":
+    def session(self, scenario: Scenario) -> Session:
         """A planning session at the scenario's initial state, to call the coarse and refined
         planners step by step (tests, benchmarks, figures)."""
         return Session(scenario, self.config)
@@ -496,7 +496,11 @@ class Session:
         turn = np.minimum(np.abs(wrap(bearing - self.base.yaw)), np.abs(wrap(bearing + math.pi - self.base.yaw)))
         travel = dist / e.travel_speed + turn / e.yaw_rate
         tdist = np.hypot(st[:, 0] - self.truck.x, st[:, 1] - self.truck.y)
-        truck_extra = np.where(tdist - self.truck_spec.loading_radius > e.reach_max - 0.05, np.abs(tdist - self.cfg.truck_distance) / self.truck_spec.travel_speed + 15.0, 0.0)
+        truck_extra = np.where(
+            tdist - self.truck_spec.loading_radius > e.reach_max - 0.05,
+            np.abs(tdist - self.cfg.truck_distance) / self.truck_spec.travel_speed + 15.0,
+            0.0,
+        )
         inside = shapely.contains_xy(self.area, st[:, 0], st[:, 1])
         score = np.minimum(reach, need) - self.cfg.travel_value * (travel + truck_extra + 10.0 * inside)
         ok = (reach >= v_min) & (dist > 0.3) & (tdist >= e.clearance + 0.2)
