@@ -881,8 +881,8 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         "# earthbench leaderboard",
         "",
         f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-        "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals (zero width where every run agrees, as in a 100 % success rate)."
-        " Columns: runs "
+        "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals "
+        "(zero width where every run agrees, as in a 100 % success rate). Columns: runs "
         "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
         "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
         "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
