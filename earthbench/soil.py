@@ -126,8 +126,9 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     distance to the nearest channel cell``), and what it loses fills the channel's cells up to
     ``L``. ``L`` is the one level at which what falls equals what fills (:func:`_balance`); the
     fill is then scaled to the fallen volume exactly, so the box's volume is conserved to rounding
-    and no cell outside the box, or farther from the channel than the run of the slope, changes. Ground the cut did not steepen stays as it was: natural,
-    undisturbed bank may stand steeper than loose soil.
+    and no cell outside the box, or farther from the channel than the run of the slope, changes.
+    Ground the cut did not steepen stays as it was: natural, undisturbed bank may stand steeper
+    than loose soil.
     """
     j0, j1, i0, i1 = box if box is not None else (0, z.shape[0], 0, z.shape[1])
     sub = z[j0:j1, i0:i1]
