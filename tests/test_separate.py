@@ -53,7 +53,7 @@ def test_registered_with_paper_defaults():
     assert PLANNERS.get("separate") is SeparatePlanner
     c = Config()
     assert (c.w_local, c.m_local, c.drag_length, c.dig_depth, c.n_steps, c.divisions) == (2.0, 5, 1.0, 0.4, 10, 0)
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError):
         SeparatePlanner(divisions=-1)
 
 

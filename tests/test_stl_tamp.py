@@ -193,7 +193,7 @@ def test_min_distance_is_continuous():
 def test_config_is_a_frozen_dataclass_with_paper_defaults():
     c = Config()
     assert (c.m_local, c.n_steps, c.area_vmax, c.area_buckets) == (5, 10, 1.0, 5.0)
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         c.m_local = 3  # type: ignore[misc]
 
 

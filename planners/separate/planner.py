@@ -3,8 +3,8 @@
 This is the comparison method of the STL-TAMP paper (Satoh, Takano, Oyama, section V-B and
 Fig. 5b, "Separate"): the *same* system model as ``stl-tamp`` — its
 :class:`~earthbench_planners.stl_tamp.model.PhaseNLP` of the local shape, built once per process through
-:func:`~earthbench_planners.stl_tamp.hierarchy.get_nlp` — but only the local optimisation of Eq. (25), with the task vector fixed through the
-NLP's bounds (``PhaseNLP.solve(..., fixed_tasks=...)``). No global layer, no task choice.
+:func:`~earthbench_planners.stl_tamp.hierarchy.get_nlp` — but only the local optimisation of Eq. (25), with the task
+vector fixed through the NLP's bounds (``PhaseNLP.solve(..., fixed_tasks=...)``). No global layer, no task choice.
 
 The rule (Fig. 5b), per local area:
 

@@ -21,7 +21,6 @@
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,11 +29,11 @@ from shapely.geometry import Polygon
 
 from earthbench.referee.backhoe import track_level_and_tilt
 from earthbench.world import Pose, Scenario
-from .surface import RbfSurface, fit_rbf
+from .surface import RbfSurface
 
-from .convert import TILT_MARGIN, Converter, SimState
-from .guess import PhaseSeed, build_guess, fill_volumes
-from .model import NX, PhaseNLP, Shape, Solution
+from .convert import TILT_MARGIN
+from .guess import PhaseSeed
+from .model import PhaseNLP, Shape
 
 _NLP_CACHE: dict[Any, PhaseNLP] = {}
 
@@ -244,7 +243,7 @@ def greedy_tour(areas: list[Area], start: tuple[float, float], target: float, sp
     tour: list[Area] = []
     pos, got = start, 0.0
     while left and got < reserve * target:
-        def score(a: Area) -> float:
+        def score(a: Area, pos: tuple[float, float] = pos) -> float:
             travel = math.hypot(a.base[0] - pos[0], a.base[1] - pos[1]) / speed
             return a.estimate / (travel + work_per_m3 * a.estimate + 1.0)
 

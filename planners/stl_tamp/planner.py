@@ -35,7 +35,7 @@ from .hierarchy import (
     site_box,
     solve_counts,
 )
-from .model import NX, Shape, Solution
+from .model import Shape, Solution
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
