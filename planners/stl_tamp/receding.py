@@ -7,8 +7,8 @@ the global problem over them is solved again for the volume still missing (the t
 reported load, not the model's), the first area it chooses gets its local problem (the next
 one, up to :data:`TRIES`, when it yields nothing), and that area's actions are the step. The
 next step re-solves the remaining areas on the terrain the referee left, warm-started from the
-previous solution: the areas it chose and did not dig yet lead the new tour, in its order, so the global problem's initial guess is the previous
-plan's tail. Areas that yielded nothing are not chosen again.
+previous solution: the areas it chose and did not dig yet lead the new tour, in its order, so
+the global problem's initial guess is the previous plan's tail. Areas that yielded nothing are not chosen again.
 
 Only the planner's own functions are called (:meth:`StlTampPlanner._global`,
 :meth:`StlTampPlanner._local` and :mod:`.hierarchy`); nothing of the open-loop path changes.
