@@ -33,6 +33,7 @@ chord, speed, yaw-rate and curvature checks see exact arcs, at ``MARGIN`` of eve
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -40,7 +41,7 @@ import numpy as np
 
 from earthbench.motion import dense_poses
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
-from earthbench.planner import Observation, closed_loop_setting
+from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import charge_cut
 from earthbench.referee.loader import cell_heights, loader_base_level, step_excess, wheel_step_excess
 from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
@@ -617,3 +618,24 @@ class CycleBuilder:
         b = cls(observation.scenario, cfg)
         b.t, b.loaded, b.loaded0 = observation.t, observation.loaded, observation.loaded
         return b
+
+
+class CyclePlanner(Planner):
+    """A wheel-loader planner on :class:`CycleBuilder`, which differs from the others only in
+    how :meth:`_run` chooses each dig: open loop runs cycles until the target is loaded, a
+    closed-loop step one cycle from the observation."""
+
+    tracks = ("wheel_loader",)
+
+    def plan(self, scenario: Scenario) -> Plan:
+        return self._run(CycleBuilder(scenario, self.config))
+
+    def step(self, observation: Observation) -> Plan | None:
+        if observation.truck_full:
+            return None
+        plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
+        return plan if plan.actions else None
+
+    @abstractmethod
+    def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:
+        """Cycles on ``b`` until the target is loaded (or ``max_dumps`` cycles: one step)."""

@@ -18,9 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.plan import Plan
-from earthbench.planner import Observation, Planner
-from earthbench.world import Scenario
-from ..loader_cycle import Cycle, CycleBuilder, LoaderPlanConfig, pile_side
+from ..loader_cycle import Cycle, CycleBuilder, CyclePlanner, LoaderPlanConfig, pile_side
 
 
 @dataclass(frozen=True)
@@ -43,22 +41,12 @@ def nearest_candidates(line: np.ndarray, width: float) -> tuple[np.ndarray, np.n
     return line[ok], np.stack([-t[:, 1], t[:, 0]], axis=1)
 
 
-class GreedyLoader(Planner):
+class GreedyLoader(CyclePlanner):
     """Nearest contour point to the truck, perpendicular entry; see the module docstring."""
 
     name = "greedy-loader"
     version = "1.1"
-    tracks = ("wheel_loader",)
     Config = GreedyLoaderConfig
-
-    def plan(self, scenario: Scenario) -> Plan:
-        return self._run(CycleBuilder(scenario, self.config))
-
-    def step(self, observation: Observation) -> Plan | None:
-        if observation.truck_full:
-            return None
-        plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
-        return plan if plan.actions else None
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:
         """Cycles until the target is loaded (or ``max_dumps`` cycles: one closed-loop step)."""

@@ -44,9 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.plan import Plan
-from earthbench.planner import Observation, Planner
-from earthbench.world import Scenario
-from ..loader_cycle import Cycle, CycleBuilder, LoaderPlanConfig, box_volumes, pile_side
+from ..loader_cycle import Cycle, CycleBuilder, CyclePlanner, LoaderPlanConfig, box_volumes, pile_side
 
 
 @dataclass(frozen=True)
@@ -88,22 +86,12 @@ def corner_candidates(line: np.ndarray, width: float) -> tuple[np.ndarray, np.nd
     return (A + B) / 2, n, i
 
 
-class SinghCannonLoader(Planner):
+class SinghCannonLoader(CyclePlanner):
     """Coarse dig region on the zero contour, refined by ξ·ψ·ζ; see the module docstring."""
 
     name = "singh-cannon-loader"
     version = "1.1"
-    tracks = ("wheel_loader",)
     Config = SinghCannonLoaderConfig
-
-    def plan(self, scenario: Scenario) -> Plan:
-        return self._run(CycleBuilder(scenario, self.config))
-
-    def step(self, observation: Observation) -> Plan | None:
-        if observation.truck_full:
-            return None
-        plan = self._run(CycleBuilder.observed(observation, self.config), max_dumps=1)
-        return plan if plan.actions else None
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:
         """Cycles until the target is loaded (or ``max_dumps`` cycles: one closed-loop step)."""
