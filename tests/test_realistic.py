@@ -201,7 +201,8 @@ def test_a_cut_face_slumps_and_keeps_the_volume():
     assert exact.digs[0].volume == pytest.approx(real.digs[0].volume)
     area = sc.terrain.cell_area
     assert exact.final_terrain.z.sum() * area == pytest.approx(real.final_terrain.z.sum() * area, abs=1e-9)
-    steep = lambda z: np.abs(np.diff(z, axis=0)).max()  # noqa: E731
+    def steep(z):
+        return np.abs(np.diff(z, axis=0)).max()
     assert steep(exact.final_terrain.z) == pytest.approx(0.4)
     assert steep(real.final_terrain.z) <= math.tan(math.radians(30.0)) * 0.05 + 1e-3
 

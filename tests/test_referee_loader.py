@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from earthbench import Budget, Charge, Dig, Dump, Heightmap, Machines, Move, Plan, Pose, Scenario, Site, Task, judge
 from earthbench.errors import PlanFormatError
@@ -349,7 +351,6 @@ def test_charge_round_trips_and_malformed_charges_are_rejected():
 
 # -- properties -------------------------------------------------------------------------------
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
 
 
 @settings(max_examples=40, deadline=None)

@@ -100,7 +100,8 @@ def test_machines_move_and_violations_are_red(viewer):
     runs = dt.js("JSON.parse(document.getElementById('rp-data').textContent).map(d => [d.run, d.verdict, d.label])")
     jumpy = next(r for r in runs if "jumpy" in r[2] and r[1] != "valid")
     _load(dt, jumpy[0])
-    red = lambda img: ((img[..., 0] > 190) & (img[..., 1] < 40) & (img[..., 2] < 40)).sum()  # noqa: E731
+    def red(img):
+        return ((img[..., 0] > 190) & (img[..., 1] < 40) & (img[..., 2] < 40)).sum()
     start = _canvas(dt, 0.0)
     mk = dt.js("earthbenchReplay.state().makespan")
     end = _canvas(dt, mk)

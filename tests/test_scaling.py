@@ -18,7 +18,8 @@ def ladder_db(tmp_path_factory):
 
 
 def test_a_ladder_is_three_targets_each_at_least_double():
-    frame = lambda *t: pd.DataFrame({"target_volume": t})  # noqa: E731
+    def frame(*t):
+        return pd.DataFrame({"target_volume": t})
     assert is_size_ladder(frame(4.0, 16.0, 64.0, 256.0, 4.0))
     assert is_size_ladder(frame(0.28, 0.56, 1.12))
     assert not is_size_ladder(frame(4.0, 16.0))  # two sizes are no growth curve

@@ -47,7 +47,8 @@ def test_loading_past_the_target_never_lowers_time_per_target(dumps, target, mor
     before = _verdict(dumps)
     t = dumps[-1][0]
     after = _verdict(dumps + [(t + sum(d for d, _ in more[: i + 1]), v) for i, (_, v) in enumerate(more)])
-    tpt = lambda v: time_to_target(v, target) / min(v.loaded_volume, target)  # noqa: E731
+    def tpt(v):
+        return time_to_target(v, target) / min(v.loaded_volume, target)
     if before.loaded_volume >= target:
         assert tpt(after) == tpt(before)
     # time per m³ (makespan / loaded) has no such floor: loading on lowers it whenever a dump beats the mean
