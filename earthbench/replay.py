@@ -176,8 +176,8 @@ def replay_data(scenario: Scenario, plan: Plan, label: str, run_id: int | None =
     t = scenario.terrain
     z0 = np.asarray(t.z, dtype=np.float64)
     cut = [c.z for c in steps if c.z is not None]  # every height any frame has that the first lacks
-    lo = float(min(z0.min(), *(z.min() for z in cut)))
-    hi = float(max(z0.max(), *(z.max() for z in cut)))
+    lo = float(min([z0.min(), *(z.min() for z in cut)]))  # a list: a plan may change no cell
+    hi = float(max([z0.max(), *(z.max() for z in cut)]))
     q = max(QUANTUM, (hi - lo) / 60000.0)
 
     def quant(z: np.ndarray) -> np.ndarray:

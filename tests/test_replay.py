@@ -135,3 +135,10 @@ def test_one_judgement_gives_the_frames_of_judging_every_prefix(case, which):
     for s, (_, z, loaded) in zip(steps, expected):
         np.testing.assert_array_equal(s.z, z)
         assert s.loaded == loaded
+
+
+def test_a_plan_that_changes_no_cell_still_replays(case):
+    sc, plan = case
+    moves_only = Plan(tuple(a for a in plan.actions if a.kind == "move"))
+    doc = replay_data(sc, moves_only, "moves only")
+    assert json.loads(json.dumps(doc))["label"] == "moves only"
