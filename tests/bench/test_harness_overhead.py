@@ -18,7 +18,7 @@ from earthbench.suite import load_suite
 PLUGIN = str(Path(__file__).parents[1] / "plugins" / "faulty_planners.py")
 
 
-pytestmark = pytest.mark.usefixtures("forget_test_planners")
+pytestmark = pytest.mark.usefixtures("forget_test_planners", "compiled_bytecode")
 
 
 @pytest.mark.parametrize("planner", ["t-fast", "greedy", "singh-cannon-backhoe"])
