@@ -18,6 +18,7 @@ from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs, stored_steps
 from earthbench.suite import parse_suite
 from earthbench.verify import audit
+from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "step_planners.py")
 
@@ -26,26 +27,8 @@ pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 def suite_toml(name: str, *, wall_s: float = 20.0, step_s: float = 3.0, max_steps: int = 50, config: str = "") -> str:
     """Small rbf maps with a target of a few buckets, so a greedy plan has a few dig cycles."""
-    return f"""
-name = "{name}"
-track = "backhoe"
-[budget]
-wall_s = {wall_s}
-cores = 2
-memory_mb = 1024
-step_s = {step_s}
-max_steps = {max_steps}
-[[family]]
-name = "small"
-generator = "rbf"
-targets = [1.2]
-seeds = "0-0"
-[family.params]
-n_bases = 5
-size = [8.0, 6.0]
-resolution = 0.1
-{config}
-"""
+    return tiny_suite_toml(name, wall_s=wall_s, target=1.2, size=(8.0, 6.0), n_bases=5,
+                           budget=f"step_s = {step_s}\nmax_steps = {max_steps}", config=config)
 
 
 def run(tmp_path: Path, suite_text: str, planners: list[str]) -> tuple[object, Path]:

@@ -63,9 +63,15 @@ def straight_move(machine: str, start: Pose, goal: tuple[float, float], t0: floa
     return Move(machine, ((t0, start.x, start.y, start.yaw), (t0 + d / speed, goal[0], goal[1], start.yaw)))
 
 
-def tiny_suite_toml(name: str = "tiny", *, wall_s: float = 20.0, memory_mb: int = 1024, seeds: str = "0-0") -> str:
+def tiny_suite_toml(name: str = "tiny", *, wall_s: float = 20.0, memory_mb: int = 1024, seeds: str = "0-0",
+                    target: float = 0.28, size: tuple[float, float] = (4.0, 3.0), n_bases: int = 3,
+                    budget: str = "", config: str = "") -> str:
     """A suite of tiny rbf maps (4 m × 3 m, 3 bases, 0.1 m cells, a one-bucket target) for harness
-    tests: every planner solves one in well under a second, so a test times the harness, not it."""
+    tests: every planner solves one in well under a second, so a test times the harness, not it.
+
+    ``budget`` adds lines to ``[budget]`` (e.g. the closed-loop ``step_s``), ``config`` appends
+    ``[config.PLANNER]`` tables; a larger ``size`` and ``target`` give a plan of a few dig cycles.
+    """
     return f"""
 name = "{name}"
 track = "backhoe"
@@ -73,15 +79,17 @@ track = "backhoe"
 wall_s = {wall_s}
 cores = 2
 memory_mb = {memory_mb}
+{budget}
 [[family]]
 name = "small"
 generator = "rbf"
-targets = [0.28]
+targets = [{target}]
 seeds = "{seeds}"
 [family.params]
-n_bases = 3
-size = [4.0, 3.0]
+n_bases = {n_bases}
+size = [{size[0]}, {size[1]}]
 resolution = 0.1
+{config}
 """
 
 
