@@ -131,26 +131,38 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     than loose soil.
     """
     j0, j1, i0, i1 = box if box is not None else (0, z.shape[0], 0, z.shape[1])
-    sub = z[j0:j1, i0:i1]
-    lost = before - sub
-    channel = lost > 1e-12
-    if not channel.any() or channel.all():
+    lost = before - z[j0:j1, i0:i1]
+    js, is_ = np.nonzero(lost > 1e-12)
+    return slump_cells(z, resolution, repose_deg, js + j0, is_ + i0, lost[js, is_], (j0, j1, i0, i1))
+
+
+def slump_cells(z: np.ndarray, resolution: float, repose_deg: float, jj: np.ndarray, ii: np.ndarray,
+                lost: np.ndarray, box: tuple[int, int, int, int]) -> float:
+    """:func:`slump` with the channel given as its cells: the distinct cells ``(jj, ii)`` of
+    ``box`` that the cut lowered, by ``lost`` (each > 1e-12 m). The referee knows them (the
+    bucket's path cells), so it need not compare the whole box before and after the cut."""
+    j0, j1, i0, i1 = box
+    if jj.size == 0 or jj.size == (j1 - j0) * (i1 - i0):
         return 0.0
     from scipy.ndimage import distance_transform_edt  # only once a cut happened
 
     slope = math.tan(math.radians(repose_deg))
-    run = float(lost[channel].max()) / slope  # how far from the channel a face can reach
+    run = float(lost.max()) / slope  # how far from the channel a face can reach
     pad = int(math.ceil(run / resolution)) + 1
-    js, is_ = np.nonzero(channel)
-    crop = (slice(max(int(js.min()) - pad, 0), int(js.max()) + pad + 1), slice(max(int(is_.min()) - pad, 0), int(is_.max()) + pad + 1))
-    sub, channel = sub[crop], channel[crop]  # views: what changes lands in ``z``
-    dist = distance_transform_edt(~channel) * resolution
-    band = ~channel & (dist <= run + 1e-9)
+    cj0, ci0 = max(int(jj.min()) - pad, j0), max(int(ii.min()) - pad, i0)
+    cj1, ci1 = min(int(jj.max()) + pad + 1, j1), min(int(ii.max()) + pad + 1, i1)
+    sub = z[cj0:cj1, ci0:ci1]  # a view: what changes lands in ``z``
+    channel = np.zeros(sub.shape, dtype=bool)
+    channel[jj - cj0, ii - ci0] = True
+    outside = ~channel
+    dist = distance_transform_edt(outside) * resolution
     floor = sub[channel]
-    band &= sub - slope * dist > floor.min()  # only cells above the lowest possible slope can fall
-    if not band.any():
+    rise_all = slope * dist
+    band = outside & (dist <= run + 1e-9) & (sub - rise_all > floor.min())  # only cells above the lowest possible slope can fall
+    walls = sub[band]
+    if walls.size == 0:
         return 0.0
-    walls, rise = sub[band], slope * dist[band]
+    rise = rise_all[band]
     level = _balance(walls - rise, floor)
     cut_back = np.minimum(walls, level + rise)
     fallen = float((walls - cut_back).sum())

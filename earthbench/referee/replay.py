@@ -20,7 +20,7 @@ import shapely
 from ..cut import Cut, cut_along, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, sample_yaws, wrap
 from ..plan import Charge, Move, Plan
-from ..soil import cut_levels, slump, slump_box
+from ..soil import cut_levels, slump_box, slump_cells
 from ..world import ExcavatorSpec, LoaderSpec, Pose, Scenario, TruckSpec
 
 Spec = ExcavatorSpec | TruckSpec | LoaderSpec
@@ -270,9 +270,10 @@ class Replay:
         self.soil = scenario.soil
         #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
         self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
-        self._unsettled: tuple[tuple[int, int, int, int], np.ndarray] | None = None
-        #: with soil, the firm ground: the heights less the loose material slumping left on top
-        self.firm: np.ndarray | None = None if self.soil is None else self.z.copy()
+        #: the last cut's slump box and the cells it lowered, with by how much, until :meth:`settle`
+        self._unsettled: tuple[tuple[int, int, int, int], np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: with soil and a loader, the firm ground: the heights less the loose material slumping left on top
+        self.firm: np.ndarray | None = None if self.soil is None or m.loader is None else self.z.copy()
 
     def _timelines(self) -> dict[str, Timeline]:
         m = self.sc.machines
@@ -337,27 +338,29 @@ class Replay:
         """
         if cells is None:
             cells = path_cells(self.terrain, self.z.shape, contact, heading, width, length)
+        budget = bucket_capacity - self.bucket
         if self.soil is None:
-            return cut_along(self.terrain, self.z, contact, heading, width, length, level, bucket_capacity - self.bucket, cells), None
-        nominal = cut_along(
-            self.terrain, self.z.copy(), contact, heading, width, length, level, bucket_capacity - self.bucket, cells
-        ).volume
+            return cut_along(self.terrain, self.z, contact, heading, width, length, level, budget, cells), None
+        nominal = cut_along(self.terrain, self.z, contact, heading, width, length, level, budget, cells, apply=False).volume
         jj, ii, _ = cells
-        if jj.size:
-            box = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg)
-            self._unsettled = (box, self.z[box[0]:box[1], box[2]:box[3]].copy())
+        before = self.z[jj, ii]
         levels = cut_levels(self.soil, self.sc.terrain.z, self.z, jj, ii, level)
         real = cut_along(self.terrain, self.z, contact, heading, width, length, levels,
                          self.soil.fill_factor * bucket_capacity - self.bucket, cells)
-        if self.firm is not None and jj.size:
-            self.firm[jj, ii] = np.minimum(self.firm[jj, ii], self.z[jj, ii])
+        if jj.size:
+            lost = before - self.z[jj, ii]
+            cut = lost > 1e-12
+            box = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg)
+            self._unsettled = (box, jj[cut], ii[cut], lost[cut])
+            if self.firm is not None:
+                self.firm[jj, ii] = np.minimum(self.firm[jj, ii], self.z[jj, ii])
         return real, nominal
 
     def settle(self) -> None:
         """Slump the faces the last cut left steeper than the soil's angle of repose."""
         if self.soil is not None and self._unsettled is not None:
-            (j0, j1, i0, i1), before = self._unsettled
-            slump(self.z, self.terrain.resolution, self.soil.repose_deg, before, (j0, j1, i0, i1))
+            (j0, j1, i0, i1), jj, ii, lost = self._unsettled
+            slump_cells(self.z, self.terrain.resolution, self.soil.repose_deg, jj, ii, lost, (j0, j1, i0, i1))
             if self.firm is not None:  # what fell is loose: the firm ground only ever goes down
                 np.minimum(self.firm[j0:j1, i0:i1], self.z[j0:j1, i0:i1], out=self.firm[j0:j1, i0:i1])
         self._unsettled = None
