@@ -135,6 +135,75 @@ def test_slumping_conserves_volume_and_touches_nothing_outside_its_box(seed, ny,
     assert np.array_equal(z[outside], after_cut[outside])
 
 
+def _steepest(z: np.ndarray) -> float:
+    """The largest height difference between two 4-neighbours."""
+    return max(np.abs(np.diff(z, axis=0)).max(initial=0.0), np.abs(np.diff(z, axis=1)).max(initial=0.0))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31), depth=st.floats(0.01, 1.5), repose=st.floats(20.0, 60.0),
+    size=st.tuples(st.integers(1, 14), st.integers(1, 14)), ragged=st.booleans(),
+)
+def test_a_slumped_cut_keeps_the_volume_stays_above_its_floor_and_stands_at_repose(seed, depth, repose, size, ragged):
+    """Level ground, a flat-bottomed cut of any depth and outline (as the referee cuts: every cell
+    of the bucket's path down to one level), then its slump: the volume is conserved to 1e-9 m³,
+    no cell ends lower than the cut's level (so never below a floor the cut respected), and no
+    two neighbouring cells differ by more than the repose slope over a cell.
+
+    On sloping ground the last holds only near the cut: the slump reaches ``depth / tan(repose)``
+    from the channel (docs/DESIGN.md §5), so ground that rises faster than that keeps its faces."""
+    rng = np.random.default_rng(seed)
+    res, n = 0.05, 48
+    before = np.full((n, n), 2.0)
+    z = before.copy()
+    h, w = size
+    j0, i0 = int(rng.integers(0, n - h)), int(rng.integers(0, n - w))
+    cut = np.zeros((n, n), dtype=bool)
+    cut[j0:j0 + h, i0:i0 + w] = True
+    if ragged:  # the bucket filled before the end of its path, or some cells were already low
+        cut &= rng.uniform(size=(n, n)) < 0.7
+    z[cut] = 2.0 - depth
+    after_cut = z.copy()
+    slump(z, res, repose, before)
+    assert abs(z.sum() - after_cut.sum()) * res * res <= 1e-9
+    assert z.min() >= 2.0 - depth - 1e-12
+    assert _steepest(z) <= math.tan(math.radians(repose)) * res * (1 + 1e-9) + 1e-12
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(material=st.sampled_from(sorted(MATERIALS)), seed=st.integers(0, 1000), floor=st.floats(0.55, 0.95),
+       contact=st.tuples(st.floats(3.0, 5.0), st.floats(4.5, 5.5)), depth=st.floats(0.05, 0.4))
+def test_with_soil_no_cell_ends_below_the_floor(material, seed, floor, contact, depth):
+    """Two digs at one place with a drawn soil: the referee cuts at the floor at most and what
+    slumps never carries the ground below it."""
+    sc = block_scenario(floor=floor).replace(soil=draw({"material": material}, seed))
+    first = dig_dump_plan(contact=contact, depth=depth)
+    t = first[-1].t_end
+    second = dig_dump_plan(contact=contact, depth=depth, t0=t)
+    v = judge(sc, Plan(tuple(first + second)))
+    assert v.final_terrain.z.min() >= floor - 1e-9
+    assert "below_floor" not in {x.rule for x in v.violations}
+
+
+@pytest.mark.parametrize("track", ["exact", "soil", "scan", "soil and scan"])
+def test_a_cut_below_the_floor_is_flagged_only_where_the_planner_sees_the_truth(track):
+    """The exact track flags it; where the planner's model is not the world (soil: slumping moves
+    the ground it planned on; a scan: it never saw the true ground) the cut is made at the floor,
+    and it removes what a dig to the floor removes: nothing more."""
+    sc = block_scenario(floor=0.7)
+    if "soil" in track:
+        sc = sc.replace(soil=LOAM)
+    if "scan" in track:
+        sc = sc.replace(sensing=Sensing(noise=0.02, seed=1))
+    deep = judge(sc, Plan(tuple(dig_dump_plan(depth=0.4))))  # level 0.6: 0.1 m below the floor
+    to_floor = judge(sc, Plan(tuple(dig_dump_plan(depth=0.3))))  # level 0.7: the floor
+    assert ("below_floor" in {x.rule for x in deep.violations}) == (track == "exact")
+    assert deep.final_terrain.z.min() >= 0.7 - 1e-9
+    assert deep.digs[0].volume == pytest.approx(to_floor.digs[0].volume, abs=1e-12)
+    assert deep.loaded_volume == pytest.approx(to_floor.loaded_volume, abs=1e-12)
+
+
 def test_a_cut_pit_collapses_to_the_repose_angle():
     before = np.zeros((40, 40))
     z = before.copy()
