@@ -128,7 +128,8 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     fill is then scaled to the fallen volume exactly, so the box's volume is conserved to rounding
     and no cell outside the box, or farther from the channel than the run of the slope, changes.
     Ground the cut did not steepen stays as it was: natural, undisturbed bank may stand steeper
-    than loose soil.
+    than loose soil; so does ground beyond the run ``D / tan(repose)`` that rises faster than the
+    slope beside the cut (docs/DESIGN.md §5).
     """
     j0, j1, i0, i1 = box if box is not None else (0, z.shape[0], 0, z.shape[1])
     lost = before - z[j0:j1, i0:i1]
@@ -140,7 +141,8 @@ def slump_cells(z: np.ndarray, resolution: float, repose_deg: float, jj: np.ndar
                 lost: np.ndarray, box: tuple[int, int, int, int]) -> float:
     """:func:`slump` with the channel given as its cells: the distinct cells ``(jj, ii)`` of
     ``box`` that the cut lowered, by ``lost`` (each > 1e-12 m). The referee knows them (the
-    bucket's path cells), so it need not compare the whole box before and after the cut."""
+    bucket's path cells), so it need not compare the whole box before and after the cut; the
+    result is bit for bit :func:`slump`'s (docs/DESIGN.md §5, "Speed with soil")."""
     j0, j1, i0, i1 = box
     if jj.size == 0 or jj.size == (j1 - j0) * (i1 - i0):
         return 0.0
