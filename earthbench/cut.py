@@ -75,22 +75,34 @@ def cut_along(
         return Cut(0.0, 0.0)
     r = terrain.resolution
     jj, ii, dist = path_cells(terrain, z.shape, contact, heading, width, length) if cells is None else cells
-    if jj.size == 0:
-        return Cut(0.0)
-    excess = np.maximum(z[jj, ii] - level, 0.0) * (r * r)
-    total = np.cumsum(excess)
-    full = int(np.searchsorted(total, capacity, side="right"))
+    got, full, part = cut_heights(z[jj, ii], dist, level, capacity, r * r)
     if apply:
         levels = np.asarray(level)
         z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], levels if levels.ndim == 0 else levels[:full])
+        if part:
+            z[jj[full], ii[full]] -= part
+    return got
+
+
+def cut_heights(
+    heights: np.ndarray, dist: np.ndarray, level: float | np.ndarray, capacity: float, cell_area: float
+) -> tuple[Cut, int, float]:
+    """The cut model on the heights of a path's cells (path order, ``dist`` along it), changing
+    nothing: the :class:`Cut`, how many leading cells are lowered to ``level`` whole, and by how
+    much the next one is lowered (0.0: none). :func:`cut_along` applies it to a grid; the referee
+    with soil applies it to heights it has already read (docs/DESIGN.md §5)."""
+    if capacity <= 0:
+        return Cut(0.0, 0.0), 0, 0.0
+    if heights.size == 0:
+        return Cut(0.0), 0, 0.0
+    total = np.cumsum(np.maximum(heights - level, 0.0) * cell_area)
+    full = int(np.searchsorted(total, capacity, side="right"))
     removed = float(total[full - 1]) if full else 0.0
-    if full < jj.size and removed < capacity:
-        if apply:
-            z[jj[full], ii[full]] -= (capacity - removed) / (r * r)
-        return Cut(capacity, float(dist[full]))
+    if full < heights.size and removed < capacity:
+        return Cut(capacity, float(dist[full])), full, (capacity - removed) / cell_area
     if full and removed >= capacity:
-        return Cut(removed, float(dist[full - 1]))
-    return Cut(removed)
+        return Cut(removed, float(dist[full - 1])), full, 0.0
+    return Cut(removed), full, 0.0
 
 
 def path_cells(

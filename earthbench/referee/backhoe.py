@@ -118,7 +118,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     r.settle()
     r.bucket += vol
     r.removed += vol
-    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, nominal))
+    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, None if nominal is None else nominal.volume))
     r.turn = math.atan2(a.contact[1] - base.y, a.contact[0] - base.x) - base.yaw
 
 

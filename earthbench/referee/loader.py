@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..cut import cut_along, footprint, path_cells
+from ..cut import footprint, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, loader_dump_excess, wrap
 from ..plan import Charge, Dump, Move
 from ..world import Heightmap, LoaderSpec, Pose, Scenario
@@ -227,19 +227,14 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
     level = r.sc.site.floor if r.sc.site.floor is not None else loader_base_level(r.sc)
     cells = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, a.penetration)  # the edge's path (charge_along's)
-    if r.soil is None:
-        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, 0.0, cells)
-        full_at = cut.full_at
-    else:  # overfill is judged on the public cut model: where the plan could know the bucket fills
-        full_at = cut_along(r.terrain, r.z, edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity - r.bucket,
-                            cells, apply=False).full_at
-        height = float(np.max(r.z[cells[0], cells[1]] - level, initial=0.0))  # the highest face the charge can leave
-        cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, height, cells)
+    cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, None, cells)
+    # overfill is judged on the public cut model: where the plan could know the bucket fills
+    full_at = cut.full_at if nominal is None else nominal.full_at
     if full_at is not None:
         _overfill(r, n, a.penetration, level, full_at, cells)
     r.bucket += cut.volume
     r.removed += cut.volume
-    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity, nominal))
+    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity, None if nominal is None else nominal.volume))
     step(r, n, a.machine, spec, path, charge_arc)
     r.settle()  # the face slumps as the bucket withdraws: into the channel it cut, ahead of the wheels
     r.travel[a.machine] += a.penetration
