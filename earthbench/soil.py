@@ -173,7 +173,8 @@ def slump_cells(z: np.ndarray, resolution: float, repose_deg: float, jj: np.ndar
     flat = sub.ravel()
     channel = jj * w + ii
     channel -= j0 * w + i0
-    outside = np.ones(h * w, dtype=bool)
+    outside = np.empty(h * w, dtype=bool)
+    outside.fill(True)
     outside[channel] = False
     # the nearest channel cell of every window cell, then the squared distance to it (cells²)
     near_j, near_i = distance_transform_edt(outside.reshape(h, w), return_distances=False, return_indices=True)
@@ -189,18 +190,18 @@ def slump_cells(z: np.ndarray, resolution: float, repose_deg: float, jj: np.ndar
     tops_all = flat - rise_all
     reach = (drop / slope + 1e-9) / resolution  # how far from the channel a face can reach (cells)
     # only cells within the run and above the lowest possible slope can fall
-    band = np.flatnonzero((d2 <= reach * reach) & (tops_all > floor.min()) & outside)
+    band = ((d2 <= reach * reach) & (tops_all > np.minimum.reduce(floor)) & outside).nonzero()[0]
     if band.size == 0:
         return 0.0
     walls, rise = flat[band], rise_all[band]
     level = _balance(tops_all[band], floor)
     cut_back = np.minimum(walls, level + rise)
-    fallen = float((walls - cut_back).sum())
+    fallen = float(np.add.reduce(walls - cut_back))
     if fallen <= 0.0:
         return 0.0
     fill = level - floor
     np.maximum(fill, 0.0, out=fill)
-    total = float(fill.sum())
+    total = float(np.add.reduce(fill))
     if total > 0:
         fill *= fallen / total
     else:
@@ -234,9 +235,9 @@ def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
     ct = np.empty(nt + 1)
     ct[0] = 0.0
     np.cumsum(t, out=ct[1:])  # ct[k]: the sum of the k lowest tops
-    high = float(floor.max())
+    high = float(np.maximum.reduce(floor))
     k = int(np.searchsorted(t, high, side="right"))
-    below = float(floor.sum())
+    below = float(np.add.reduce(floor))
     if (ct[nt] - ct[k]) - (nt - k) * high >= nf * high - below:
         b = nf
     else:

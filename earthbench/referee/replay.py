@@ -362,7 +362,7 @@ class Replay:
             cut = lost > 1e-12
             if depth is None:  # the highest face the cut can leave
                 depth = float(np.max(heights - level, initial=0.0))
-            drop = float(lost.max())
+            drop = float(np.maximum.reduce(lost))
             if drop > 1e-12:
                 window = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg, drop)
                 self._unsettled = (window, cj[cut], ci[cut], drop)
