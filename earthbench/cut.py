@@ -95,8 +95,8 @@ def cut_heights(
         return Cut(0.0, 0.0), 0, 0.0
     if heights.size == 0:
         return Cut(0.0), 0, 0.0
-    total = np.cumsum(np.maximum(heights - level, 0.0) * cell_area)
-    full = int(np.searchsorted(total, capacity, side="right"))
+    total = (np.maximum(heights - level, 0.0) * cell_area).cumsum()
+    full = int(total.searchsorted(capacity, side="right"))
     removed = float(total[full - 1]) if full else 0.0
     if full < heights.size and removed < capacity:
         return Cut(capacity, float(dist[full])), full, (capacity - removed) / cell_area

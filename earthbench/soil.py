@@ -221,7 +221,7 @@ def reach_cells(drop: float, resolution: float, repose_deg: float) -> int:
 
 def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
     """The level ``L`` at which ``Σ max(tops − L, 0) = Σ max(L − floor, 0)``; some top must lie
-    above the lowest floor height.
+    above the lowest floor height. Sorts ``tops`` in place.
 
     Both sides are piecewise linear in ``L`` and their difference ``g`` falls strictly above
     that height. First the floor cells below ``L``: all of them when ``g`` at the highest is
@@ -230,13 +230,14 @@ def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
     are those where ``g`` < 0 (sorted tops, prefix sums), and ``L`` solves the one linear piece:
     (their sum + the floor cells' sum) / (their number + ``b``).
     """
-    t = np.sort(tops)
+    t = tops
+    t.sort()
     nt, nf = t.size, floor.size
     ct = np.empty(nt + 1)
     ct[0] = 0.0
-    np.cumsum(t, out=ct[1:])  # ct[k]: the sum of the k lowest tops
+    t.cumsum(out=ct[1:])  # ct[k]: the sum of the k lowest tops
     high = float(np.maximum.reduce(floor))
-    k = int(np.searchsorted(t, high, side="right"))
+    k = int(t.searchsorted(high, side="right"))
     below = float(np.add.reduce(floor))
     if (ct[nt] - ct[k]) - (nt - k) * high >= nf * high - below:
         b = nf
@@ -244,8 +245,8 @@ def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
         f = np.sort(floor)
         cf = np.empty(nf + 1)
         cf[0] = 0.0
-        np.cumsum(f, out=cf[1:])
-        above = np.searchsorted(t, f, side="right")
+        f.cumsum(out=cf[1:])
+        above = t.searchsorted(f, side="right")
         g = (ct[nt] - ct[above]) - (nt - above) * f - (np.arange(1, nf + 1) * f - cf[1:])
         b = int(np.count_nonzero(g > 0))
         below = float(cf[b])
@@ -265,5 +266,6 @@ def slump_box(
     pad = int(math.ceil(depth / math.tan(math.radians(repose_deg)) / resolution)) + 2
     if drop is not None:
         pad = min(pad, reach_cells(drop, resolution, repose_deg))
-    return (max(int(jj.min()) - pad, 0), min(int(jj.max()) + pad + 1, shape[0]),
-            max(int(ii.min()) - pad, 0), min(int(ii.max()) + pad + 1, shape[1]))
+    lo, hi = np.minimum.reduce, np.maximum.reduce  # no Python wrappers: the referee calls this per dig
+    return (max(int(lo(jj)) - pad, 0), min(int(hi(jj)) + pad + 1, shape[0]),
+            max(int(lo(ii)) - pad, 0), min(int(hi(ii)) + pad + 1, shape[1]))
