@@ -65,29 +65,44 @@ def cut_along(
     level: float | np.ndarray,
     capacity: float,
     cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    apply: bool = True,
 ) -> Cut:
     """:func:`apply_cut`, also telling where along the path the bucket filled; ``cells`` is
     :func:`path_cells` of the same path when the caller already has it. ``level`` may also be
-    an array, one level per path cell (the referee's soil: a harder layer, ``earthbench.soil``)."""
+    an array, one level per path cell (the referee's soil: a harder layer, ``earthbench.soil``).
+    With ``apply`` False, ``z`` is left as it is: the same answer, for a prediction."""
     if capacity <= 0:
         return Cut(0.0, 0.0)
     r = terrain.resolution
     jj, ii, dist = path_cells(terrain, z.shape, contact, heading, width, length) if cells is None else cells
-    if jj.size == 0:
-        return Cut(0.0)
-    excess = np.maximum(z[jj, ii] - level, 0.0) * (r * r)
-    total = np.cumsum(excess)
-    full = int(np.searchsorted(total, capacity, side="right"))
-    levels = np.asarray(level)
-    z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], levels if levels.ndim == 0 else levels[:full])
+    got, full, part = cut_heights(z[jj, ii], dist, level, capacity, r * r)
+    if apply:
+        levels = np.asarray(level)
+        z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], levels if levels.ndim == 0 else levels[:full])
+        if part:
+            z[jj[full], ii[full]] -= part
+    return got
+
+
+def cut_heights(
+    heights: np.ndarray, dist: np.ndarray, level: float | np.ndarray, capacity: float, cell_area: float
+) -> tuple[Cut, int, float]:
+    """The cut model on the heights of a path's cells (path order, ``dist`` along it), changing
+    nothing: the :class:`Cut`, how many leading cells are lowered to ``level`` whole, and by how
+    much the next one is lowered (0.0: none). :func:`cut_along` applies it to a grid; the referee
+    with soil applies it to heights it has already read (docs/DESIGN.md §5)."""
+    if capacity <= 0:
+        return Cut(0.0, 0.0), 0, 0.0
+    if heights.size == 0:
+        return Cut(0.0), 0, 0.0
+    total = (np.maximum(heights - level, 0.0) * cell_area).cumsum()
+    full = int(total.searchsorted(capacity, side="right"))
     removed = float(total[full - 1]) if full else 0.0
-    if full < jj.size and removed < capacity:
-        part = capacity - removed
-        z[jj[full], ii[full]] -= part / (r * r)
-        return Cut(capacity, float(dist[full]))
+    if full < heights.size and removed < capacity:
+        return Cut(capacity, float(dist[full])), full, (capacity - removed) / cell_area
     if full and removed >= capacity:
-        return Cut(removed, float(dist[full - 1]))
-    return Cut(removed)
+        return Cut(removed, float(dist[full - 1])), full, 0.0
+    return Cut(removed), full, 0.0
 
 
 def path_cells(
@@ -154,17 +169,18 @@ def charge_along(
     penetration: float,
     level: float,
     capacity: float,
+    apply: bool = True,
 ) -> Cut:
     """Cut ``z`` in place along a charge from ``entry`` (the loader's pose) and return the volume.
 
     The cutting edge starts ``spec.bucket_offset`` ahead of the pose and sweeps ``penetration``
     metres along the heading; the cells whose centre lies in that ``bucket_width`` wide path are
     lowered to ``level`` in path order until ``capacity`` is reached (the last cell partly),
-    exactly as :func:`apply_cut` does for a backhoe drag.
+    exactly as :func:`apply_cut` does for a backhoe drag (``apply`` False: a prediction only).
     """
     x, y, yaw = entry
     edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
-    return cut_along(terrain, z, edge, yaw, spec.bucket_width, penetration, level, capacity)
+    return cut_along(terrain, z, edge, yaw, spec.bucket_width, penetration, level, capacity, apply=apply)
 
 
 def cut_level(terrain: Heightmap, z: np.ndarray, contact: tuple[float, float], depth: float) -> float:

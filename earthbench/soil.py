@@ -104,14 +104,20 @@ def draw(spec: dict[str, Any], seed: int, where: str = "soil") -> Soil:
         raise ScenarioError(str(exc).replace("scenario field soil.", f"{where}.")) from None
 
 
-def cut_levels(soil: Soil, z0: np.ndarray, z: np.ndarray, jj: np.ndarray, ii: np.ndarray, level: float) -> np.ndarray | float:
-    """The level each path cell ``(jj, ii)`` is really cut to: ``level``, but no deeper than
-    ``hard_penetration`` into the harder layer (its top lies ``hard_depth`` below the initial
-    heights ``z0``; a cell already in it gives way by that much below its current height)."""
-    if soil.hard_depth is None:
+def hard_top(soil: Soil, z0: np.ndarray) -> np.ndarray | None:
+    """The top of the harder layer under every cell: ``hard_depth`` below the initial heights
+    ``z0`` (None: the soil has no such layer). The referee reads it once per replay."""
+    return None if soil.hard_depth is None else np.asarray(z0) - soil.hard_depth
+
+
+def cut_levels(soil: Soil, top: np.ndarray | None, heights: np.ndarray, level: float) -> np.ndarray | float:
+    """The level each path cell is really cut to, given its current ``heights`` and ``top``, the
+    harder layer's top under it (:func:`hard_top` at the cells; None: no layer): ``level``, but
+    no deeper than ``hard_penetration`` into the layer (a cell already in it gives way by that
+    much below its current height)."""
+    if top is None:
         return level
-    top = z0[jj, ii] - soil.hard_depth
-    return np.maximum(level, np.minimum(z[jj, ii], top) - soil.hard_penetration)
+    return np.maximum(level, np.minimum(heights, top) - soil.hard_penetration)
 
 
 def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarray,
@@ -128,71 +134,138 @@ def slump(z: np.ndarray, resolution: float, repose_deg: float, before: np.ndarra
     fill is then scaled to the fallen volume exactly, so the box's volume is conserved to rounding
     and no cell outside the box, or farther from the channel than the run of the slope, changes.
     Ground the cut did not steepen stays as it was: natural, undisturbed bank may stand steeper
-    than loose soil.
+    than loose soil; so does ground beyond the run ``D / tan(repose)`` that rises faster than the
+    slope beside the cut (docs/DESIGN.md §5).
     """
     j0, j1, i0, i1 = box if box is not None else (0, z.shape[0], 0, z.shape[1])
-    sub = z[j0:j1, i0:i1]
-    lost = before - sub
-    channel = lost > 1e-12
-    if not channel.any() or channel.all():
+    lost = before - z[j0:j1, i0:i1]
+    js, is_ = np.nonzero(lost > 1e-12)
+    if js.size == 0 or js.size == lost.size:
+        return 0.0
+    drop = float(lost[js, is_].max())
+    pad = reach_cells(drop, resolution, repose_deg)  # the window: the channel's bounding box grown by the run
+    window = (max(int(js.min()) - pad, 0) + j0, min(int(js.max()) + pad + 1, j1 - j0) + j0,
+              max(int(is_.min()) - pad, 0) + i0, min(int(is_.max()) + pad + 1, i1 - i0) + i0)
+    return slump_cells(z, resolution, repose_deg, js + j0, is_ + i0, drop, window)
+
+
+def slump_cells(z: np.ndarray, resolution: float, repose_deg: float, jj: np.ndarray, ii: np.ndarray,
+                drop: float, window: tuple[int, int, int, int]) -> float:
+    """:func:`slump` with the channel given as its cells: the distinct cells ``(jj, ii)`` that
+    the cut lowered (each by more than 1e-12 m, ``drop`` the most), and ``window`` ``(j0, j1,
+    i0, i1)``, the box the slump stays in, holding the channel (:func:`slump_box` with ``drop``;
+    growing it beyond the run ``drop / tan(repose)`` of the channel changes nothing). The
+    referee knows the channel (the bucket's path cells), so it need not compare heights before
+    and after the cut.
+
+    One distance transform gives every window cell's nearest channel cell; the rest works on
+    flat indices into a copy of the window, which is cheaper than masks (docs/DESIGN.md §5,
+    "Speed with soil").
+    """
+    j0, j1, i0, i1 = window
+    h, w = j1 - j0, i1 - i0
+    if jj.size == 0 or jj.size == h * w:
         return 0.0
     from scipy.ndimage import distance_transform_edt  # only once a cut happened
 
     slope = math.tan(math.radians(repose_deg))
-    run = float(lost[channel].max()) / slope  # how far from the channel a face can reach
-    pad = int(math.ceil(run / resolution)) + 1
-    js, is_ = np.nonzero(channel)
-    crop = (slice(max(int(js.min()) - pad, 0), int(js.max()) + pad + 1), slice(max(int(is_.min()) - pad, 0), int(is_.max()) + pad + 1))
-    sub, channel = sub[crop], channel[crop]  # views: what changes lands in ``z``
-    dist = distance_transform_edt(~channel) * resolution
-    band = ~channel & (dist <= run + 1e-9)
-    floor = sub[channel]
-    band &= sub - slope * dist > floor.min()  # only cells above the lowest possible slope can fall
-    if not band.any():
+    sub = z[j0:j1, i0:i1].copy()
+    flat = sub.ravel()
+    channel = jj * w + ii
+    channel -= j0 * w + i0
+    outside = np.empty(h * w, dtype=bool)
+    outside.fill(True)
+    outside[channel] = False
+    # the nearest channel cell of every window cell, then the squared distance to it (cells²)
+    near_j, near_i = distance_transform_edt(outside.reshape(h, w), return_distances=False, return_indices=True)
+    near_j -= np.arange(h, dtype=near_j.dtype)[:, None]
+    near_i -= np.arange(w, dtype=near_i.dtype)
+    near_j *= near_j
+    near_i *= near_i
+    near_j += near_i
+    d2 = near_j.ravel()
+    rise_all = np.sqrt(d2)
+    rise_all *= slope * resolution  # the repose slope's rise from the channel
+    floor = flat[channel]
+    tops_all = flat - rise_all
+    reach = (drop / slope + 1e-9) / resolution  # how far from the channel a face can reach (cells)
+    # only cells within the run and above the lowest possible slope can fall
+    band = ((d2 <= reach * reach) & (tops_all > np.minimum.reduce(floor)) & outside).nonzero()[0]
+    if band.size == 0:
         return 0.0
-    walls, rise = sub[band], slope * dist[band]
-    level = _balance(walls - rise, floor)
+    walls, rise = flat[band], rise_all[band]
+    level = _balance(tops_all[band], floor)
     cut_back = np.minimum(walls, level + rise)
-    fallen = float((walls - cut_back).sum())
+    fallen = float(np.add.reduce(walls - cut_back))
     if fallen <= 0.0:
         return 0.0
-    fill = np.maximum(level - floor, 0.0)
-    total = float(fill.sum())
-    fill = fill * (fallen / total) if total > 0 else np.full(floor.shape, fallen / floor.size)
-    sub[band] = cut_back
-    sub[channel] = floor + fill
+    fill = level - floor
+    np.maximum(fill, 0.0, out=fill)
+    total = float(np.add.reduce(fill))
+    if total > 0:
+        fill *= fallen / total
+    else:
+        fill[:] = fallen / floor.size
+    fill += floor
+    flat[band] = cut_back
+    flat[channel] = fill
+    z[j0:j1, i0:i1] = sub
     return fallen * resolution * resolution
 
 
-def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
-    """The level ``L`` at which ``Σ max(tops − L, 0) = Σ max(L − floor, 0)``.
+def reach_cells(drop: float, resolution: float, repose_deg: float) -> int:
+    """How many cells from a channel ``drop`` m deep a face can slump: the run of the repose
+    slope over that depth, plus one cell."""
+    return int(math.ceil(drop / math.tan(math.radians(repose_deg)) / resolution)) + 1
 
-    The left side falls and the right side grows with ``L``, both piecewise linear with kinks
-    at the given heights: evaluate the difference at every kink at once (sorted prefix sums),
-    then solve the one linear piece that changes sign.
+
+def _balance(tops: np.ndarray, floor: np.ndarray) -> float:
+    """The level ``L`` at which ``Σ max(tops − L, 0) = Σ max(L − floor, 0)``; some top must lie
+    above the lowest floor height. Sorts ``tops`` in place.
+
+    Both sides are piecewise linear in ``L`` and their difference ``g`` falls strictly above
+    that height. First the floor cells below ``L``: all of them when ``g`` at the highest is
+    still ≥ 0 (the usual case: the fill covers the channel's floor), else those where ``g`` > 0
+    (sorted floor, prefix sums). With their number ``b`` and sum fixed, the tops above ``L``
+    are those where ``g`` < 0 (sorted tops, prefix sums), and ``L`` solves the one linear piece:
+    (their sum + the floor cells' sum) / (their number + ``b``).
     """
-    t, f = np.sort(tops), np.sort(floor)
-    kinks = np.sort(np.concatenate([t, f]))
-    ct = np.concatenate([[0.0], np.cumsum(t[::-1])])  # sum of the k largest tops
-    cf = np.concatenate([[0.0], np.cumsum(f)])  # sum of the k smallest floor heights
-    above = len(t) - np.searchsorted(t, kinks, side="right")  # tops above each kink
-    below = np.searchsorted(f, kinks, side="right")  # floor cells at or below each kink
-    g = (ct[above] - above * kinks) - (below * kinks - cf[below])
-    k = int(np.searchsorted(-g, 0.0, side="left"))  # first kink where the balance is ≤ 0
-    if k == 0:
-        return float(kinks[0])
-    if k >= len(kinks):
-        return float(kinks[-1])
-    # between kinks k-1 and k the balance is linear: g(L) = g[k-1] - (above + below) (L - kink)
-    n = above[k - 1] + below[k - 1]
-    return float(kinks[k - 1] + g[k - 1] / n) if n else float(kinks[k])
+    t = tops
+    t.sort()
+    nt, nf = t.size, floor.size
+    ct = np.empty(nt + 1)
+    ct[0] = 0.0
+    t.cumsum(out=ct[1:])  # ct[k]: the sum of the k lowest tops
+    high = float(np.maximum.reduce(floor))
+    k = int(t.searchsorted(high, side="right"))
+    below = float(np.add.reduce(floor))
+    if (ct[nt] - ct[k]) - (nt - k) * high >= nf * high - below:
+        b = nf
+    else:
+        f = np.sort(floor)
+        cf = np.empty(nf + 1)
+        cf[0] = 0.0
+        f.cumsum(out=cf[1:])
+        above = t.searchsorted(f, side="right")
+        g = (ct[nt] - ct[above]) - (nt - above) * f - (np.arange(1, nf + 1) * f - cf[1:])
+        b = int(np.count_nonzero(g > 0))
+        below = float(cf[b])
+    # g at each top t[k] with b floor cells below: the tops above it less (b + those) × t[k]
+    a = int(np.count_nonzero((ct[nt] - ct[1:]) - np.arange(nt - 1 + b, b - 1, -1) * t + below < 0))
+    return float((ct[nt] - ct[nt - a] + below) / (a + b))
 
 
 def slump_box(
-    shape: tuple[int, ...], jj: np.ndarray, ii: np.ndarray, resolution: float, depth: float, repose_deg: float
+    shape: tuple[int, ...], jj: np.ndarray, ii: np.ndarray, resolution: float, depth: float, repose_deg: float,
+    drop: float | None = None,
 ) -> tuple[int, int, int, int]:
     """The cells a cut at ``(jj, ii)`` up to ``depth`` deep can disturb, as a box ``(j0, j1, i0,
-    i1)``: their bounding box grown by the run of a repose slope over that depth, plus two cells."""
+    i1)``: their bounding box grown by the run of a repose slope over that depth, plus two cells.
+    With ``drop``, the most the cut really lowered a cell, the box grows no further than
+    :func:`reach_cells` of it: the window :func:`slump_cells` needs."""
     pad = int(math.ceil(depth / math.tan(math.radians(repose_deg)) / resolution)) + 2
-    return (max(int(jj.min()) - pad, 0), min(int(jj.max()) + pad + 1, shape[0]),
-            max(int(ii.min()) - pad, 0), min(int(ii.max()) + pad + 1, shape[1]))
+    if drop is not None:
+        pad = min(pad, reach_cells(drop, resolution, repose_deg))
+    lo, hi = np.minimum.reduce, np.maximum.reduce  # no Python wrappers: the referee calls this per dig
+    return (max(int(lo(jj)) - pad, 0), min(int(hi(jj)) + pad + 1, shape[0]),
+            max(int(lo(ii)) - pad, 0), min(int(hi(ii)) + pad + 1, shape[1]))

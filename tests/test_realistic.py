@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from earthbench import Plan, Scenario, judge
 from earthbench.errors import ScenarioError, SuiteError
 from earthbench.scoring import score
 from earthbench.sensing import observe, visible_cells
-from earthbench.soil import MATERIALS, draw, nominal, slump
+from earthbench.soil import MATERIALS, draw, nominal, reach_cells, slump, slump_cells
 from earthbench.suite import load_suite, parse_suite
 from earthbench.world import Heightmap, Pose, Sensing, Soil
 from helpers import block_scenario, dig_dump_plan
@@ -133,6 +133,127 @@ def test_slumping_conserves_volume_and_touches_nothing_outside_its_box(seed, ny,
     outside = np.ones(z.shape, dtype=bool)
     outside[j0:j1, i0:i1] = False
     assert np.array_equal(z[outside], after_cut[outside])
+
+
+def _steepest(z: np.ndarray) -> float:
+    """The largest height difference between two 4-neighbours."""
+    return max(np.abs(np.diff(z, axis=0)).max(initial=0.0), np.abs(np.diff(z, axis=1)).max(initial=0.0))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31), depth=st.floats(0.01, 1.5), repose=st.floats(20.0, 60.0),
+    size=st.tuples(st.integers(1, 14), st.integers(1, 14)), ragged=st.booleans(),
+)
+def test_a_slumped_cut_keeps_the_volume_stays_above_its_floor_and_stands_at_repose(seed, depth, repose, size, ragged):
+    """Level ground, a flat-bottomed cut of any depth and outline (as the referee cuts: every cell
+    of the bucket's path down to one level), then its slump: the volume is conserved to 1e-9 m³,
+    no cell ends lower than the cut's level (so never below a floor the cut respected), and no
+    two neighbouring cells differ by more than the repose slope over a cell.
+
+    On sloping ground the last holds only near the cut: the slump reaches ``depth / tan(repose)``
+    from the channel (docs/DESIGN.md §5), so ground that rises faster than that keeps its faces."""
+    rng = np.random.default_rng(seed)
+    res, n = 0.05, 48
+    before = np.full((n, n), 2.0)
+    z = before.copy()
+    h, w = size
+    j0, i0 = int(rng.integers(0, n - h)), int(rng.integers(0, n - w))
+    cut = np.zeros((n, n), dtype=bool)
+    cut[j0:j0 + h, i0:i0 + w] = True
+    if ragged:  # the bucket filled before the end of its path, or some cells were already low
+        cut &= rng.uniform(size=(n, n)) < 0.7
+    z[cut] = 2.0 - depth
+    after_cut = z.copy()
+    slump(z, res, repose, before)
+    assert abs(z.sum() - after_cut.sum()) * res * res <= 1e-9
+    assert z.min() >= 2.0 - depth - 1e-12
+    assert _steepest(z) <= math.tan(math.radians(repose)) * res * (1 + 1e-9) + 1e-12
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31), depth=st.floats(0.02, 1.5), repose=st.floats(20.0, 60.0),
+    size=st.tuples(st.integers(1, 12), st.integers(1, 12)), shallow=st.floats(0.0, 1.0),
+)
+def test_what_falls_fills_the_channel_to_one_level(seed, depth, repose, size, shallow):
+    """A channel whose cells were cut to different depths (some barely, as where the bucket
+    filled or the harder layer held): the cells the slump fills all end at one level, the
+    level at which what falls equals what fills, and the cells it leaves unfilled stand at or
+    above it (their floor was higher). Holds whether the level covers the whole floor or not."""
+    rng = np.random.default_rng(seed)
+    res, n = 0.05, 40
+    before = np.full((n, n), 2.0)
+    h, w = size
+    j0, i0 = int(rng.integers(0, n - h)), int(rng.integers(0, n - w))
+    lowered = rng.uniform(0.0, depth, (h, w))
+    lowered[rng.uniform(size=(h, w)) < shallow] *= 0.05  # some cells barely cut
+    z = before.copy()
+    z[j0:j0 + h, i0:i0 + w] -= lowered
+    after_cut = z.copy()
+    assume(slump(z, res, repose, before) > 0.0)  # a cut shallower than the slope over a cell lets nothing fall
+    channel = after_cut < before - 1e-12
+    filled = channel & (z > after_cut + 1e-12)
+    assert filled.any()
+    level = z[filled]
+    assert level.max() - level.min() <= 1e-9
+    assert (z[channel & ~filled] >= level.min() - 1e-9).all()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31), depth=st.floats(0.02, 1.0), repose=st.floats(20.0, 60.0),
+       grow=st.tuples(st.integers(0, 6), st.integers(0, 6), st.integers(0, 6), st.integers(0, 6)))
+def test_a_window_beyond_the_slopes_reach_changes_nothing(seed, depth, repose, grow):
+    """The referee slumps inside the window the slope can reach (``slump_box`` narrowed by the
+    cut's deepest loss); any larger window gives the same heights, bit for bit."""
+    rng = np.random.default_rng(seed)
+    res, n = 0.05, 60
+    z = 2.0 + rng.uniform(-0.3, 0.3, (n, n))
+    jj, ii = np.nonzero(np.add.outer(np.arange(n), np.arange(n)) % 7 < 3)  # a diagonal band of cells
+    keep = (jj > 20) & (jj < 35) & (ii > 18) & (ii < 40) & (rng.uniform(size=jj.size) < 0.8)
+    jj, ii = jj[keep], ii[keep]
+    lost = rng.uniform(0.01, depth, jj.size)
+    z[jj, ii] -= lost
+    pad = reach_cells(float(lost.max()), res, repose)
+    window = (max(int(jj.min()) - pad, 0), min(int(jj.max()) + pad + 1, n), max(int(ii.min()) - pad, 0), min(int(ii.max()) + pad + 1, n))
+    wider = (max(window[0] - grow[0], 0), min(window[1] + grow[1], n), max(window[2] - grow[2], 0), min(window[3] + grow[3], n))
+    a, b = z.copy(), z.copy()
+    fell = slump_cells(a, res, repose, jj, ii, float(lost.max()), window)
+    assert fell == slump_cells(b, res, repose, jj, ii, float(lost.max()), wider)
+    assert np.array_equal(a, b)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(material=st.sampled_from(sorted(MATERIALS)), seed=st.integers(0, 1000), floor=st.floats(0.55, 0.95),
+       contact=st.tuples(st.floats(3.0, 5.0), st.floats(4.5, 5.5)), depth=st.floats(0.05, 0.4))
+def test_with_soil_no_cell_ends_below_the_floor(material, seed, floor, contact, depth):
+    """Two digs at one place with a drawn soil: the referee cuts at the floor at most and what
+    slumps never carries the ground below it."""
+    sc = block_scenario(floor=floor).replace(soil=draw({"material": material}, seed))
+    first = dig_dump_plan(contact=contact, depth=depth)
+    t = first[-1].t_end
+    second = dig_dump_plan(contact=contact, depth=depth, t0=t)
+    v = judge(sc, Plan(tuple(first + second)))
+    assert v.final_terrain.z.min() >= floor - 1e-9
+    assert "below_floor" not in {x.rule for x in v.violations}
+
+
+@pytest.mark.parametrize("track", ["exact", "soil", "scan", "soil and scan"])
+def test_a_cut_below_the_floor_is_flagged_only_where_the_planner_sees_the_truth(track):
+    """The exact track flags it; where the planner's model is not the world (soil: slumping moves
+    the ground it planned on; a scan: it never saw the true ground) the cut is made at the floor,
+    and it removes what a dig to the floor removes: nothing more."""
+    sc = block_scenario(floor=0.7)
+    if "soil" in track:
+        sc = sc.replace(soil=LOAM)
+    if "scan" in track:
+        sc = sc.replace(sensing=Sensing(noise=0.02, seed=1))
+    deep = judge(sc, Plan(tuple(dig_dump_plan(depth=0.4))))  # level 0.6: 0.1 m below the floor
+    to_floor = judge(sc, Plan(tuple(dig_dump_plan(depth=0.3))))  # level 0.7: the floor
+    assert ("below_floor" in {x.rule for x in deep.violations}) == (track == "exact")
+    assert deep.final_terrain.z.min() >= 0.7 - 1e-9
+    assert deep.digs[0].volume == pytest.approx(to_floor.digs[0].volume, abs=1e-12)
+    assert deep.loaded_volume == pytest.approx(to_floor.loaded_volume, abs=1e-12)
 
 
 def test_a_cut_pit_collapses_to_the_repose_angle():

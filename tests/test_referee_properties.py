@@ -113,3 +113,24 @@ def test_a_plan_with_a_broken_limit_is_never_valid(pick, kind, amount):
     if broken is None:
         return
     assert not judge(sc, broken).valid
+
+
+@SETTINGS
+@given(contact=st.tuples(st.floats(0.0, 12.0), st.floats(0.0, 6.0)), heading=st.floats(-math.pi, math.pi),
+       length=st.floats(0.05, 1.5), depth=st.floats(-0.2, 1.0), capacity=st.floats(0.0, 0.6), per_cell=st.booleans())
+def test_a_dry_run_of_the_cut_says_exactly_what_the_cut_does_and_cuts_nothing(contact, heading, length, depth, capacity, per_cell):
+    """``cut_along(apply=False)``, the referee's prediction of a nominal volume with soil, gives
+    the very ``Cut`` of the real one (bit for bit) and leaves the grid as it was."""
+    from earthbench.cut import cut_along, cut_level, path_cells
+
+    sc = site(-10.0)
+    t = sc.terrain
+    z = np.array(t.z)
+    level = cut_level(t, z, contact, depth)
+    cells = path_cells(t, z.shape, contact, heading, 0.7, length)
+    if per_cell:  # one level per path cell, as the harder layer gives
+        level = level + np.linspace(0.0, 0.1, cells[0].size)
+    dry = cut_along(t, z, contact, heading, 0.7, length, level, capacity, cells, apply=False)
+    assert np.array_equal(z, t.z)
+    wet = cut_along(t, z, contact, heading, 0.7, length, level, capacity, cells)
+    assert dry == wet

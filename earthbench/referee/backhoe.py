@@ -90,7 +90,11 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     level = cut_level(r.terrain, r.z, a.contact, a.depth)
     floor = r.sc.site.floor
     if floor is not None and level < floor - ABS_TOL:
-        if r.sc.sensing is None:  # with a scan, the machine's grade control holds the floor (README, "The referee")
+        # only on the exact track is a cut below the floor the plan's own error; on the realistic
+        # track (soil or a scan) the ground it meets is not the one its planner could know, and the
+        # machine's grade control holds the floor (docs/DESIGN.md §5, "Rules where the planner's
+        # model is not the world")
+        if r.soil is None and r.sc.sensing is None:
             r.flag(n, "below_floor", floor - level, f"cut level {level:.4f} m is below the floor {floor} m")
         level = floor
     cells = path_cells(r.terrain, r.z.shape, a.contact, a.heading, spec.bucket_width, a.drag_length)
@@ -114,7 +118,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     r.settle()
     r.bucket += vol
     r.removed += vol
-    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, nominal))
+    r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, None if nominal is None else nominal.volume))
     r.turn = math.atan2(a.contact[1] - base.y, a.contact[0] - base.x) - base.yaw
 
 

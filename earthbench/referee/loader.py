@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..cut import charge_along, footprint, path_cells
+from ..cut import footprint, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, loader_dump_excess, wrap
 from ..plan import Charge, Dump, Move
 from ..world import Heightmap, LoaderSpec, Pose, Scenario
@@ -226,37 +226,26 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     charge_arc = arcs(path)
     r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
     level = r.sc.site.floor if r.sc.site.floor is not None else loader_base_level(r.sc)
-    if r.soil is None:
-        cut, nominal = charge_along(r.terrain, r.z, spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket), None
-        full_at = cut.full_at
-    else:  # overfill is judged on the public cut model: where the plan could know the bucket fills
-        full_at = charge_along(r.terrain, r.z.copy(), spec, a.entry, a.penetration, level, spec.bucket_capacity - r.bucket).full_at
-        cut, nominal = r.cut(
-            edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, _pile_height(r, spec, edge, yaw, a.penetration, level)
-        )
+    cells = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, a.penetration)  # the edge's path (charge_along's)
+    cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, None, cells)
+    # overfill is judged on the public cut model: where the plan could know the bucket fills
+    full_at = cut.full_at if nominal is None else nominal.full_at
     if full_at is not None:
-        _overfill(r, n, spec, edge, yaw, a.penetration, level, full_at)
+        _overfill(r, n, a.penetration, level, full_at, cells)
     r.bucket += cut.volume
     r.removed += cut.volume
-    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity, nominal))
+    r.digs.append(DigRecord(n, cut.volume, cut.volume / spec.bucket_capacity, None if nominal is None else nominal.volume))
     step(r, n, a.machine, spec, path, charge_arc)
     r.settle()  # the face slumps as the bucket withdraws: into the channel it cut, ahead of the wheels
     r.travel[a.machine] += a.penetration
     r.pose[a.machine] = Pose(ex, ey, yaw)
 
 
-def _pile_height(r: Replay, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float) -> float:
-    """The highest face a charge can leave: the pile's height above ``level`` along its path."""
-    jj, ii, _ = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, penetration)
-    return float(np.max(r.z[jj, ii] - level, initial=0.0))
-
-
-def _overfill(
-    r: Replay, n: int, spec: LoaderSpec, edge: tuple[float, float], yaw: float, penetration: float, level: float, full_at: float
-) -> None:
-    """The bucket filled ``full_at`` along the edge's path: the edge may go at most one cell
-    further; the material it would push through beyond that is the violation."""
-    jj, ii, along = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, penetration)
+def _overfill(r: Replay, n: int, penetration: float, level: float, full_at: float,
+              cells: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """The bucket filled ``full_at`` along the edge's path (``cells``): the edge may go at most
+    one cell further; the material it would push through beyond that is the violation."""
+    jj, ii, along = cells
     beyond = along > full_at + r.terrain.resolution + ABS_TOL
     left = float(np.maximum(r.z[jj[beyond], ii[beyond]] - level, 0.0).sum() * r.terrain.cell_area)
     if left > ABS_TOL:

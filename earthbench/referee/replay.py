@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import shapely
 
-from ..cut import Cut, cut_along, path_cells
+from ..cut import Cut, cut_along, cut_heights, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, sample_yaws, wrap
 from ..plan import Charge, Move, Plan
-from ..soil import cut_levels, slump, slump_box
+from ..soil import cut_levels, hard_top, slump_box, slump_cells
 from ..world import ExcavatorSpec, LoaderSpec, Pose, Scenario, TruckSpec
 
 Spec = ExcavatorSpec | TruckSpec | LoaderSpec
@@ -270,9 +270,12 @@ class Replay:
         self.soil = scenario.soil
         #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
         self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
-        self._unsettled: tuple[tuple[int, int, int, int], np.ndarray] | None = None
-        #: with soil, the firm ground: the heights less the loose material slumping left on top
-        self.firm: np.ndarray | None = None if self.soil is None else self.z.copy()
+        #: the last cut's slump window, the cells it lowered and the most it lowered one, until :meth:`settle`
+        self._unsettled: tuple[tuple[int, int, int, int], np.ndarray, np.ndarray, float] | None = None
+        #: with soil and a loader, the firm ground: the heights less the loose material slumping left on top
+        self.firm: np.ndarray | None = None if self.soil is None or m.loader is None else self.z.copy()
+        #: with soil, the top of its harder layer under every cell (None: no such layer)
+        self.hard_top = None if self.soil is None else hard_top(self.soil, self.sc.terrain.z)
 
     def _timelines(self) -> dict[str, Timeline]:
         m = self.sc.machines
@@ -323,41 +326,55 @@ class Replay:
         length: float,
         level: float,
         bucket_capacity: float,
-        depth: float,
+        depth: float | None,
         cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-    ) -> tuple[Cut, float | None]:
+    ) -> tuple[Cut, Cut | None]:
         """Cut the grid along a stroke or charge into a bucket of ``bucket_capacity`` that
-        already holds ``self.bucket``; returns the cut and, with soil, the nominal volume.
+        already holds ``self.bucket``; returns the cut and, with soil, the nominal one.
 
         Without soil this is :func:`~earthbench.cut.cut_along`. With soil the bucket really
         holds ``fill_factor × bucket_capacity`` bank m³, the harder layer limits the level
         (:func:`~earthbench.soil.cut_levels`), and :meth:`settle` must follow once the rules
-        that look at the fresh cut have been checked; the nominal volume is what the public
-        cut model removes from the same ground.
+        that look at the fresh cut have been checked; the nominal cut is what the public cut
+        model does to the same ground (:func:`~earthbench.cut.cut_heights` on the heights read
+        once for both).
         """
         if cells is None:
             cells = path_cells(self.terrain, self.z.shape, contact, heading, width, length)
+        budget = bucket_capacity - self.bucket
         if self.soil is None:
-            return cut_along(self.terrain, self.z, contact, heading, width, length, level, bucket_capacity - self.bucket, cells), None
-        nominal = cut_along(
-            self.terrain, self.z.copy(), contact, heading, width, length, level, bucket_capacity - self.bucket, cells
-        ).volume
-        jj, ii, _ = cells
-        if jj.size:
-            box = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg)
-            self._unsettled = (box, self.z[box[0]:box[1], box[2]:box[3]].copy())
-        levels = cut_levels(self.soil, self.sc.terrain.z, self.z, jj, ii, level)
-        real = cut_along(self.terrain, self.z, contact, heading, width, length, levels,
-                         self.soil.fill_factor * bucket_capacity - self.bucket, cells)
-        if self.firm is not None and jj.size:
-            self.firm[jj, ii] = np.minimum(self.firm[jj, ii], self.z[jj, ii])
+            return cut_along(self.terrain, self.z, contact, heading, width, length, level, budget, cells), None
+        jj, ii, along = cells
+        area = self.terrain.resolution * self.terrain.resolution
+        heights = self.z[jj, ii]
+        nominal = cut_heights(heights, along, level, budget, area)[0]
+        levels = cut_levels(self.soil, None if self.hard_top is None else self.hard_top[jj, ii], heights, level)
+        real, full, part = cut_heights(heights, along, levels, self.soil.fill_factor * bucket_capacity - self.bucket, area)
+        n = full + (part > 0)  # the cells this cut lowers, in path order
+        if n:
+            was = heights[:n]
+            now = np.minimum(was, levels[:n] if isinstance(levels, np.ndarray) else levels)
+            if part:
+                now[full] = was[full] - part
+            cj, ci = jj[:n], ii[:n]
+            self.z[cj, ci] = now
+            lost = was - now
+            cut = lost > 1e-12
+            if depth is None:  # the highest face the cut can leave
+                depth = float(np.max(heights - level, initial=0.0))
+            drop = float(np.maximum.reduce(lost))
+            if drop > 1e-12:
+                window = slump_box(self.z.shape, jj, ii, self.terrain.resolution, depth, self.soil.repose_deg, drop)
+                self._unsettled = (window, cj[cut], ci[cut], drop)
+            if self.firm is not None:  # the firm ground is never above the heights: only cut cells change
+                self.firm[cj, ci] = np.minimum(self.firm[cj, ci], now)
         return real, nominal
 
     def settle(self) -> None:
         """Slump the faces the last cut left steeper than the soil's angle of repose."""
         if self.soil is not None and self._unsettled is not None:
-            (j0, j1, i0, i1), before = self._unsettled
-            slump(self.z, self.terrain.resolution, self.soil.repose_deg, before, (j0, j1, i0, i1))
+            (j0, j1, i0, i1), jj, ii, drop = self._unsettled
+            slump_cells(self.z, self.terrain.resolution, self.soil.repose_deg, jj, ii, drop, (j0, j1, i0, i1))
             if self.firm is not None:  # what fell is loose: the firm ground only ever goes down
                 np.minimum(self.firm[j0:j1, i0:i1], self.z[j0:j1, i0:i1], out=self.firm[j0:j1, i0:i1])
         self._unsettled = None
