@@ -35,7 +35,7 @@ from .hierarchy import (
     site_box,
     solve_counts,
 )
-from .model import Shape, Solution
+from .problem import Shape, Solution
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
