@@ -20,7 +20,8 @@ from earthbench_planners.stl_tamp import Config, StlTampPlanner, StlTampSolveErr
 from earthbench_planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
 from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
-from earthbench_planners.stl_tamp.model import inverse_kinematics, tip_position
+from earthbench_planners.stl_tamp.model import tip_position
+from earthbench_planners.stl_tamp.problem import inverse_kinematics
 from earthbench_terrains.rbf import rbf
 from earthbench_planners.stl_tamp.surface import fit_rbf
 

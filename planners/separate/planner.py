@@ -58,7 +58,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -70,10 +70,13 @@ from earthbench.world import Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
-from ..stl_tamp.model import PhaseNLP, Solution, quantize
+from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
 from ..stl_tamp.surface import fit_rbf
+
+if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
+    from ..stl_tamp.model import PhaseNLP
 
 
 @dataclass(frozen=True)
@@ -354,7 +357,7 @@ class SeparatePlanner(Planner):
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
         fixed = {"eta": eta, "px": np.array([d.contact[0] for d in digs]), "py": np.array([d.contact[1] for d in digs]),
                  "psi": np.array([d.heading for d in digs])}
-        fixed = {k: quantize(v) for k, v in fixed.items()}  # see model.QUANTUM
+        fixed = {k: quantize(v) for k, v in fixed.items()}  # see problem.QUANTUM
         sol, rounds = self._solve(nlp, params, w0, s0, box, fixed)
         trace.build_time_s += nlp.take_build_time()
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "box": list(area_box(area, self.side(scenario))),

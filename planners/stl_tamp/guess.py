@@ -14,12 +14,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from earthbench.motion import wrap
 
-from .model import NX, NU, PIVOT_HEIGHT, PhaseNLP, inverse_kinematics
+from .problem import NU, NX, PIVOT_HEIGHT, inverse_kinematics
+
+if TYPE_CHECKING:  # CasADi loads with the first solve, not with the planner (problem.py)
+    from .model import PhaseNLP
 
 DUMP_HEIGHT = 1.0  # tip height above the pivot over the truck (m)
 
@@ -124,7 +128,7 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
             work_j = max(abs(turn_t - turn_c), abs(boom_t - boom_c), abs(arm_t - arm_c))
             dtm = max(dtm, move_j / (jrate * max(kc, 1)))
             eta = seed.eta if seed is not None else 0.0
-            swing = abs(turn_t - turn_c) / exc.swing_rate if sh.hold_base else 0.0  # priced on top (model.Shape.hold_base)
+            swing = abs(turn_t - turn_c) / exc.swing_rate if sh.hold_base else 0.0  # priced on top (problem.Shape.hold_base)
             dtw = max(work_j / (jrate * nw), ((1.0 - math.exp(-eta / sh.eta_saturation)) * sh.work_time + swing) * 1.05 / nw, 0.05)
             ph["px"][i], ph["py"][i], ph["psi"][i], ph["eta"][i] = ref.px, ref.py, ref.psi, eta
         elif ref is not None:

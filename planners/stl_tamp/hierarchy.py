@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from shapely.geometry import Polygon
@@ -33,7 +33,10 @@ from .surface import RbfSurface
 
 from .convert import TILT_MARGIN
 from .guess import PhaseSeed
-from .model import PhaseNLP, Shape
+from .problem import Shape
+
+if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (problem.py)
+    from .model import PhaseNLP
 
 _NLP_CACHE: dict[Any, PhaseNLP] = {}
 
@@ -44,6 +47,8 @@ class StlTampSolveError(RuntimeError):
 
 def get_nlp(shape: Shape, scenario: Scenario, box: tuple[float, float, float, float]) -> tuple[PhaseNLP, bool]:
     """The process-wide NLP of this shape, machines and site box (built on first use)."""
+    from .model import PhaseNLP
+
     key = (shape, scenario.machines.excavator, scenario.machines.truck, box)
     hit = key in _NLP_CACHE
     if not hit:
