@@ -110,7 +110,7 @@ class Config(LocalNLPConfig):
     block_fill: float = 0.8
     block_phases: int = 8  # 24 × 12 m / 16 m³, seed 0: 6 phases 20.3 CPU s, 33.4 s/m³; 8 phases 17.1 CPU s, 30.5 s/m³
     # iteration caps only: no CPU- or wall-time cap, so machine load never changes a plan
-    max_iter: int = 250  # 150 (0.6.2): with the monotone μ a fifth of the local solves stopped there (README)
+    max_iter: int = 150
     global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
     # IPOPT's barrier update and stop (docs/DESIGN.md §11): a monotone μ from 1.0 solved on to tol,
     # without the acceptable-level stop, ends most local solves Solve_Succeeded and gave the better
