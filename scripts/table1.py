@@ -18,6 +18,7 @@ import json
 
 import pandas as pd
 
+from earthbench.aggregate import version_key
 from earthbench.store import Store, load_runs
 
 SUITE = "paper-extensive-realistic"
@@ -25,9 +26,13 @@ SUITE = "paper-extensive-realistic"
 PAPER = {4.0: (3.84, 95.9, 0.267), 5.0: (4.83, 96.6, 0.217), 6.0: (5.66, 94.3, 0.238), 7.0: (6.35, 90.7, 0.370)}
 
 
-def runs_of(db: str, as_planned: bool) -> pd.DataFrame:
+def runs_of(db: str, as_planned: bool, version: str | None = None) -> pd.DataFrame:
+    """stl-tamp's runs of one version (default: the latest stored, as the leaderboard ranks)."""
     runs = load_runs(db, suite=SUITE)
     runs = runs[runs["planner"] == "stl-tamp"]
+    if version is None and not runs.empty:
+        version = max(runs["planner_version"].unique(), key=version_key)
+    runs = runs[runs["planner_version"] == version]
     runs = runs[runs["config"].map(lambda c: bool(json.loads(c or "{}").get("as_planned", False))) == as_planned]
     runs = runs.copy()
     runs["material"] = runs["family"].str.split("-").str[1]
@@ -112,8 +117,9 @@ def main() -> None:
     ap.add_argument("--db", required=True)
     ap.add_argument("--out", help="markdown file to write (default: print)")
     ap.add_argument("--default-config", action="store_true", help="stl-tamp's default configuration instead of as_planned")
+    ap.add_argument("--version", help="stl-tamp's version (default: the latest in the store)")
     args = ap.parse_args()
-    runs = runs_of(args.db, not args.default_config)
+    runs = runs_of(args.db, not args.default_config, args.version)
     if runs.empty:
         raise SystemExit(f"no stl-tamp runs on {SUITE} in {args.db}")
     cmd = (f"earthbench run {SUITE} --planner stl-tamp --config as_planned=true --db table1.db\n"
