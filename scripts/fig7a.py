@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from earthbench.publish import volume_time_figure
+from earthbench.aggregate import version_key
 from earthbench.store import load_runs
 
 SUITES = ("paper-extensive", "paper-separate-sweep")
@@ -45,6 +46,8 @@ def collect(dbs: list[str]) -> pd.DataFrame:
         keep = runs["suite"].isin(SUITES) | on_paper_extensive(runs)
         frames.append(runs[keep & runs["planner"].isin(["stl-tamp", "separate"])])
     runs = pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"])
+    latest = runs.groupby("planner")["planner_version"].agg(lambda v: max(v.unique(), key=version_key))
+    runs = runs[runs["planner_version"] == runs["planner"].map(latest)].copy()  # each planner's latest, as ranked
     runs["solver"] = runs.apply(label, axis=1)
     return runs
 
