@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import pytest
 
 from earthbench import Plan, Scenario
@@ -27,3 +29,17 @@ def forget_test_planners():
     yield
     for name in set(PLANNERS.names()) - before:
         PLANNERS.unregister(name)
+
+
+@pytest.fixture
+def sigint_delivered():
+    """Let Ctrl-C reach Python in this test and the processes it starts.
+
+    A shell's background job (``cmd &``, ``nohup``) starts with SIGINT ignored, an ignored signal
+    stays ignored across exec, and Python then never raises KeyboardInterrupt: a Ctrl-C test
+    run that way would see a run go on to the end. A handler in this process is reset to the
+    default in its children, which then install Python's own.
+    """
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

@@ -75,6 +75,7 @@ def test_sigkill_halfway_then_resume_stores_every_case_once(tmp_path):
     assert "t-nap" in out and "6/6" in out
 
 
+@pytest.mark.usefixtures("sigint_delivered")
 def test_ctrl_c_stops_cleanly_and_keeps_finished_cases(tmp_path):
     db, suite = str(tmp_path / "c.db"), suite_file(tmp_path, 6)
     args = ["run", suite, "--planner", "t-nap", "--plugin", PLUGIN, "--db", db]

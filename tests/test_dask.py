@@ -146,6 +146,7 @@ def _case_processes(pids: dict[str, int]) -> list[psutil.Process]:
     return out
 
 
+@pytest.mark.usefixtures("sigint_delivered")
 def test_ctrl_c_ends_the_cases_in_flight_on_the_workers_and_stores_nothing_of_them(cluster, tmp_path):
     lc, client = cluster
     load_plugin_file(FAULTY)
