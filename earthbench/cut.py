@@ -75,12 +75,11 @@ def cut_along(
         return Cut(0.0, 0.0)
     r = terrain.resolution
     jj, ii, dist = path_cells(terrain, z.shape, contact, heading, width, length) if cells is None else cells
-    got, full, part = cut_heights(z[jj, ii], dist, level, capacity, r * r)
+    heights = z[jj, ii]
+    got, full, part = cut_heights(heights, dist, level, capacity, r * r)
     if apply:
-        levels = np.asarray(level)
-        z[jj[:full], ii[:full]] = np.minimum(z[jj[:full], ii[:full]], levels if levels.ndim == 0 else levels[:full])
-        if part:
-            z[jj[full], ii[full]] -= part
+        n = full + (part > 0)
+        z[jj[:n], ii[:n]] = lowered(heights, level, full, part)
     return got
 
 
@@ -103,6 +102,17 @@ def cut_heights(
     if full and removed >= capacity:
         return Cut(removed, float(dist[full - 1])), full, 0.0
     return Cut(removed), full, 0.0
+
+
+def lowered(heights: np.ndarray, level: float | np.ndarray, full: int, part: float) -> np.ndarray:
+    """The new heights of the cells a :func:`cut_heights` answer lowers (its first ``full``, to
+    ``level``, and the next by ``part`` when ``part`` > 0), from the path's ``heights`` before it."""
+    n = full + (part > 0)
+    levels = np.asarray(level)
+    now = np.minimum(heights[:n], levels if levels.ndim == 0 else levels[:n])
+    if part:
+        now[full] = heights[full] - part
+    return now
 
 
 def path_cells(

@@ -113,7 +113,6 @@ def _compress(text: str) -> bytes:
     return zlib.compress(text.encode(), 6)
 
 
-
 class SuiteRecord(Protocol):
     """What :meth:`Store.register_suite` reads of a suite: a loaded :class:`~earthbench.suite.Suite`,
     or a suite version read back from another store (:mod:`earthbench.merge`)."""
@@ -130,6 +129,7 @@ class SuiteRecord(Protocol):
     def description(self) -> str: ...
     @property
     def scenarios(self) -> Any: ...
+
 
 @overload
 def decompress(blob: bytes) -> str: ...

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from ..cut import Cut, cut_along, cut_heights, path_cells
+from ..cut import Cut, cut_along, cut_heights, lowered, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, sample_yaws, wrap
 from ..plan import Charge, Move, Plan
 from ..soil import cut_levels, hard_top, slump_box, slump_cells
@@ -352,10 +352,7 @@ class Replay:
         real, full, part = cut_heights(heights, along, levels, self.soil.fill_factor * bucket_capacity - self.bucket, area)
         n = full + (part > 0)  # the cells this cut lowers, in path order
         if n:
-            was = heights[:n]
-            now = np.minimum(was, levels[:n] if isinstance(levels, np.ndarray) else levels)
-            if part:
-                now[full] = was[full] - part
+            was, now = heights[:n], lowered(heights, levels, full, part)
             cj, ci = jj[:n], ii[:n]
             self.z[cj, ci] = now
             lost = was - now
