@@ -220,6 +220,7 @@ class Stamp:
     solve_machines: list[str] = field(default_factory=list)  #: per planner: the machines its solve times come from
     spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
     n_machines: int = 1
+    seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``)
 
     @property
     def mixed(self) -> bool:
@@ -231,6 +232,7 @@ class Stamp:
         return [
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
+            *([f"scenarios: seeds {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
             f"project commit: {commits or 'unknown'}",
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
@@ -258,8 +260,10 @@ def _machine_of(runs: pd.DataFrame) -> pd.Series:
                       for i in range(len(runs))], index=runs.index, dtype=object)
 
 
-def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = ()) -> Stamp:
-    """The stamp of one table; ``spot_checks`` (:class:`earthbench.verify.SpotCheck`) of its planners are listed."""
+def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = (),
+          seeds: str = "") -> Stamp:
+    """The stamp of one table; ``spot_checks`` (:class:`earthbench.verify.SpotCheck`) of its planners are listed;
+    ``seeds`` names the seed selection the board was limited to."""
     def uniq(col: str) -> list[str]:
         return sorted({str(v) for v in runs[col].dropna()}) if col in runs else []
 
@@ -280,7 +284,18 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
-                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()))
+                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds)
+
+
+def seed_list(seeds: Sequence[int]) -> str:
+    """``0–2, 5`` for seeds 0, 1, 2, 5: runs of consecutive seeds as ranges."""
+    out: list[str] = []
+    for s in sorted(set(seeds)):
+        if out and out[-1].rsplit("–", 1)[-1] == str(s - 1):
+            out[-1] = f"{out[-1].split('–')[0]}–{s}"
+        else:
+            out.append(str(s))
+    return ", ".join(out)
 
 
 def mark_mixed_solve_columns(rows: list[dict[str, Any]], mixed: bool) -> list[dict[str, Any]]:
@@ -769,8 +784,13 @@ def spreadsheet_safe(df: pd.DataFrame) -> pd.DataFrame:
 
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
-            workers: int | None = None, replays: int = 20, all_versions: bool = False) -> Published:
+            workers: int | None = None, replays: int = 20, all_versions: bool = False,
+            seeds: Sequence[int] | None = None) -> Published:
     """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
+
+    ``seeds``: limit the board to the suite's scenarios of these seeds (runs and denominators
+    alike, so a planner run on those seeds only is not charged failures for the others);
+    every table's stamp says so.
 
     ``workers``: processes drawing the figures (default: one per core this process may use);
     ``replays``: how many runs the page's replay viewer embeds (0: none);
@@ -785,6 +805,12 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
         runs = published_runs(store, suites)
+        members = suite_members(store, runs["suite"].unique())
+        seed_note = ""
+        if seeds is not None:
+            runs = runs[runs["seed"].isin(seeds)].reset_index(drop=True)
+            members = members[members["seed"].isin(seeds)].reset_index(drop=True)
+            seed_note = seed_list(seeds)
         fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
         renderer = Renderer(workers) if figures else None
         latest = latest_versions(runs)
@@ -792,7 +818,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         sections = []
         scenarios: dict[str, str] = {}
         for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
-            st = stamp(srun, suite, track, generated, spot_checks)
+            st = stamp(srun, suite, track, generated, spot_checks, seed_note)
             sec: dict[str, Any] = {
                 "suite": suite, "track": track, "stamp": st,
                 "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
@@ -834,7 +860,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
         viewer = viewer_section(store, runs, replays)
         # the tables (bootstrap intervals, paired tests) while the workers draw
-        summary = aggregate(runs, members=suite_members(store, runs["suite"].unique()), scopes=SCOPES,
+        summary = aggregate(runs, members=members, scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
         closed = (

@@ -525,7 +525,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
 
 def suite_members(db: str | Path | Store, suites: Iterable[str]) -> pd.DataFrame:
     """The scenarios of each suite's most recently run version: ``suite``, ``scenario_digest``,
-    ``scenario_id``, ``family``, ``target_volume`` (the denominators of every aggregate)."""
+    ``scenario_id``, ``family``, ``target_volume``, ``seed`` (the denominators of every aggregate)."""
     import pandas as pd
 
     store = db if isinstance(db, Store) else Store(db, create=False)
@@ -536,15 +536,15 @@ def suite_members(db: str | Path | Store, suites: Iterable[str]) -> pd.DataFrame
             if ver is None:
                 continue
             for r in store.db.execute(
-                "SELECT m.scenario_digest, m.scenario_id, m.family, s.target_volume FROM suite_scenarios m "
+                "SELECT m.scenario_digest, m.scenario_id, m.family, s.target_volume, m.seed FROM suite_scenarios m "
                 "LEFT JOIN scenarios s ON s.digest = m.scenario_digest WHERE m.suite_id=?", (ver["id"],)
             ):
                 target = r[3]
                 if target is None:  # no run stored yet: the id's documented tail, SUITE/FAMILY/sSEED/vTARGET
                     tail = r[1].rsplit("/v", 1)
                     target = float(tail[1]) if len(tail) == 2 and tail[1].replace(".", "", 1).isdigit() else None
-                rows.append((name, r[0], r[1], r[2], target))
+                rows.append((name, r[0], r[1], r[2], target, r[4]))
     finally:
         if not isinstance(db, Store):
             store.close()
-    return pd.DataFrame(rows, columns=["suite", "scenario_digest", "scenario_id", "family", "target_volume"])
+    return pd.DataFrame(rows, columns=["suite", "scenario_digest", "scenario_id", "family", "target_volume", "seed"])

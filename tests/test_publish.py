@@ -13,7 +13,7 @@ import pytest
 from earthbench.cli import main
 from earthbench.compare import Selector, compare
 from earthbench.merge import MergeError, merge
-from earthbench.publish import md_escape, publish
+from earthbench.publish import md_escape, publish, seed_list
 from earthbench.store import load_runs
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 
@@ -86,6 +86,24 @@ def test_suite_filter_and_unknown_suite(db, tmp_path):
     res = publish(db, tmp_path / "a", ["pubtest"], figures=False)
     assert len(res.runs) == 24
     assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "b"), "--suite", "nope", "--no-figures"]) == 2
+
+
+def test_board_limited_to_some_seeds(db, tmp_path, capsys):
+    """A board over seed 0: its runs, and its denominators, are that seed's scenarios only."""
+    res = publish(db, tmp_path / "s0", figures=False, seeds=[0])
+    assert set(res.runs["seed"]) == {0} and len(res.runs) == 8  # 4 planners × 2 targets
+    whole = res.summary[(res.summary["scope"] == "suite") if "scope" in res.summary else slice(None)]
+    assert set(whole["of"]) == {2}  # a planner run on seed 0 alone is not charged the other seeds
+    md = (res.out / "README.md").read_text()
+    assert "scenarios: seeds 0 of the suite only" in md
+    assert "scenarios: seeds" not in (publish(db, tmp_path / "all", figures=False).out / "README.md").read_text()
+    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "cli"), "--no-figures", "--seeds", "1-2"]) == 0
+    assert "16 run(s)" in capsys.readouterr().err
+    assert "scenarios: seeds 1–2 of the suite only" in (tmp_path / "cli" / "README.md").read_text()
+
+
+def test_seed_list():
+    assert seed_list([5, 0, 2, 1]) == "0–2, 5" and seed_list([3]) == "3" and seed_list([0, 2]) == "0, 2"
 
 
 def test_cli_leaderboard(db, tmp_path, capsys):

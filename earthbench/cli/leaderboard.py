@@ -27,6 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--no-terrain", action="store_true", help="skip the terrain before/after figures (no re-judging)")
     p.add_argument("--all-versions", action="store_true",
                    help="rank every stored version of each planner (default: the latest; older ones in a history table)")
+    p.add_argument("--seeds", metavar="A-B", default=None,
+                   help="only the suite's scenarios of these seeds, e.g. 0-2 (runs and denominators alike; stamped on every table)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="processes drawing figures (default: one per core)")
     p.add_argument("--replays", type=int, default=20, metavar="N",
                    help="runs the page's replay viewer embeds, a success and an invalid run per planner first (default: 20; 0: none)")
@@ -35,10 +37,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..publish import publish
+    from ..suite import parse_seed_range
 
     t0 = time.perf_counter()
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
-                  workers=args.jobs, replays=args.replays, all_versions=args.all_versions)
+                  workers=args.jobs, replays=args.replays, all_versions=args.all_versions,
+                  seeds=parse_seed_range(args.seeds) if args.seeds else None)
     runs = 0 if res.runs is None else len(res.runs)
     tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
     print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "
