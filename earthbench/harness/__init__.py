@@ -14,8 +14,9 @@ Modules, each with one job:
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ..lazy import lazy_getattr
 
 #: Public name → the module that defines it. Loaded on first use, so a case's process, which
 #: imports only :mod:`.child`, does not pay for the executors, psutil and concurrent.futures.
@@ -40,10 +41,4 @@ if TYPE_CHECKING:  # pragma: no cover
     from .slots import SlotPool, make_slots
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())
