@@ -48,6 +48,7 @@ import numpy as np
 from earthbench.world import ExcavatorSpec, TruckSpec
 from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
+from . import nlp_cache
 from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, PIVOT_HEIGHT, Shape, Solution, quantize
 
 
@@ -74,6 +75,32 @@ def one_blas_thread() -> bool:
         except (OSError, AttributeError):
             continue
     return done
+
+
+_PHASE_VARS = ("dtm", "dtw", "eta", "px", "py", "psi", "V")
+_FUNCTIONS = ("nlp", "tip", "rho", "vol", "pz")
+_DERIVATIVES = ("hess_lag", "jac_g", "grad_f")  # nlpsol's options: given, it builds none of its own
+
+
+def _pack(fns: dict[str, Any]) -> str:
+    """The built functions as one string (CasADi's serialization), for :mod:`.nlp_cache`."""
+    s = ca.StringSerializer()
+    s.pack(sorted(fns))
+    s.pack([fns[k] for k in sorted(fns)])
+    return s.encode()
+
+
+def _unpack(data: str) -> dict[str, Any] | None:
+    """The functions of :func:`_pack`; None when ``data`` does not hold them."""
+    try:
+        d = ca.StringDeserializer(data)
+        names, fns = d.unpack(), d.unpack()
+    except RuntimeError:
+        return None
+    if not isinstance(names, list) or not isinstance(fns, list) or len(names) != len(fns) \
+            or not set(_FUNCTIONS + ("bounds",)) <= set(names):
+        return None
+    return dict(zip(names, fns))
 
 
 def _sigmoid(x: Any, k: float) -> Any:
@@ -110,6 +137,32 @@ class PhaseNLP:
 
         if sh.symbolic not in ("SX", "MX"):
             raise ValueError(f"Shape.symbolic must be 'SX' or 'MX', got {sh.symbolic!r}")
+        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
+        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in _PHASE_VARS] + [("slack", 2)]
+        self.nw = sum(ln for _, ln in self.v_parts)
+        # the built functions come from the disk cache when this NLP was built before (nlp_cache)
+        name = nlp_cache.key(shape, exc, truck, site_box)
+        data = nlp_cache.load(name)
+        fns = _unpack(data) if data is not None else None
+        self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
+        if fns is None:
+            fns = self._build()
+            if self.cache == "miss":
+                nlp_cache.save(name, _pack(fns))
+        self._nlp_fn, self._tip_fn, self._rho_fn, self._vol_fn, self._pz_fn = (fns[k] for k in _FUNCTIONS)
+        self._derivs = {k: fns[k] for k in _DERIVATIVES if k in fns}
+        lbg, ubg = fns["bounds"].call([])
+        self.lbg, self.ubg = np.array(lbg).reshape(-1), np.array(ubg).reshape(-1)
+        self.ng = self.lbg.shape[0]
+        self.build_time_s = time.perf_counter() - t0
+        self._solvers: dict[tuple, Any] = {}
+        self._unreported_build_s = self.build_time_s
+        self._cache_unreported = True
+
+    def _build(self) -> dict[str, Any]:
+        """The CasADi graph: the NLP (x, p) → (f, g), its derivatives (SX) and the helpers."""
+        sh, exc, truck, site_box = self.shape, self.exc, self.truck, self.site_box
+        m1, n, N, K = self.m1, self.n, self.N, self.K
         sym = ca.SX.sym if sh.symbolic == "SX" else ca.MX.sym
 
         # -- parameters -------------------------------------------------------------------------
@@ -120,17 +173,14 @@ class PhaseNLP:
         P_a = sym("alpha", 5)  # α_u, α_t, α_v, α_η, α_term
         P_goal = sym("goal", 2)
         P_floor = sym("floor")
-        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
         p = ca.vertcat(P_w, P_o, P_s0, P_vt, P_a, P_goal, P_floor)
 
         # -- variables --------------------------------------------------------------------------
         Xv = sym("X", NX, N)  # nodes 1..N (node 0 is the parameter s0)
         Uv = sym("U", NU, N)
-        ph = {k: sym(k, m1) for k in ("dtm", "dtw", "eta", "px", "py", "psi", "V")}
+        ph = {k: sym(k, m1) for k in _PHASE_VARS}
         slack = sym("slack", 2)
-        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in ph] + [("slack", 2)]
         w = ca.vertcat(ca.vec(Xv), ca.vec(Uv), *ph.values(), slack)
-        self.nw = w.shape[0]
 
         X = [P_s0] + [Xv[:, k] for k in range(N)]
         U = [Uv[:, k] for k in range(N)]
@@ -164,10 +214,36 @@ class PhaseNLP:
         offs_x = ca.DM([a * sh.terrain_spacing for a in range(nx_t)])
         offs_y = ca.DM([b * sh.terrain_spacing for b in range(ny_t)])
 
-        def f0(x: Any, y: Any) -> Any:
+        def rbf(x: Any, y: Any) -> Any:
             ex = ca.exp(-((x - P_o[0] - offs_x) ** 2) / s2)
             ey = ca.exp(-((y - P_o[1] - offs_y) ** 2) / s2)
             return ca.mtimes(ey.T, ca.mtimes(Wmat, ex))
+
+        def rbf_taylor(x: Any, y: Any) -> Any:
+            """f0 at (x, y) with its gradient and Hessian, each one contraction with the weights."""
+            dx, dy = x - P_o[0] - offs_x, y - P_o[1] - offs_y
+            ex = ca.exp(-(dx**2) / s2)
+            ey = ca.exp(-(dy**2) / s2)
+            ax, ay = -2.0 * dx / s2, -2.0 * dy / s2
+            ex1, ey1 = ex * ax, ey * ay
+            ex2, ey2 = ex * (ax * ax - 2.0 / s2), ey * (ay * ay - 2.0 / s2)
+            w0, w1, w2 = ca.mtimes(Wmat, ex), ca.mtimes(Wmat, ex1), ca.mtimes(Wmat, ex2)
+            return [ca.mtimes(ey.T, w0), ca.mtimes(ey.T, w1), ca.mtimes(ey1.T, w0),
+                    ca.mtimes(ey.T, w2), ca.mtimes(ey1.T, w1), ca.mtimes(ey2.T, w0)]
+
+        lifted = sh.symbolic == "SX"
+        anchors: list[Any] = []  # per f0 point: the symbols (x̄, ȳ, c) and their values
+        anchor_vals: list[Any] = []
+
+        def f0(x: Any, y: Any) -> Any:
+            if not lifted:
+                return rbf(x, y)
+            a = ca.SX.sym(f"f0pt{len(anchors)}", 8)
+            anchors.append(a)
+            anchor_vals.append(ca.vertcat(x, y, *rbf_taylor(x, y)))
+            ddx, ddy = x - a[0], y - a[1]
+            return (a[2] + a[3] * ddx + a[4] * ddy + 0.5 * a[5] * ddx * ddx + a[6] * ddx * ddy
+                    + 0.5 * a[7] * ddy * ddy)
 
         kk = sh.sigmoid_k
         W, L, D = sh.unit_width, sh.unit_length, sh.unit_depth
@@ -215,7 +291,7 @@ class PhaseNLP:
         rmin, rmax = exc.reach_min + sh.margin, exc.reach_max - sh.margin
         xmin, xmax, ymin, ymax = site_box
         tips = [tip_position(X[k], exc, P_floor) for k in range(N + 1)]
-        self._tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
+        tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
         for i in range(1, m1):
             kn = i * n + self.kc[i]
             s = X[kn]
@@ -290,7 +366,6 @@ class PhaseNLP:
             safe_parts += robustness_constraints(phi_dump, sig, 0, smooth=sh.beta)
         for r in safe_parts:
             add(r - slack[1], 0.0, ca.inf)
-        self._rho_fn = ca.Function("rho", [w, p], [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)])
         self.specs = {"task": tasks, "safe": phi_safe}
 
         # -- cost, Eq. (26) + terminal --------------------------------------------------------------
@@ -305,21 +380,41 @@ class PhaseNLP:
         J = (P_a[0] * J_u + P_a[1] * t_final + P_a[2] * (V_tot - P_vt) ** 2 + P_a[3] * ca.sum1(ph["eta"][1:])
              + P_a[4] * ((X[N][0] - P_goal[0]) ** 2 + (X[N][1] - P_goal[1]) ** 2))
 
-        self.g = ca.vertcat(*g)
-        self.lbg, self.ubg = np.array(lbg), np.array(ubg)
-        self.w, self.p, self.J = w, p, J
-        self._vol_fn = ca.Function("vol", [w, p], [ca.vertcat(*[vol_model[i] for i in range(1, m1)])])
+        G = ca.vertcat(*g)
+        vol = ca.vertcat(*[vol_model[i] for i in range(1, m1)])
+        pzv = ca.vertcat(*[pz[i] for i in range(1, m1)])
+        rho = [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)]
+        fns: dict[str, Any] = {}
+        if lifted:  # the terrain's derivatives from its Taylor coefficients (see f0 above)
+            A, Av = ca.vertcat(*anchors), ca.vertcat(*anchor_vals)
+            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", G.shape[0])
+            hess = ca.triu(ca.hessian(lam_f * J + ca.dot(lam_g, G), w)[0])
+            jac, grad = ca.jacobian(G, w), ca.gradient(J, w)
+            G, J, vol, pzv, hess, jac, grad, *rho = ca.substitute([G, J, vol, pzv, hess, jac, grad, *rho], [A], [Av])
+            fns["hess_lag"] = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+                                          ["triu_hess_gamma_x_x"])
+            fns["jac_g"] = ca.Function("nlp_jac_g", [w, p], [G, jac], ["x", "p"], ["g", "jac_g_x"])
+            fns["grad_f"] = ca.Function("nlp_grad_f", [w, p], [J, grad], ["x", "p"], ["f", "grad_f_x"])
+        fns["nlp"] = ca.Function("nlp", [w, p], [J, G], ["x", "p"], ["f", "g"])
+        fns["tip"] = tip_fn
+        fns["rho"] = ca.Function("rho", [w, p], rho)
+        fns["vol"] = ca.Function("vol", [w, p], [vol])
         # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
-        self._pz_fn = ca.Function("pz", [w, p], [ca.vertcat(*[pz[i] for i in range(1, m1)])])
-        self.build_time_s = time.perf_counter() - t0
-        self._solvers: dict[tuple, Any] = {}
-        self._unreported_build_s = self.build_time_s
+        fns["pz"] = ca.Function("pz", [w, p], [pzv])
+        fns["bounds"] = ca.Function("bounds", [], [ca.DM(lbg), ca.DM(ubg)])
+        return fns
 
     def take_build_time(self) -> float:
         """Construction seconds (the graph, then each IPOPT solver with its derivatives) not yet
         reported: a planner adds them to its build time once."""
         t, self._unreported_build_s = self._unreported_build_s, 0.0
         return t
+
+    def take_cache_state(self) -> str | None:
+        """How this NLP was made — ``hit`` (loaded from the disk cache), ``miss`` (built and stored)
+        or ``off`` (built, no cache) — the first time it is asked, then None."""
+        state, self._cache_unreported = (self.cache if self._cache_unreported else None), False
+        return state
 
     # -- packing -----------------------------------------------------------------------------------
     def pack_p(self, **vals: Any) -> np.ndarray:
@@ -411,9 +506,8 @@ class PhaseNLP:
                      "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
                      "linear_solver": "mumps", "hessian_approximation": "exact", "sb": "yes"}
             ipopt.update(options or {})
-            nlp = {"x": self.w, "p": self.p, "f": self.J, "g": self.g}
-            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
-                                                                      **(casadi_options or {})})
+            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", self._nlp_fn, {"ipopt": ipopt, "print_time": False,
+                                                                      **self._derivs, **(casadi_options or {})})
             one_blas_thread()
             dt = time.perf_counter() - t0
             self.build_time_s += dt
