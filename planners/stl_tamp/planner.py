@@ -139,7 +139,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.7.0"
+    version = "0.7.1"
     tracks = ("backhoe",)
     Config = Config
 
