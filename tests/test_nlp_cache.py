@@ -3,6 +3,7 @@ NLP a build gives, and a damaged, partial or unwritable cache is a miss, never a
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import os
@@ -130,5 +131,11 @@ def test_a_loaded_nlp_evaluates_as_the_built_one(cache_dir):
         for a, b in zip(f.call(args), g.call(args)):
             assert np.array_equal(np.array(a), np.array(b))
     assert np.array_equal(built.lbg, loaded.lbg) and np.array_equal(built.ubg, loaded.ubg)
-    other = PhaseNLP(shape, ExcavatorSpec(), TruckSpec(), (0.0, 6.0, 0.0, 3.5))  # another site box: another NLP
-    assert other.cache == "miss"
+    # another site: the same graph, other bounds on the dig corners
+    other = PhaseNLP(shape, ExcavatorSpec(), TruckSpec(), (1.0, 7.0, -1.0, 3.5))
+    assert other.cache == "hit"
+    moved = np.flatnonzero(other.lbg != built.lbg)
+    assert len(moved) == 2 * 4 * shape.phases  # x and y of four corners per dig phase
+    assert sorted(set(other.lbg[moved])) == pytest.approx([-1.0 + 1e-3, 1.0 + 1e-3])
+    assert sorted(set(other.ubg[moved])) == pytest.approx([3.5 - 1e-3, 7.0 - 1e-3])
+    assert PhaseNLP(dataclasses.replace(shape, vmax=0.3), ExcavatorSpec(), TruckSpec(), (0.0, 6.0, 0.0, 3.0)).cache == "miss"

@@ -34,6 +34,13 @@ alone (ε_r = 5 cm normalised) IPOPT hit its iteration limit with ρ_safe ≈ �
 local test, and the referee needs the truck exactly still anyway.
 predicates are normalised by their scale (η by 1, volume by V_max, distances² by the squared
 radius) so that one sharpness fits all. Cost, Eq. (26), plus ``α_term ‖p_B(end) − goal‖²``.
+
+Derivatives (SX): each terrain evaluation enters the graph as its second-order Taylor polynomial
+at the point itself, with symbolic coefficients; after CasADi has differentiated the graph, the
+coefficients become the RBF's value, gradient and Hessian there — the same derivatives, but
+each a single contraction over the lattice weights instead of one per Hessian colour
+(docs/DESIGN.md §11). The built functions are stored by :mod:`.nlp_cache` and loaded by later
+processes.
 """
 
 from __future__ import annotations
@@ -141,7 +148,7 @@ class PhaseNLP:
         self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in _PHASE_VARS] + [("slack", 2)]
         self.nw = sum(ln for _, ln in self.v_parts)
         # the built functions come from the disk cache when this NLP was built before (nlp_cache)
-        name = nlp_cache.key(shape, exc, truck, site_box)
+        name = nlp_cache.key(shape, exc, truck)  # the site's box only bounds g (below)
         data = nlp_cache.load(name)
         fns = _unpack(data) if data is not None else None
         self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
@@ -151,8 +158,12 @@ class PhaseNLP:
                 nlp_cache.save(name, _pack(fns))
         self._nlp_fn, self._tip_fn, self._rho_fn, self._vol_fn, self._pz_fn = (fns[k] for k in _FUNCTIONS)
         self._derivs = {k: fns[k] for k in _DERIVATIVES if k in fns}
-        lbg, ubg = fns["bounds"].call([])
-        self.lbg, self.ubg = np.array(lbg).reshape(-1), np.array(ubg).reshape(-1)
+        lbg, ubg, site_rows = (np.array(v).reshape(-1) for v in fns["bounds"].call([]))
+        rows = site_rows.astype(int)
+        xmin, xmax, ymin, ymax = site_box  # every corner of every dig rectangle inside the site
+        lbg[rows], ubg[rows] = xmin + 1e-3, xmax - 1e-3
+        lbg[rows + 1], ubg[rows + 1] = ymin + 1e-3, ymax - 1e-3
+        self.lbg, self.ubg = lbg, ubg
         self.ng = self.lbg.shape[0]
         self.build_time_s = time.perf_counter() - t0
         self._solvers: dict[tuple, Any] = {}
@@ -161,7 +172,7 @@ class PhaseNLP:
 
     def _build(self) -> dict[str, Any]:
         """The CasADi graph: the NLP (x, p) → (f, g), its derivatives (SX) and the helpers."""
-        sh, exc, truck, site_box = self.shape, self.exc, self.truck, self.site_box
+        sh, exc, truck = self.shape, self.exc, self.truck
         m1, n, N, K = self.m1, self.n, self.N, self.K
         sym = ca.SX.sym if sh.symbolic == "SX" else ca.MX.sym
 
@@ -236,6 +247,7 @@ class PhaseNLP:
         anchor_vals: list[Any] = []
 
         def f0(x: Any, y: Any) -> Any:
+            """The fitted terrain at (x, y); in SX its Taylor polynomial at (x̄, ȳ) = (x, y)."""
             if not lifted:
                 return rbf(x, y)
             a = ca.SX.sym(f"f0pt{len(anchors)}", 8)
@@ -289,7 +301,7 @@ class PhaseNLP:
 
         # -- contact, reach and site constraints, Eq. (3), (15), (16) --------------------------------
         rmin, rmax = exc.reach_min + sh.margin, exc.reach_max - sh.margin
-        xmin, xmax, ymin, ymax = site_box
+        site_rows: list[int] = []  # (x, y) rows of the dig corners, bounded by the site's box in __init__
         tips = [tip_position(X[k], exc, P_floor) for k in range(N + 1)]
         tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
         for i in range(1, m1):
@@ -307,9 +319,8 @@ class PhaseNLP:
                 for sc in (-W / 2, W / 2):
                     cx = ph["px"][i] + sa * ux[i] - sc * uy[i]
                     cy = ph["py"][i] + sa * uy[i] + sc * ux[i]
+                    site_rows.append(len(lbg))
                     add(ca.vertcat(cx, cy), -ca.inf, ca.inf)
-                    lbg[-2:] = [xmin + 1e-3, ymin + 1e-3]
-                    ubg[-2:] = [xmax - 1e-3, ymax - 1e-3]
             reach_dt = exc.reach_max + truck.loading_radius - sh.margin
             add((s[0] - s[6]) ** 2 + (s[1] - s[7]) ** 2, 0.0, reach_dt**2)
             # a stroke and a dump take their full time however little the bucket takes in: the
@@ -401,7 +412,7 @@ class PhaseNLP:
         fns["vol"] = ca.Function("vol", [w, p], [vol])
         # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
         fns["pz"] = ca.Function("pz", [w, p], [pzv])
-        fns["bounds"] = ca.Function("bounds", [], [ca.DM(lbg), ca.DM(ubg)])
+        fns["bounds"] = ca.Function("bounds", [], [ca.DM(lbg), ca.DM(ubg), ca.DM(site_rows)])
         return fns
 
     def take_build_time(self) -> float:
