@@ -377,7 +377,6 @@ class PhaseNLP:
             safe_parts += robustness_constraints(phi_dump, sig, 0, smooth=sh.beta)
         for r in safe_parts:
             add(r - slack[1], 0.0, ca.inf)
-        self.specs = {"task": tasks, "safe": phi_safe}
 
         # -- cost, Eq. (26) + terminal --------------------------------------------------------------
         qu = ca.DM(list(sh.q_u) + list(sh.q_u_truck))
