@@ -23,13 +23,25 @@ def cache_dir(tmp_path, monkeypatch):
     return d
 
 
+def _writer(text: str):
+    def write(path: str) -> None:
+        with open(path, "w") as f:
+            f.write(text)
+    return write
+
+
+def _read(name: str) -> str | None:
+    path = nlp_cache.load(name)
+    return None if path is None else path.read_text()[: -len("\nearthbench-nlp/1 sha256 ") - 64]
+
+
 def test_round_trip_and_off(cache_dir, monkeypatch):
     assert nlp_cache.load("k") is None
-    assert nlp_cache.save("k", "payload ∑")
-    assert nlp_cache.load("k") == "payload ∑"
+    assert nlp_cache.save("k", _writer("payload ∑"))
+    assert _read("k") == "payload ∑"
     monkeypatch.setenv(nlp_cache.ENV, "off")
     assert nlp_cache.directory() is None
-    assert nlp_cache.load("k") is None and not nlp_cache.save("k", "x")
+    assert nlp_cache.load("k") is None and not nlp_cache.save("k", _writer("x"))
 
 
 def test_default_directory_is_the_users_cache(monkeypatch, tmp_path):
@@ -38,31 +50,40 @@ def test_default_directory_is_the_users_cache(monkeypatch, tmp_path):
     assert nlp_cache.directory() == tmp_path / "earthbench" / "nlp"
 
 
-@pytest.mark.parametrize("damage", ["truncate", "flip", "garbage", "empty"])
+@pytest.mark.parametrize("damage", ["truncate", "flip", "append", "garbage", "empty"])
 def test_a_damaged_file_is_a_miss(cache_dir, damage):
-    nlp_cache.save("k", "some payload " * 100)
+    nlp_cache.save("k", _writer("some payload " * 100))
     path = cache_dir / "k.nlp"
     blob = path.read_bytes()
     if damage == "truncate":
         blob = blob[: len(blob) // 2]
     elif damage == "flip":
-        blob = blob[:-5] + bytes([blob[-5] ^ 0xFF]) + blob[-4:]
+        blob = blob[:5] + bytes([blob[5] ^ 0xFF]) + blob[6:]
+    elif damage == "append":
+        blob = blob + b"x"
     elif damage == "garbage":
         blob = os.urandom(len(blob))
     else:
         blob = b""
     path.write_bytes(blob)
     assert nlp_cache.load("k") is None
-    assert nlp_cache.save("k", "rebuilt") and nlp_cache.load("k") == "rebuilt"
+    assert nlp_cache.save("k", _writer("rebuilt")) and _read("k") == "rebuilt"
 
 
-def test_an_unwritable_directory_is_no_error(tmp_path, monkeypatch):
+def test_an_unwritable_directory_or_a_failed_write_is_no_error(tmp_path, monkeypatch):
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
     monkeypatch.setenv(nlp_cache.ENV, str(blocker / "nlp"))
-    assert not nlp_cache.save("k", "x")
+    assert not nlp_cache.save("k", _writer("x"))
     assert nlp_cache.load("k") is None
     assert blocker.read_text() == "not a directory"
+    monkeypatch.setenv(nlp_cache.ENV, str(tmp_path / "nlp"))
+
+    def fails(path: str) -> None:
+        raise RuntimeError("disk full")
+
+    assert not nlp_cache.save("k", fails)
+    assert not list((tmp_path / "nlp").iterdir())  # no temporary file left behind
 
 
 def test_keys_change_with_the_content():
@@ -70,24 +91,24 @@ def test_keys_change_with_the_content():
     assert nlp_cache.key(1, (2.0, 3.0)) != nlp_cache.key(1, (2.0, 3.0000001))
 
 
-def _writer(directory: str, payload: str, rounds: int) -> None:
+def _keep_writing(directory: str, payload: str, rounds: int) -> None:
     os.environ[nlp_cache.ENV] = directory
     for _ in range(rounds):
-        assert nlp_cache.save("k", payload)
+        assert nlp_cache.save("k", _writer(payload))
 
 
 def test_two_writers_and_a_reader_never_see_a_partial_file(cache_dir):
     a, b = "a" * 3_000_000, "b" * 1_000
     ctx = multiprocessing.get_context("spawn")
-    procs = [ctx.Process(target=_writer, args=(str(cache_dir), p, 30)) for p in (a, b)]
+    procs = [ctx.Process(target=_keep_writing, args=(str(cache_dir), p, 30)) for p in (a, b)]
     for p in procs:
         p.start()
     while any(p.is_alive() for p in procs):
-        assert nlp_cache.load("k") in (None, a, b)
+        assert _read("k") in (None, a, b)
     for p in procs:
         p.join()
         assert p.exitcode == 0
-    assert nlp_cache.load("k") in (a, b)
+    assert _read("k") in (a, b)
     assert not [f for f in cache_dir.iterdir() if f.suffix == ".tmp"]
 
 

@@ -89,18 +89,18 @@ _FUNCTIONS = ("nlp", "tip", "rho", "vol", "pz")
 _DERIVATIVES = ("hess_lag", "jac_g", "grad_f")  # nlpsol's options: given, it builds none of its own
 
 
-def _pack(fns: dict[str, Any]) -> str:
-    """The built functions as one string (CasADi's serialization), for :mod:`.nlp_cache`."""
-    s = ca.StringSerializer()
+def _pack(fns: dict[str, Any], path: str) -> None:
+    """Write the built functions to ``path`` (CasADi's serialization), for :mod:`.nlp_cache`."""
+    s = ca.FileSerializer(path)
     s.pack(sorted(fns))
     s.pack([fns[k] for k in sorted(fns)])
-    return s.encode()
+    del s  # closes the file
 
 
-def _unpack(data: str) -> dict[str, Any] | None:
-    """The functions of :func:`_pack`; None when ``data`` does not hold them."""
+def _unpack(path: Any) -> dict[str, Any] | None:
+    """The functions :func:`_pack` wrote to ``path``; None when it does not hold them."""
     try:
-        d = ca.StringDeserializer(data)
+        d = ca.FileDeserializer(str(path))
         names, fns = d.unpack(), d.unpack()
     except RuntimeError:
         return None
@@ -149,13 +149,13 @@ class PhaseNLP:
         self.nw = sum(ln for _, ln in self.v_parts)
         # the built functions come from the disk cache when this NLP was built before (nlp_cache)
         name = nlp_cache.key(shape, exc, truck)  # the site's box only bounds g (below)
-        data = nlp_cache.load(name)
-        fns = _unpack(data) if data is not None else None
+        path = nlp_cache.load(name)
+        fns = _unpack(path) if path is not None else None
         self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
         if fns is None:
             fns = self._build()
             if self.cache == "miss":
-                nlp_cache.save(name, _pack(fns))
+                nlp_cache.save(name, lambda tmp: _pack(fns, tmp))
         self._nlp_fn, self._tip_fn, self._rho_fn, self._vol_fn, self._pz_fn = (fns[k] for k in _FUNCTIONS)
         self._derivs = {k: fns[k] for k in _DERIVATIVES if k in fns}
         lbg, ubg, site_rows = (np.array(v).reshape(-1) for v in fns["bounds"].call([]))

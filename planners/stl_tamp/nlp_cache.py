@@ -2,12 +2,13 @@
 
 Each case runs in a fresh process, and building the CasADi graphs and derivatives of one NLP
 costs seconds (docs/DESIGN.md §11). The build depends only on the NLP's content, so its result
-(serialized CasADi functions, zlib-compressed) is stored once per machine under a key that hashes
-everything it depends on, and loaded by every later process.
+(CasADi's serialization of the built functions, written and read as a file stream, which keeps
+the memory low) is stored once per machine under a key that hashes everything it depends on,
+and loaded by every later process.
 
 Files are written to a temporary name and renamed into place, so two workers building the same
-NLP at once each leave a complete file and a reader never sees a partial one; a file that fails
-its checksum or does not decompress is a miss (the caller rebuilds and overwrites it). Any
+NLP at once each leave a complete file and a reader never sees a partial one; a file ends in the
+sha256 of what precedes it, and one that fails it is a miss (the caller rebuilds and overwrites it). Any
 error of the cache itself (no home, a read-only or full disk) makes it a miss, never a failed
 plan. The directory is ``$EARTHBENCH_NLP_CACHE`` (``off`` disables the cache), else
 ``$XDG_CACHE_HOME/earthbench/nlp`` (default ``~/.cache/earthbench/nlp``).
@@ -20,11 +21,11 @@ import os
 import platform
 import sys
 import tempfile
-import zlib
+from collections.abc import Callable
 from pathlib import Path
 
 ENV = "EARTHBENCH_NLP_CACHE"
-_MAGIC = b"earthbench-nlp/1\n"
+_TRAILER = b"\nearthbench-nlp/1 sha256 "
 
 
 def directory() -> Path | None:
@@ -51,42 +52,53 @@ def key(*parts: object) -> str:
     return h.hexdigest()[:32]
 
 
-def load(name: str) -> str | None:
-    """The payload stored under ``name``, or None (no cache, no file, or a damaged one)."""
+def _digest(f, size: int) -> str:
+    h = hashlib.sha256()
+    while size > 0:
+        chunk = f.read(min(1 << 20, size))
+        if not chunk:
+            break
+        h.update(chunk)
+        size -= len(chunk)
+    return h.hexdigest()
+
+
+def load(name: str) -> Path | None:
+    """The stored file of ``name``, checked whole, or None (no cache, no file, a damaged one)."""
     d = directory()
     if d is None:
         return None
+    path = d / f"{name}.nlp"
+    tail = len(_TRAILER) + 64
     try:
-        blob = (d / f"{name}.nlp").read_bytes()
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size - tail
+            if size < 0 or _TRAILER + _digest(f, size).encode() != f.read():
+                return None
     except OSError:
         return None
-    head = len(_MAGIC) + 64
-    if not blob.startswith(_MAGIC) or len(blob) < head + 1:
-        return None
-    body = blob[head + 1:]
-    if hashlib.sha256(body).hexdigest().encode() != blob[len(_MAGIC):head]:
-        return None
-    try:
-        return zlib.decompress(body).decode()
-    except (zlib.error, UnicodeDecodeError):
-        return None
+    return path
 
 
-def save(name: str, payload: str) -> bool:
-    """Store ``payload`` under ``name`` atomically; False when the cache is off or unwritable."""
+def save(name: str, write: Callable[[str], None]) -> bool:
+    """Store what ``write(path)`` writes to ``path`` under ``name``, atomically; False when the
+    cache is off or unwritable (``write`` may raise OSError or RuntimeError for a full disk)."""
     d = directory()
     if d is None:
         return False
-    body = zlib.compress(payload.encode(), 1)
     tmp = None
     try:
         d.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=d, prefix=f".{name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(_MAGIC + hashlib.sha256(body).hexdigest().encode() + b"\n" + body)
+        os.close(fd)
+        write(tmp)
+        with open(tmp, "r+b") as f:
+            digest = _digest(f, os.fstat(f.fileno()).st_size)
+            f.seek(0, os.SEEK_END)
+            f.write(_TRAILER + digest.encode())
         os.replace(tmp, d / f"{name}.nlp")
         return True
-    except OSError:
+    except (OSError, RuntimeError):
         if tmp is not None:
             try:
                 os.unlink(tmp)
