@@ -2,12 +2,32 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
+import tempfile
 
 import pytest
 
 from earthbench import Plan, Scenario
 from helpers import block_scenario, dig_dump_plan
+
+
+_NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"  # earthbench_planners.stl_tamp.nlp_cache.ENV
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The session's built STL-TAMP NLPs (and those of the cases it runs) go to a temporary
+    folder, not the user's cache, unless the caller chose one."""
+    if _NLP_CACHE_ENV not in os.environ:
+        config._earthbench_nlp_cache = os.environ[_NLP_CACHE_ENV] = tempfile.mkdtemp(prefix="earthbench-nlp-")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    folder = getattr(config, "_earthbench_nlp_cache", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(_NLP_CACHE_ENV, None)
 
 
 @pytest.fixture

@@ -80,6 +80,14 @@ class Trace:
     locals_: list[dict[str, Any]] = field(default_factory=list)
     fallbacks: int = 0
     regenerated: int = 0
+    nlp_cache: dict[str, int] = field(default_factory=dict)  # NLPs loaded ("hit") or built ("miss", "off")
+
+    def add_build(self, nlp: PhaseNLP) -> None:
+        """Count the NLP's construction seconds not yet reported and, once, how it was made."""
+        self.build_time_s += nlp.take_build_time()
+        state = nlp.take_cache_state()
+        if state is not None:
+            self.nlp_cache[state] = self.nlp_cache.get(state, 0) + 1
 
 
 def site_box(scenario: Scenario) -> tuple[float, float, float, float]:

@@ -34,6 +34,13 @@ alone (ε_r = 5 cm normalised) IPOPT hit its iteration limit with ρ_safe ≈ �
 local test, and the referee needs the truck exactly still anyway.
 predicates are normalised by their scale (η by 1, volume by V_max, distances² by the squared
 radius) so that one sharpness fits all. Cost, Eq. (26), plus ``α_term ‖p_B(end) − goal‖²``.
+
+Derivatives (SX): each terrain evaluation enters the graph as its second-order Taylor polynomial
+at the point itself, with symbolic coefficients; after CasADi has differentiated the graph, the
+coefficients become the RBF's value, gradient and Hessian there — the same derivatives, but
+each a single contraction over the lattice weights instead of one per Hessian colour
+(docs/DESIGN.md §11). The built functions are stored by :mod:`.nlp_cache` and loaded by later
+processes.
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ import numpy as np
 from earthbench.world import ExcavatorSpec, TruckSpec
 from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
+from . import nlp_cache
 from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, PIVOT_HEIGHT, Shape, Solution, quantize
 
 
@@ -74,6 +82,32 @@ def one_blas_thread() -> bool:
         except (OSError, AttributeError):
             continue
     return done
+
+
+_PHASE_VARS = ("dtm", "dtw", "eta", "px", "py", "psi", "V")
+_FUNCTIONS = ("nlp", "tip", "rho", "vol", "pz")
+_DERIVATIVES = ("hess_lag", "jac_g", "grad_f")  # nlpsol's options: given, it builds none of its own
+
+
+def _pack(fns: dict[str, Any], path: str) -> None:
+    """Write the built functions to ``path`` (CasADi's serialization), for :mod:`.nlp_cache`."""
+    s = ca.FileSerializer(path)
+    s.pack(sorted(fns))
+    s.pack([fns[k] for k in sorted(fns)])
+    del s  # closes the file
+
+
+def _unpack(path: Any) -> dict[str, Any] | None:
+    """The functions :func:`_pack` wrote to ``path``; None when it does not hold them."""
+    try:
+        d = ca.FileDeserializer(str(path))
+        names, fns = d.unpack(), d.unpack()
+    except RuntimeError:
+        return None
+    if not isinstance(names, list) or not isinstance(fns, list) or len(names) != len(fns) \
+            or not set(_FUNCTIONS + ("bounds",)) <= set(names):
+        return None
+    return dict(zip(names, fns))
 
 
 def _sigmoid(x: Any, k: float) -> Any:
@@ -110,6 +144,36 @@ class PhaseNLP:
 
         if sh.symbolic not in ("SX", "MX"):
             raise ValueError(f"Shape.symbolic must be 'SX' or 'MX', got {sh.symbolic!r}")
+        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
+        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in _PHASE_VARS] + [("slack", 2)]
+        self.nw = sum(ln for _, ln in self.v_parts)
+        # the built functions come from the disk cache when this NLP was built before (nlp_cache)
+        name = nlp_cache.key(shape, exc, truck)  # the site's box only bounds g (below)
+        path = nlp_cache.load(name)
+        fns = _unpack(path) if path is not None else None
+        self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
+        if fns is None:
+            fns = self._build()
+            if self.cache == "miss":
+                nlp_cache.save(name, lambda tmp: _pack(fns, tmp))
+        self._nlp_fn, self._tip_fn, self._rho_fn, self._vol_fn, self._pz_fn = (fns[k] for k in _FUNCTIONS)
+        self._derivs = {k: fns[k] for k in _DERIVATIVES if k in fns}
+        lbg, ubg, site_rows = (np.array(v).reshape(-1) for v in fns["bounds"].call([]))
+        rows = site_rows.astype(int)
+        xmin, xmax, ymin, ymax = site_box  # every corner of every dig rectangle inside the site
+        lbg[rows], ubg[rows] = xmin + 1e-3, xmax - 1e-3
+        lbg[rows + 1], ubg[rows + 1] = ymin + 1e-3, ymax - 1e-3
+        self.lbg, self.ubg = lbg, ubg
+        self.ng = self.lbg.shape[0]
+        self.build_time_s = time.perf_counter() - t0
+        self._solvers: dict[tuple, Any] = {}
+        self._unreported_build_s = self.build_time_s
+        self._cache_unreported = True
+
+    def _build(self) -> dict[str, Any]:
+        """The CasADi graph: the NLP (x, p) → (f, g), its derivatives (SX) and the helpers."""
+        sh, exc, truck = self.shape, self.exc, self.truck
+        m1, n, N, K = self.m1, self.n, self.N, self.K
         sym = ca.SX.sym if sh.symbolic == "SX" else ca.MX.sym
 
         # -- parameters -------------------------------------------------------------------------
@@ -120,17 +184,14 @@ class PhaseNLP:
         P_a = sym("alpha", 5)  # α_u, α_t, α_v, α_η, α_term
         P_goal = sym("goal", 2)
         P_floor = sym("floor")
-        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
         p = ca.vertcat(P_w, P_o, P_s0, P_vt, P_a, P_goal, P_floor)
 
         # -- variables --------------------------------------------------------------------------
         Xv = sym("X", NX, N)  # nodes 1..N (node 0 is the parameter s0)
         Uv = sym("U", NU, N)
-        ph = {k: sym(k, m1) for k in ("dtm", "dtw", "eta", "px", "py", "psi", "V")}
+        ph = {k: sym(k, m1) for k in _PHASE_VARS}
         slack = sym("slack", 2)
-        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in ph] + [("slack", 2)]
         w = ca.vertcat(ca.vec(Xv), ca.vec(Uv), *ph.values(), slack)
-        self.nw = w.shape[0]
 
         X = [P_s0] + [Xv[:, k] for k in range(N)]
         U = [Uv[:, k] for k in range(N)]
@@ -164,10 +225,37 @@ class PhaseNLP:
         offs_x = ca.DM([a * sh.terrain_spacing for a in range(nx_t)])
         offs_y = ca.DM([b * sh.terrain_spacing for b in range(ny_t)])
 
-        def f0(x: Any, y: Any) -> Any:
+        def rbf(x: Any, y: Any) -> Any:
             ex = ca.exp(-((x - P_o[0] - offs_x) ** 2) / s2)
             ey = ca.exp(-((y - P_o[1] - offs_y) ** 2) / s2)
             return ca.mtimes(ey.T, ca.mtimes(Wmat, ex))
+
+        def rbf_taylor(x: Any, y: Any) -> Any:
+            """f0 at (x, y) with its gradient and Hessian, each one contraction with the weights."""
+            dx, dy = x - P_o[0] - offs_x, y - P_o[1] - offs_y
+            ex = ca.exp(-(dx**2) / s2)
+            ey = ca.exp(-(dy**2) / s2)
+            ax, ay = -2.0 * dx / s2, -2.0 * dy / s2
+            ex1, ey1 = ex * ax, ey * ay
+            ex2, ey2 = ex * (ax * ax - 2.0 / s2), ey * (ay * ay - 2.0 / s2)
+            w0, w1, w2 = ca.mtimes(Wmat, ex), ca.mtimes(Wmat, ex1), ca.mtimes(Wmat, ex2)
+            return [ca.mtimes(ey.T, w0), ca.mtimes(ey.T, w1), ca.mtimes(ey1.T, w0),
+                    ca.mtimes(ey.T, w2), ca.mtimes(ey1.T, w1), ca.mtimes(ey2.T, w0)]
+
+        lifted = sh.symbolic == "SX"
+        anchors: list[Any] = []  # per f0 point: the symbols (x̄, ȳ, c) and their values
+        anchor_vals: list[Any] = []
+
+        def f0(x: Any, y: Any) -> Any:
+            """The fitted terrain at (x, y); in SX its Taylor polynomial at (x̄, ȳ) = (x, y)."""
+            if not lifted:
+                return rbf(x, y)
+            a = ca.SX.sym(f"f0pt{len(anchors)}", 8)
+            anchors.append(a)
+            anchor_vals.append(ca.vertcat(x, y, *rbf_taylor(x, y)))
+            ddx, ddy = x - a[0], y - a[1]
+            return (a[2] + a[3] * ddx + a[4] * ddy + 0.5 * a[5] * ddx * ddx + a[6] * ddx * ddy
+                    + 0.5 * a[7] * ddy * ddy)
 
         kk = sh.sigmoid_k
         W, L, D = sh.unit_width, sh.unit_length, sh.unit_depth
@@ -213,9 +301,9 @@ class PhaseNLP:
 
         # -- contact, reach and site constraints, Eq. (3), (15), (16) --------------------------------
         rmin, rmax = exc.reach_min + sh.margin, exc.reach_max - sh.margin
-        xmin, xmax, ymin, ymax = site_box
+        site_rows: list[int] = []  # (x, y) rows of the dig corners, bounded by the site's box in __init__
         tips = [tip_position(X[k], exc, P_floor) for k in range(N + 1)]
-        self._tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
+        tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
         for i in range(1, m1):
             kn = i * n + self.kc[i]
             s = X[kn]
@@ -231,9 +319,8 @@ class PhaseNLP:
                 for sc in (-W / 2, W / 2):
                     cx = ph["px"][i] + sa * ux[i] - sc * uy[i]
                     cy = ph["py"][i] + sa * uy[i] + sc * ux[i]
+                    site_rows.append(len(lbg))
                     add(ca.vertcat(cx, cy), -ca.inf, ca.inf)
-                    lbg[-2:] = [xmin + 1e-3, ymin + 1e-3]
-                    ubg[-2:] = [xmax - 1e-3, ymax - 1e-3]
             reach_dt = exc.reach_max + truck.loading_radius - sh.margin
             add((s[0] - s[6]) ** 2 + (s[1] - s[7]) ** 2, 0.0, reach_dt**2)
             # a stroke and a dump take their full time however little the bucket takes in: the
@@ -290,8 +377,6 @@ class PhaseNLP:
             safe_parts += robustness_constraints(phi_dump, sig, 0, smooth=sh.beta)
         for r in safe_parts:
             add(r - slack[1], 0.0, ca.inf)
-        self._rho_fn = ca.Function("rho", [w, p], [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)])
-        self.specs = {"task": tasks, "safe": phi_safe}
 
         # -- cost, Eq. (26) + terminal --------------------------------------------------------------
         qu = ca.DM(list(sh.q_u) + list(sh.q_u_truck))
@@ -305,21 +390,41 @@ class PhaseNLP:
         J = (P_a[0] * J_u + P_a[1] * t_final + P_a[2] * (V_tot - P_vt) ** 2 + P_a[3] * ca.sum1(ph["eta"][1:])
              + P_a[4] * ((X[N][0] - P_goal[0]) ** 2 + (X[N][1] - P_goal[1]) ** 2))
 
-        self.g = ca.vertcat(*g)
-        self.lbg, self.ubg = np.array(lbg), np.array(ubg)
-        self.w, self.p, self.J = w, p, J
-        self._vol_fn = ca.Function("vol", [w, p], [ca.vertcat(*[vol_model[i] for i in range(1, m1)])])
+        G = ca.vertcat(*g)
+        vol = ca.vertcat(*[vol_model[i] for i in range(1, m1)])
+        pzv = ca.vertcat(*[pz[i] for i in range(1, m1)])
+        rho = [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)]
+        fns: dict[str, Any] = {}
+        if lifted:  # the terrain's derivatives from its Taylor coefficients (see f0 above)
+            A, Av = ca.vertcat(*anchors), ca.vertcat(*anchor_vals)
+            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", G.shape[0])
+            hess = ca.triu(ca.hessian(lam_f * J + ca.dot(lam_g, G), w)[0])
+            jac, grad = ca.jacobian(G, w), ca.gradient(J, w)
+            G, J, vol, pzv, hess, jac, grad, *rho = ca.substitute([G, J, vol, pzv, hess, jac, grad, *rho], [A], [Av])
+            fns["hess_lag"] = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+                                          ["triu_hess_gamma_x_x"])
+            fns["jac_g"] = ca.Function("nlp_jac_g", [w, p], [G, jac], ["x", "p"], ["g", "jac_g_x"])
+            fns["grad_f"] = ca.Function("nlp_grad_f", [w, p], [J, grad], ["x", "p"], ["f", "grad_f_x"])
+        fns["nlp"] = ca.Function("nlp", [w, p], [J, G], ["x", "p"], ["f", "g"])
+        fns["tip"] = tip_fn
+        fns["rho"] = ca.Function("rho", [w, p], rho)
+        fns["vol"] = ca.Function("vol", [w, p], [vol])
         # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
-        self._pz_fn = ca.Function("pz", [w, p], [ca.vertcat(*[pz[i] for i in range(1, m1)])])
-        self.build_time_s = time.perf_counter() - t0
-        self._solvers: dict[tuple, Any] = {}
-        self._unreported_build_s = self.build_time_s
+        fns["pz"] = ca.Function("pz", [w, p], [pzv])
+        fns["bounds"] = ca.Function("bounds", [], [ca.DM(lbg), ca.DM(ubg), ca.DM(site_rows)])
+        return fns
 
     def take_build_time(self) -> float:
         """Construction seconds (the graph, then each IPOPT solver with its derivatives) not yet
         reported: a planner adds them to its build time once."""
         t, self._unreported_build_s = self._unreported_build_s, 0.0
         return t
+
+    def take_cache_state(self) -> str | None:
+        """How this NLP was made — ``hit`` (loaded from the disk cache), ``miss`` (built and stored)
+        or ``off`` (built, no cache) — the first time it is asked, then None."""
+        state, self._cache_unreported = (self.cache if self._cache_unreported else None), False
+        return state
 
     # -- packing -----------------------------------------------------------------------------------
     def pack_p(self, **vals: Any) -> np.ndarray:
@@ -411,9 +516,8 @@ class PhaseNLP:
                      "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
                      "linear_solver": "mumps", "hessian_approximation": "exact", "sb": "yes"}
             ipopt.update(options or {})
-            nlp = {"x": self.w, "p": self.p, "f": self.J, "g": self.g}
-            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
-                                                                      **(casadi_options or {})})
+            self._solvers[key] = ca.nlpsol("stl_tamp", "ipopt", self._nlp_fn, {"ipopt": ipopt, "print_time": False,
+                                                                      **self._derivs, **(casadi_options or {})})
             one_blas_thread()
             dt = time.perf_counter() - t0
             self.build_time_s += dt

@@ -139,7 +139,7 @@ class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
 
     name = "stl-tamp"
-    version = "0.7.0"
+    version = "0.7.1"
     tracks = ("backhoe",)
     Config = Config
 
@@ -252,6 +252,7 @@ class StlTampPlanner(Planner):
                 "nlp_model_volume": predicted_model_volume,
                 "fit_time_s": trace.fit_time_s,
                 "build_time_s": trace.build_time_s,
+                "nlp_cache": trace.nlp_cache,
                 "fallbacks": trace.fallbacks,
                 "local_solves": counts,
                 "skipped": dict(conv.skips),
@@ -296,7 +297,7 @@ class StlTampPlanner(Planner):
         cbox = (max(window[0], box[0]), min(window[1], box[1]), max(window[2], box[2]), min(window[3], box[3]))
         sol = nlp.solve(params, w0, cbox, max_iter=c.global_max_iter, accept_feasible=c.accept_feasible,
                         max_dig_phases=min(need, m_g) if fixed_phases else None, options=self._ipopt_options())
-        trace.build_time_s += nlp.take_build_time()
+        trace.add_build(nlp)
         rec = {"used": True, "phases": m_g, "status": sol.status, "iterations": sol.iterations,
                "solve_time_s": sol.solve_time_s, "success": sol.success, "eta": np.round(sol.eta, 3).tolist(),
                "volume": float(np.sum(sol.V)), "wall_s": time.perf_counter() - t0}
@@ -386,7 +387,7 @@ class StlTampPlanner(Planner):
                 n_iter, t_solve = n_iter + sol2.iterations, t_solve + sol2.solve_time_s
                 if sol2.success and float(np.sum(sol2.V)) > float(np.sum(sol.V)):
                     sol = sol2
-        trace.build_time_s += nlp.take_build_time()
+        trace.add_build(nlp)
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
                                "success": sol.success, "eta": np.round(sol.eta[1:], 3).tolist(),

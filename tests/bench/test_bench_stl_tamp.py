@@ -48,7 +48,7 @@ def test_local_solve(benchmark, seed):
         iterations=1,
     )
     benchmark.extra_info.update(status=sol.status, iterations=sol.iterations, variables=nlp.nw,
-                                constraints=int(nlp.g.shape[0]), build_s=nlp.build_time_s)
+                                constraints=nlp.ng, build_s=nlp.build_time_s)
 
 
 def test_surface_fit_paper_map(benchmark):
