@@ -32,6 +32,7 @@ from .hierarchy import (
     level_stand,
     local_seeds,
     nearest_block,
+    shared_truck_stand,
     site_box,
     solve_counts,
 )
@@ -118,6 +119,7 @@ class Config(LocalNLPConfig):
     # a monotone μ from 0.1 declared a feasible local problem of the tests infeasible)
     mu_strategy: str = "monotone"
     mu_init: float = 1.0
+    barrier_tol_factor: float = 10.0
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks; past it the area is left undug) or "raise"
     max_fallbacks: int = 6  # at least this many, or max_fallback_share of the local solves so far (large sites)
     max_fallback_share: float = 0.05
@@ -262,10 +264,15 @@ class StlTampPlanner(Planner):
         )
         return plan
 
-    def _ipopt_options(self) -> dict[str, Any]:
+    def _ipopt_options(self, local: bool = True) -> dict[str, Any]:
+        """IPOPT's settings; the local solves' barrier subproblems end at ``barrier_tol_factor``·μ
+        (the global solve keeps IPOPT's 10: docs/DESIGN.md §11)."""
         c = self.config
-        return {"mu_strategy": c.mu_strategy, "mu_init": c.mu_init, "tol": c.ipopt_tol, "acceptable_tol": c.acceptable_tol,
-                "acceptable_iter": c.acceptable_iter}
+        out = {"mu_strategy": c.mu_strategy, "mu_init": c.mu_init, "tol": c.ipopt_tol, "acceptable_tol": c.acceptable_tol,
+               "acceptable_iter": c.acceptable_iter}
+        if local:
+            out["barrier_tol_factor"] = c.barrier_tol_factor
+        return out
 
     # -- global layer ------------------------------------------------------------------------------
     def _global(self, scenario: Scenario, st: SimState, surf, tour: list[Area], target: float, side: float,
@@ -287,7 +294,10 @@ class StlTampPlanner(Planner):
         t0 = time.perf_counter()
         nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0
-        seeds = [PhaseSeed(a.px, a.py, a.psi, c.eta_init if j < need else 0.0, a.base, tour[0].truck,
+        truck = shared_truck_stand([a.base for a in tour[:m_g]], [a.truck for a in tour[:m_g]],
+                                   exc.reach_max + scenario.machines.truck.loading_radius - shape.margin,
+                                   exc.clearance + shape.col_margin)
+        seeds = [PhaseSeed(a.px, a.py, a.psi, c.eta_init if j < need else 0.0, a.base, truck,
                            float(surf(a.px, a.py))) for j, a in enumerate(tour[:m_g])]
         s0 = st.s0
         params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=target,
@@ -295,7 +305,7 @@ class StlTampPlanner(Planner):
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params, [a.estimate for a in tour[:m_g]])
         cbox = (max(window[0], box[0]), min(window[1], box[1]), max(window[2], box[2]), min(window[3], box[3]))
         sol = nlp.solve(params, w0, cbox, max_iter=c.global_max_iter, accept_feasible=c.accept_feasible,
-                        max_dig_phases=min(need, m_g) if fixed_phases else None, options=self._ipopt_options())
+                        max_dig_phases=min(need, m_g) if fixed_phases else None, options=self._ipopt_options(local=False))
         trace.build_time_s += nlp.take_build_time()
         rec = {"used": True, "phases": m_g, "status": sol.status, "iterations": sol.iterations,
                "solve_time_s": sol.solve_time_s, "success": sol.success, "eta": np.round(sol.eta, 3).tolist(),
