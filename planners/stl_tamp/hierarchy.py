@@ -285,3 +285,19 @@ def local_seeds(area: Area, k_active: int, m: int, bucket_w: float, drag: float,
         py = area.py + a * uy + c * ny_
         seeds.append(PhaseSeed(px, py, area.psi, eta0 if j < k_active else 0.0, area.base, truck, float(surf(px, py))))
     return seeds
+
+
+def shared_truck_stand(bases: list[tuple[float, float]], trucks: list[tuple[float, float]], reach: float,
+                       clear: float) -> tuple[float, float]:
+    """Where the global guess parks the truck: it stays put after phase 0 (``Shape.hold_truck``),
+    so it must be in dump reach of every base the guess visits and clear of each. The candidates
+    are the areas' own stands and their mean; the one with the least total shortfall (first on a
+    tie). docs/DESIGN.md §11: from the first area's stand alone, later bases stood up to 11 m
+    away (a violation of 73 m² at the start), and IPOPT spent its first ~60 iterations there."""
+    mean = (sum(t[0] for t in trucks) / len(trucks), sum(t[1] for t in trucks) / len(trucks))
+
+    def shortfall(t: tuple[float, float]) -> float:
+        d = [math.hypot(b[0] - t[0], b[1] - t[1]) for b in bases]
+        return sum(max(0.0, x - reach) + max(0.0, clear - x) for x in d)
+
+    return min([mean] + list(trucks), key=shortfall)
