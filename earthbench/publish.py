@@ -232,7 +232,8 @@ class Stamp:
         return [
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
-            *([f"scenarios: seeds {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
+            *([f"scenarios: {'seeds' if any(c in self.seeds for c in '–,') else 'seed'} {self.seeds} of the suite only "
+               "(every rate and median is over those)"] if self.seeds else []),
             f"project commit: {commits or 'unknown'}",
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",

@@ -95,8 +95,8 @@ def test_board_limited_to_some_seeds(db, tmp_path, capsys):
     whole = res.summary[(res.summary["scope"] == "suite") if "scope" in res.summary else slice(None)]
     assert set(whole["of"]) == {2}  # a planner run on seed 0 alone is not charged the other seeds
     md = (res.out / "README.md").read_text()
-    assert "scenarios: seeds 0 of the suite only" in md
-    assert "scenarios: seeds" not in (publish(db, tmp_path / "all", figures=False).out / "README.md").read_text()
+    assert "scenarios: seed 0 of the suite only" in md
+    assert "scenarios: seed" not in (publish(db, tmp_path / "all", figures=False).out / "README.md").read_text()
     assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "cli"), "--no-figures", "--seeds", "1-2"]) == 0
     assert "16 run(s)" in capsys.readouterr().err
     assert "scenarios: seeds 1–2 of the suite only" in (tmp_path / "cli" / "README.md").read_text()
