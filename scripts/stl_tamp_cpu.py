@@ -11,40 +11,26 @@ field of stl-tamp's ``Config``.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import statistics
 import sys
 import time
 
+from earthbench.cli import parse_config
 from earthbench.referee import judge
-from earthbench.suite import load_suite
+from earthbench.suite import load_suite, parse_seed_range
 from earthbench_metrics.run import core_metrics
 from earthbench_planners.stl_tamp import StlTampPlanner
-from earthbench_planners.stl_tamp.planner import Config
-
-
-def overrides(args: list[str]) -> dict:
-    fields = {f.name for f in dataclasses.fields(Config)}
-    out = {}
-    for kv in args:
-        k, _, v = kv.partition("=")
-        if k not in fields:
-            raise SystemExit(f"unknown Config field {k!r}")
-        t = type(getattr(Config(), k))
-        out[k] = (v.lower() in ("1", "true", "yes")) if t is bool else t(v)
-    return out
 
 
 def main(argv: list[str]) -> None:
-    a, _, b = argv[0].partition("-")
-    target, kw = float(argv[1]), overrides(argv[2:])
-    scs = [sc for sc in load_suite("paper-extensive").scenarios if abs(sc.task.target_volume - target) < 1e-6]
+    target, kw = float(argv[1]), parse_config(argv[2:], StlTampPlanner)
     rows = []
-    for seed in range(int(a), int(b or a) + 1):
-        sc = scs[seed]
+    for sc in load_suite("paper-extensive").select(parse_seed_range(argv[0])):
+        if abs(sc.task.target_volume - target) > 1e-6:
+            continue
         c0 = time.process_time()
-        plan = StlTampPlanner(Config(**kw)).plan(sc)
+        plan = StlTampPlanner(**kw).plan(sc)
         cpu = time.process_time() - c0
         verdict = judge(sc, plan)
         info, g = plan.info, plan.info["global"]

@@ -14,6 +14,7 @@ import signal
 import sys
 
 from ..errors import EarthbenchError
+from ._common import parse_config  # public: scripts convert KEY=VALUE settings as --config does
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
 COMMANDS = [
