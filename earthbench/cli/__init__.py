@@ -14,7 +14,7 @@ import signal
 import sys
 
 from ..errors import EarthbenchError
-from ._common import parse_config  # public: scripts convert KEY=VALUE settings as --config does
+from ._common import parse_config as parse_config  # public: scripts convert KEY=VALUE settings as --config does
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
 COMMANDS = [
