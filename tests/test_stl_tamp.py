@@ -77,13 +77,16 @@ def test_inverse_kinematics_reaches_the_point():
 
 
 def test_local_solve_meets_the_volume_and_its_specs(local_setup):
-    # three buckets seeded for three buckets' volume, at the planner's η guess
-    sol = _solve(local_setup, 0.84, k_active=3, eta0=Config().eta_init)
+    # an area's usual local problem, posed as the planner poses it: its V_max as the target,
+    # seeded with as many digs as that takes at the estimated fill, at the planner's η guess
+    c = Config()
+    k = min(c.m_local, math.ceil(c.area_vmax / (0.28 * c.fill_estimate)))
+    sol = _solve(local_setup, c.area_vmax, k_active=k, eta0=c.eta_init)
     assert sol.success, sol.status
-    assert float(np.sum(sol.V)) == pytest.approx(0.84, abs=0.02)
+    assert float(np.sum(sol.V)) == pytest.approx(c.area_vmax, abs=0.02)
     assert np.all(sol.V <= 0.28 + 1e-6)
     sc, pl, nlp, st, area, surf = local_setup
-    ev = nlp.evaluate(sol.info["w"], nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=0.84,
+    ev = nlp.evaluate(sol.info["w"], nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=c.area_vmax,
                                                 alpha=(0, 0, 0, 0, 0), goal=area.base, floor=0.0))
     # exact (not smoothed) robustness of the safety spec holds on the solution; the task spec
     # is smooth inside its disjunction/finally and may miss the exact value by its log(N)/β bound
@@ -99,7 +102,7 @@ def test_local_solve_meets_the_volume_and_its_specs(local_setup):
 
 @pytest.mark.parametrize("buckets", [2, 3, 4])
 def test_paper_switch_digs_the_minimum_number_of_buckets(buckets):
-    """Fig. 6 on the ``paper-switch`` set-up (one 2.0 m × 1.75 m local area): of the m_l = 5
+    """Fig. 6 on the ``paper-switch`` set-up (one 2.0 m × 1.75 m local area): of the m_l = 4
     phases it may use, the plan digs exactly as many as the target has buckets, and the referee
     measures the target. The switch variables select at least those phases; η acts as a depth
     fraction, so the NLP may spread the volume over one more partial phase, which the conversion
@@ -191,9 +194,15 @@ def test_min_distance_is_continuous():
     assert min_distance(a, b) == pytest.approx(0.5)
 
 
-def test_config_is_a_frozen_dataclass_with_paper_defaults():
+def test_config_is_a_frozen_dataclass_with_paper_defaults_but_the_documented_horizon():
+    """The paper's area (S_l = 5 buckets, V_max = 1 m³); the local horizon is the documented
+    departure (m_l = 4, n = 8; docs/DESIGN.md §11), and ``separate`` keeps the paper's 5 and 10."""
+    from earthbench_planners.separate.planner import Config as SeparateConfig
+
     c = Config()
-    assert (c.m_local, c.n_steps, c.area_vmax, c.area_buckets) == (5, 10, 1.0, 5.0)
+    assert (c.m_local, c.n_steps, c.contact_step, c.area_vmax, c.area_buckets) == (4, 8, 3, 1.0, 5.0)
+    s = SeparateConfig()
+    assert (s.m_local, s.n_steps, s.contact_step) == (5, 10, 4)
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.m_local = 3  # type: ignore[misc]
 

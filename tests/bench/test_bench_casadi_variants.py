@@ -1,6 +1,6 @@
 """What makes the STL-TAMP local solve fast: CasADi/IPOPT variants side by side on one problem.
 
-The problem is ``test_bench_stl_tamp``'s local solve (seed 0: m = 5 phases, n = 10 steps,
+The problem is ``test_bench_stl_tamp``'s local solve (seed 0: m = 4 phases, n = 8 steps,
 1 m³ in the richest area of a 30-basis map), solved from the IK initial guess by
 
 - ``sx-exact``: what the planner uses — SX graphs, exact Hessian;

@@ -1,6 +1,6 @@
 """What a case process pays for the STL-TAMP NLPs before IPOPT starts, and one Hessian evaluation.
 
-- ``test_build``: the local NLP (5 phases, 11 × 11 lattice) and the global one of
+- ``test_build``: the local NLP (4 phases of 8 steps, 11 × 11 lattice) and the global one of
   ``paper-extensive`` at 7 m³ (8 phases, 9 × 15 lattice), each built from scratch (the disk
   cache off), built and stored (a miss), and loaded (a hit), IPOPT's solver included;
   ``extra_info`` has the SX instruction counts of the Hessian of the Lagrangian and of the

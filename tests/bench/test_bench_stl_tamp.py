@@ -1,4 +1,4 @@
-"""Speed of the STL-TAMP pieces: one local solve (m = 5 phases, n = 10 steps) and the surface fit.
+"""Speed of the STL-TAMP pieces: one local solve (the planner's shape: m = 4 phases, n = 8 steps) and the surface fit.
 
 Run with ``pytest tests/bench/test_bench_stl_tamp.py --benchmark-only``; reported, not asserted.
 The local NLP is built once (as in a run) and each round solves it from the IK initial guess.
