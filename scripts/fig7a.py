@@ -7,9 +7,11 @@ more results databases, draws them with the leaderboard's own figure code
 (:func:`earthbench.publish.volume_time_figure`) and prints the numbers behind it: per method the
 runs, valid plans, mean loaded volume and makespan, median time per m³, the least-squares slope
 of makespan over volume, and — on the paper-extensive scenarios both planners solved — the
-median ratio of ``separate``'s time per m³ to ``stl-tamp``'s.
+median ratio of ``separate``'s time per m³ to ``stl-tamp``'s. With ``--placed``, the same ratio
+for ``separate`` run with ``stl-tamp``'s truck placement (``leaderboard/fig7a/separate-placed.toml``),
+kept out of the figure: it isolates what the task planning earns from where the truck stands.
 
-    python scripts/fig7a.py --db earthbench.db --db separate-sweep.db --out fig7a.png
+    python scripts/fig7a.py --db earthbench.db --db separate-sweep.db --out fig7a.png [--placed placed.db]
 """
 
 from __future__ import annotations
@@ -64,26 +66,49 @@ def table(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def paired_ratio(runs: pd.DataFrame) -> tuple[int, float]:
+def time_per_m3(runs: pd.DataFrame, planner: str) -> pd.Series:
+    """A planner's valid runs on the paper-extensive maps: time per m³ by scenario digest."""
     pe = runs[on_paper_extensive(runs) & (runs["reason"] == "ok")]
-    a = pe[pe["planner"] == "separate"].set_index("scenario_digest")["time_per_m3"]
-    b = pe[pe["planner"] == "stl-tamp"].set_index("scenario_digest")["time_per_m3"]
+    return pe[pe["planner"] == planner].set_index("scenario_digest")["time_per_m3"]
+
+
+def paired_ratio(a: pd.Series, b: pd.Series) -> tuple[int, float, int]:
+    """On the scenarios both solved: their number, the median of a / b, and how often a > b."""
     both = a.index.intersection(b.index)
-    return len(both), float(np.median(a[both] / b[both])) if len(both) else float("nan")
+    ratio = a[both] / b[both]
+    return len(both), float(np.median(ratio)) if len(both) else float("nan"), int((ratio > 1).sum())
+
+
+def placed_runs(db: str) -> pd.DataFrame:
+    """``separate``'s latest runs in ``db`` (the ``separate-placed`` suite: stl-tamp's truck placement)."""
+    runs = load_runs(db)
+    runs = runs[runs["planner"] == "separate"]
+    if runs.empty:
+        return runs
+    latest = max(runs["planner_version"].unique(), key=version_key)
+    return runs[runs["planner_version"] == latest]
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", action="append", required=True, help="results database (repeatable)")
     p.add_argument("--out", default="fig7a.png", help="figure file (default: fig7a.png)")
+    p.add_argument("--placed", help="database of separate run with stl-tamp's truck placement (separate-placed.toml)")
     args = p.parse_args(argv)
     runs = collect(args.db)
     fig = volume_time_figure(runs, "STL-TAMP vs Separate (paper Fig. 7a), paper-extensive maps")
     fig.savefig(args.out, dpi=130)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.2f}".format):
         print(table(runs).to_string(index=False))
-    n, r = paired_ratio(runs)
+    stl = time_per_m3(runs, "stl-tamp")
+    n, r, _ = paired_ratio(time_per_m3(runs, "separate"), stl)
     print(f"paired paper-extensive scenarios: {n}; median time-per-m³ ratio separate / stl-tamp: {r:.3f}")
+    if args.placed:
+        placed = placed_runs(args.placed)
+        n, r, slower = paired_ratio(time_per_m3(placed, "separate"), stl)
+        version = placed["planner_version"].iloc[0] if len(placed) else "-"
+        print(f"with stl-tamp's truck placement (separate {version}, {args.placed}): paired scenarios {n}; "
+              f"median ratio separate / stl-tamp {r:.3f}; separate slower on {slower}")
     print(f"figure: {args.out}")
     return 0
 
