@@ -220,7 +220,7 @@ class Stamp:
     solve_machines: list[str] = field(default_factory=list)  #: per planner: the machines its solve times come from
     spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
     n_machines: int = 1
-    seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``)
+    seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``): "seed 0", "seeds 0–2"
 
     @property
     def mixed(self) -> bool:
@@ -232,8 +232,7 @@ class Stamp:
         return [
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
-            *([f"scenarios: {'seeds' if any(c in self.seeds for c in '–,') else 'seed'} {self.seeds} of the suite only "
-               "(every rate and median is over those)"] if self.seeds else []),
+            *([f"scenarios: {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
             f"project commit: {commits or 'unknown'}",
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
@@ -811,7 +810,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         if seeds is not None:
             runs = runs[runs["seed"].isin(seeds)].reset_index(drop=True)
             members = members[members["seed"].isin(seeds)].reset_index(drop=True)
-            seed_note = seed_list(seeds)
+            seed_note = f"{'seed' if len(set(seeds)) == 1 else 'seeds'} {seed_list(seeds)}"
         fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
         renderer = Renderer(workers) if figures else None
         latest = latest_versions(runs)

@@ -47,11 +47,15 @@ def collect(dbs: list[str]) -> pd.DataFrame:
         runs = load_runs(db)
         keep = runs["suite"].isin(SUITES) | on_paper_extensive(runs)
         frames.append(runs[keep & runs["planner"].isin(["stl-tamp", "separate"])])
-    runs = pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"])
-    latest = runs.groupby("planner")["planner_version"].agg(lambda v: max(v.unique(), key=version_key))
-    runs = runs[runs["planner_version"] == runs["planner"].map(latest)].copy()  # each planner's latest, as ranked
+    runs = latest_versions(pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"]))
     runs["solver"] = runs.apply(label, axis=1)
     return runs
+
+
+def latest_versions(runs: pd.DataFrame) -> pd.DataFrame:
+    """Each planner's runs of its latest version, as the leaderboard ranks."""
+    latest = runs.groupby("planner")["planner_version"].agg(lambda v: max(v.unique(), key=version_key))
+    return runs[runs["planner_version"] == runs["planner"].map(latest)].copy()
 
 
 def table(runs: pd.DataFrame) -> pd.DataFrame:
@@ -82,11 +86,7 @@ def paired_ratio(a: pd.Series, b: pd.Series) -> tuple[int, float, int]:
 def placed_runs(db: str) -> pd.DataFrame:
     """``separate``'s latest runs in ``db`` (the ``separate-placed`` suite: stl-tamp's truck placement)."""
     runs = load_runs(db)
-    runs = runs[runs["planner"] == "separate"]
-    if runs.empty:
-        return runs
-    latest = max(runs["planner_version"].unique(), key=version_key)
-    return runs[runs["planner_version"] == latest]
+    return latest_versions(runs[runs["planner"] == "separate"])
 
 
 def main(argv: list[str] | None = None) -> int:
