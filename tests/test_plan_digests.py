@@ -4,6 +4,13 @@ byte-identical to the one recorded in ``tests/golden/plan_digests.json``.
 A refactor must leave every plan as it was; a change that is meant to move plans bumps the
 planner's version, updates the golden file (the command is in the module's ``__main__``), and
 says in its commit which plans moved and why — the published leaderboards then need a rerun.
+
+Where the golden file holds a list, each entry is the digest of the same code on another CPU
+model: the wheel-loader planners' plans on some ``pile`` scenarios differ between the AMD EPYC
+and the Intel Xeon these were run on (stl-tamp's do not: it rounds what it hands IPOPT, see
+docs/DESIGN.md §11). A list is a known irreproducibility of that planner, not a tolerance: a
+refactor still has to give one of the recorded plans, and ``write_golden`` records only the
+machine it runs on.
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ def scenarios():
 def test_plan_is_byte_identical(scenarios, planner, scenario_id):
     expected = json.loads(GOLDEN.read_text())["plans"][planner][scenario_id]
     plan = PLANNERS.get(planner)().plan(scenarios[scenario_id])
-    assert plan_digest(plan) == expected
+    assert plan_digest(plan) in ([expected] if isinstance(expected, str) else expected)
 
 
 def test_every_built_in_planner_is_pinned():
