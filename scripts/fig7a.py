@@ -47,13 +47,14 @@ def collect(dbs: list[str]) -> pd.DataFrame:
         runs = load_runs(db)
         keep = runs["suite"].isin(SUITES) | on_paper_extensive(runs)
         frames.append(runs[keep & runs["planner"].isin(["stl-tamp", "separate"])])
-    runs = latest_versions(pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"]))
+    runs = latest_version_runs(pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "config_hash"]))
     runs["solver"] = runs.apply(label, axis=1)
     return runs
 
 
-def latest_versions(runs: pd.DataFrame) -> pd.DataFrame:
-    """Each planner's runs of its latest version, as the leaderboard ranks."""
+def latest_version_runs(runs: pd.DataFrame) -> pd.DataFrame:
+    """Each planner's runs of its latest version over every suite given (the figure joins
+    several stores and suites; :func:`earthbench.aggregate.latest_versions` picks per suite)."""
     latest = runs.groupby("planner")["planner_version"].agg(lambda v: max(v.unique(), key=version_key))
     return runs[runs["planner_version"] == runs["planner"].map(latest)].copy()
 
@@ -86,7 +87,7 @@ def paired_ratio(a: pd.Series, b: pd.Series) -> tuple[int, float, int]:
 def placed_runs(db: str) -> pd.DataFrame:
     """``separate``'s latest runs in ``db`` (the ``separate-placed`` suite: stl-tamp's truck placement)."""
     runs = load_runs(db)
-    return latest_versions(runs[runs["planner"] == "separate"])
+    return latest_version_runs(runs[runs["planner"] == "separate"])
 
 
 def main(argv: list[str] | None = None) -> int:
