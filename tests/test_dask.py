@@ -136,6 +136,22 @@ def test_a_worker_killed_mid_case_still_stores_every_case_exactly_once(cluster, 
     client.wait_for_workers(2, timeout=120)  # the nanny restarted the worker
 
 
+def test_a_case_on_a_worker_runs_in_the_same_environment_as_locally(cluster, tmp_path):
+    """The nanny tunes its worker's allocator; the case must not inherit that (nor be slower for it)."""
+    lc, client = cluster
+    assert any("MALLOC_TRIM_THRESHOLD_" in env for env in client.run(lambda: dict(os.environ)).values())
+    load_plugin_file(FAULTY)
+    suite = nap_suite(1)
+    cases, _ = build_cases(suite, ["t-probe"], plugins=[FAULTY])
+    with Store(tmp_path / "e.db") as store:
+        store.register_suite(suite)
+        report = run_cases(cases, store, DaskExecutor(client))
+    assert report.counts == {"ok": 1}
+    (row,) = stored(tmp_path / "e.db").values()
+    info = json.loads(row["plan"])["info"]
+    assert info["allocator"] == [] and info["omp"] == str(len(info["affinity"]))  # the slot's thread cap
+
+
 def _case_processes(pids: dict[str, int]) -> list[psutil.Process]:
     out = []
     for pid in pids.values():

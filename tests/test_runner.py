@@ -64,12 +64,14 @@ def test_every_fault_gets_its_reason_and_the_rest_of_the_suite_runs(tmp_path):
     assert row.loc["t-fast", "volume_ratio"] == 0.0 and row.loc["t-fast", "valid"]
 
 
-def test_case_runs_inside_its_fences(tmp_path):
+def test_case_runs_inside_its_fences(tmp_path, monkeypatch):
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")  # what a Dask nanny gives its worker
     suite = tiny_suite(memory_mb=1500)
     _, df = run_all(suite, ["t-probe"], tmp_path / "p.db")
     with Store(tmp_path / "p.db") as store:
         info = json.loads(store.plan_json(int(df.id[0])))["info"]
     assert info["omp"] == "2" and info["openblas"] == "2"
+    assert info["allocator"] == []
     assert info["rlimit_as"] == 1500 * 1024 * 1024
     assert info["own_group"]
     assert set(info["affinity"]) <= set(os.sched_getaffinity(0))

@@ -97,7 +97,8 @@ class Exits(Planner):
 
 
 class Probe(Planner):
-    """Reports the fences it runs inside: affinity, thread caps, memory limit, process group."""
+    """Reports the fences it runs inside: affinity, thread caps, allocator settings, memory limit,
+    process group."""
 
     name = "t-probe"
 
@@ -106,6 +107,7 @@ class Probe(Planner):
             "affinity": sorted(os.sched_getaffinity(0)),
             "omp": os.environ.get("OMP_NUM_THREADS"),
             "openblas": os.environ.get("OPENBLAS_NUM_THREADS"),
+            "allocator": sorted(k for k in os.environ if k.startswith(("MALLOC_", "GLIBC_TUNABLES"))),
             "rlimit_as": resource.getrlimit(resource.RLIMIT_AS)[0],
             "own_group": os.getpgid(0) == os.getppid() == os.getsid(0),  # the warden leads its own session
         })
