@@ -30,7 +30,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.cut import apply_cut, cut_along, path_cells, path_window
+from earthbench.cut import apply_cut, cut_along, cut_heights, lowered, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
@@ -39,6 +39,7 @@ from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
+PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
 
 
 @dataclass(frozen=True)
@@ -228,39 +229,39 @@ class _Greedy:
         order = np.argsort(-np.minimum(est, want * 1.05))[:6]
         best = None
         track_level = self.station()[0]
+        e = self.exc
         for k in order:
             contact = (float(p[k, 0]), float(p[k, 1]))
-            if self.undermines(contact, float(h[k]), float(level[k]), track_level):
+            cells = path_cells(self.terrain, self.z.shape, contact, float(h[k]), e.bucket_width, e.max_drag_length)
+            if self.undermines(float(level[k]), track_level, cells):
                 continue  # the referee's undermining rule
-            vol = self.trial_cut(contact, float(h[k]), float(level[k]))
+            vol = self.trial_cut(contact, float(h[k]), float(level[k]), cells)
             if best is None or vol > best[0] + 1e-9:
                 best = (vol, (float(p[k, 0]), float(p[k, 1])), float(h[k]), float(depth[k]))
         return best
 
-    def trial_cut(self, contact: tuple[float, float], heading: float, level: float) -> float:
-        """The referee's volume for one stroke: cut on the planner's grid, then the few cells
-        around the footprint put back, so confirming a candidate never copies the map."""
+    def trial_cut(self, contact: tuple[float, float], heading: float, level: float, cells: PathCells) -> float:
+        """The referee's volume for one stroke (``cells``: its :func:`path_cells`), the grid
+        left as it is."""
         e = self.exc
-        rows, cols = self._window(contact, heading)
-        saved = self.z[rows, cols].copy()
-        vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
-        self.z[rows, cols] = saved
-        return vol
+        return cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level,
+                         e.bucket_capacity, cells, apply=False).volume
 
-    def undermines(self, contact: tuple[float, float], heading: float, level: float, track_level: float) -> bool:
-        """Whether the stroke breaks the referee's undermining rule (a trial cut, put back)."""
+    def undermines(self, level: float, track_level: float, cells: PathCells) -> bool:
+        """Whether the stroke along ``cells`` (its :func:`path_cells`) breaks the referee's
+        undermining rule: its cut cells lowered on the grid for the check, then put back."""
         if level >= track_level:
             return False  # nothing is cut below the tracks' ground
         e = self.exc
-        rows, cols = self._window(contact, heading)
-        saved = self.z[rows, cols].copy()
-        cells = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
-        jj, ii, _ = cells
+        jj, ii, dist = cells
         before = self.z[jj, ii]
-        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity, cells)
-        cut = self.z[jj, ii] < before
-        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
-        self.z[rows, cols] = saved
+        _, full, part = cut_heights(before, dist, level, e.bucket_capacity, self.terrain.resolution * self.terrain.resolution)
+        n = full + (part > 0)
+        after = lowered(before, level, full, part)
+        cut = after < before[:n]
+        self.z[jj[:n], ii[:n]] = after
+        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[:n][cut], ii[:n][cut])
+        self.z[jj[:n], ii[:n]] = before[:n]
         return excess > -ABS_TOL
 
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
@@ -333,6 +334,16 @@ class _Greedy:
         w = np.where(excess > 1e-3, excess * hm.cell_area, 0.0)
         prefix = np.zeros((w.shape[0], nx + 1))
         np.cumsum(w, axis=1, out=prefix[:, 1:])
+        def span(bx: np.ndarray, jc: np.ndarray, half: np.ndarray, closed: bool) -> np.ndarray:
+            """Sum of each row's cells with centre within ``half`` of bx (closed or open)."""
+            lo = (bx - half - x0) / r - 0.5
+            hi = (bx + half - x0) / r - 0.5
+            i_lo = np.ceil(lo) if closed else np.floor(lo) + 1
+            i_hi = np.floor(hi) if closed else np.ceil(hi) - 1
+            i_lo = np.clip(i_lo, 0, nx).astype(int)
+            i_hi = np.clip(i_hi + 1, 0, nx).astype(int)  # exclusive end
+            return np.where(i_hi > i_lo, prefix[jc, i_hi] - prefix[jc, i_lo], 0.0)
+
         out = np.zeros(len(bases))
         for start in range(0, len(bases), _BASE_BLOCK):
             block = bases[start:start + _BASE_BLOCK]
@@ -342,19 +353,8 @@ class _Greedy:
             dy2 = (y0 + (j + 0.5) * r - by) ** 2
             rows = (j >= 0) & (j < ny) & (dy2 <= r_out**2)
             jc = np.clip(j - band.start, 0, w.shape[0] - 1)
-
-            def span(half: np.ndarray, closed: bool) -> np.ndarray:
-                """Sum of the row's cells with centre within ``half`` of bx (closed or open)."""
-                lo = (bx - half - x0) / r - 0.5
-                hi = (bx + half - x0) / r - 0.5
-                i_lo = np.ceil(lo) if closed else np.floor(lo) + 1
-                i_hi = np.floor(hi) if closed else np.ceil(hi) - 1
-                i_lo = np.clip(i_lo, 0, nx).astype(int)
-                i_hi = np.clip(i_hi + 1, 0, nx).astype(int)  # exclusive end
-                return np.where(i_hi > i_lo, prefix[jc, i_hi] - prefix[jc, i_lo], 0.0)
-
-            outer = span(np.sqrt(np.maximum(r_out**2 - dy2, 0.0)), closed=True)
-            inner = np.where(dy2 < r_in**2, span(np.sqrt(np.maximum(r_in**2 - dy2, 0.0)), closed=False), 0.0)
+            outer = span(bx, jc, np.sqrt(np.maximum(r_out**2 - dy2, 0.0)), closed=True)
+            inner = np.where(dy2 < r_in**2, span(bx, jc, np.sqrt(np.maximum(r_in**2 - dy2, 0.0)), closed=False), 0.0)
             out[start:start + len(block)] = np.where(rows, outer - inner, 0.0).sum(axis=1)
         return out
 
