@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from earthbench import judge
-from earthbench.cut import apply_cut
+from earthbench.cut import apply_cut, path_cells
 from earthbench.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy
@@ -95,7 +95,8 @@ def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
         on_copy = apply_cut(
             g.terrain, before.copy(), contact, float(h[k]), e.bucket_width, e.max_drag_length, float(level[k]), e.bucket_capacity
         )
-        assert g.trial_cut(contact, float(h[k]), float(level[k])) == on_copy
+        cells = path_cells(g.terrain, g.z.shape, contact, float(h[k]), e.bucket_width, e.max_drag_length)
+        assert g.trial_cut(contact, float(h[k]), float(level[k]), cells) == on_copy
         assert np.array_equal(g.z, before)
 
 
