@@ -15,10 +15,12 @@ The stations it has visited are remembered from step to step.
 
 Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array
 operations (heights looked up for all contacts at once; only the strokes whose cut level or
-points a dig has changed estimated again; trial cuts made on the planner's grid and put back
-rather than on a copy of the map), and a relocation scores the stations from row-wise prefix
-sums of the material, one interval sum per grid row a station reaches, again only the stations
-within reach of what was dug since the last relocation.
+points a dig has changed estimated again; a stroke's path cells found once, its trial cut
+measured without applying it and the undermining check lowering only its cut cells and putting
+them back, never a copy of the map), and a relocation scores the stations, in blocks of 128,
+from row-wise prefix sums of the material, one interval sum per grid row a station reaches,
+again only the stations within reach of what was dug since the last relocation; the truck's
+way to a station is tested before the tilt, as most rejected stations fail the truck.
 """
 
 from __future__ import annotations
