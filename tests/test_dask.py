@@ -37,6 +37,16 @@ def nap_suite(n: int):
     return parse_suite(tiny_suite_toml("nap", wall_s=30, memory_mb=2048, seeds=f"0-{n - 1}"))
 
 
+def run_one_case_on(client, plugin: str, planner: str, db: Path):
+    """One seed of the nap suite by ``planner`` (from the plugin file) through the cluster."""
+    load_plugin_file(plugin)
+    suite = nap_suite(1)
+    cases, _ = build_cases(suite, [planner], plugins=[plugin])
+    with Store(db) as store:
+        store.register_suite(suite)
+        return run_cases(cases, store, DaskExecutor(client))
+
+
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     """Two worker processes with one slot each; a lost task is tried on at most two workers."""
@@ -140,12 +150,7 @@ def test_a_case_on_a_worker_runs_in_the_same_environment_as_locally(cluster, tmp
     """The nanny tunes its worker's allocator; the case must not inherit that (nor be slower for it)."""
     lc, client = cluster
     assert any("MALLOC_TRIM_THRESHOLD_" in env for env in client.run(lambda: dict(os.environ)).values())
-    load_plugin_file(FAULTY)
-    suite = nap_suite(1)
-    cases, _ = build_cases(suite, ["t-probe"], plugins=[FAULTY])
-    with Store(tmp_path / "e.db") as store:
-        store.register_suite(suite)
-        report = run_cases(cases, store, DaskExecutor(client))
+    report = run_one_case_on(client, FAULTY, "t-probe", tmp_path / "e.db")
     assert report.counts == {"ok": 1}
     (row,) = stored(tmp_path / "e.db").values()
     info = json.loads(row["plan"])["info"]
@@ -219,12 +224,7 @@ def test_cases_cancelled_by_the_cluster_are_an_error_not_a_silent_gap(cluster, t
 
 def test_a_case_that_keeps_killing_its_worker_is_stored_as_crashed(cluster, tmp_path):
     lc, client = cluster
-    load_plugin_file(DASK_PLANNERS)
-    suite = nap_suite(1)
-    cases, _ = build_cases(suite, ["t-kill-worker"], plugins=[DASK_PLANNERS])
-    with Store(tmp_path / "c.db") as store:
-        store.register_suite(suite)
-        report = run_cases(cases, store, DaskExecutor(client))
+    report = run_one_case_on(client, DASK_PLANNERS, "t-kill-worker", tmp_path / "c.db")
     assert report.counts == {"crashed": 1} and report.stored == 1
     rows = {r["planner"]: r for r in stored(tmp_path / "c.db").values()}
     assert rows["t-kill-worker"]["reason"] == "crashed" and "died" in rows["t-kill-worker"]["error"]
