@@ -9,6 +9,8 @@ from hypothesis import strategies as st
 
 from earthbench import judge
 from earthbench.cut import apply_cut, path_cells
+from earthbench.motion import ABS_TOL
+from earthbench.referee.backhoe import undermining_excess
 from earthbench.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy
@@ -98,6 +100,27 @@ def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
         cells = path_cells(g.terrain, g.z.shape, contact, float(h[k]), e.bucket_width, e.max_drag_length)
         assert g.trial_cut(contact, float(h[k]), float(level[k]), cells) == on_copy
         assert np.array_equal(g.z, before)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_undermining_check_agrees_with_the_referees_on_the_cut_map(seed):
+    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    g.base = g.base.__class__(6.0, 3.0, 0.0)
+    p, h, _, level, _ = g.candidates()
+    track, e, before = g.station()[0], g.exc, g.z.copy()
+    verdicts = []
+    for k in range(len(p)):
+        contact = (float(p[k, 0]), float(p[k, 1]))
+        cells = path_cells(g.terrain, g.z.shape, contact, float(h[k]), e.bucket_width, e.max_drag_length)
+        for cut_level in (float(level[k]), track - 0.5, track - 1.0):  # deeper cuts to reach the tracks
+            cut = before.copy()
+            apply_cut(g.terrain, cut, contact, float(h[k]), e.bucket_width, e.max_drag_length, cut_level, e.bucket_capacity)
+            rows, cols = np.nonzero(cut < before)
+            referee = cut_level < track and undermining_excess(g.terrain, cut, e, g.base, track, rows, cols) > -ABS_TOL
+            assert g.undermines(cut_level, track, cells) == referee
+            assert np.array_equal(g.z, before)
+            verdicts.append(referee)
+    assert any(verdicts) and not all(verdicts)
 
 
 @pytest.mark.parametrize("planner", ["greedy", "singh-cannon-backhoe"])
