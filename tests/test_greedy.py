@@ -117,7 +117,7 @@ def test_the_undermining_check_agrees_with_the_referees_on_the_cut_map(seed):
             apply_cut(g.terrain, cut, contact, float(h[k]), e.bucket_width, e.max_drag_length, cut_level, e.bucket_capacity)
             rows, cols = np.nonzero(cut < before)
             referee = cut_level < track and undermining_excess(g.terrain, cut, e, g.base, track, rows, cols) > -ABS_TOL
-            assert g.undermines(cut_level, track, cells) == referee
+            assert g.undermines(contact, float(h[k]), cut_level, track, cells) == referee
             assert np.array_equal(g.z, before)
             verdicts.append(referee)
     assert any(verdicts) and not all(verdicts)

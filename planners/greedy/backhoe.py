@@ -16,8 +16,8 @@ The stations it has visited are remembered from step to step.
 Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array
 operations (heights looked up for all contacts at once; only the strokes whose cut level or
 points a dig has changed estimated again; a stroke's path cells found once, its trial cut
-measured without applying it and the undermining check lowering only its cut cells and putting
-them back, never a copy of the map), and a relocation scores the stations, in blocks of 128,
+measured without applying it and the undermining check applying it and putting the path's
+cells back, never a copy of the map), and a relocation scores the stations, in blocks of 128,
 from row-wise prefix sums of the material, one interval sum per grid row a station reaches,
 again only the stations within reach of what was dug since the last relocation; the truck's
 way to a station is tested before the tilt, as most rejected stations fail the truck.
@@ -32,7 +32,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from earthbench.cut import apply_cut, cut_along, cut_heights, lowered, path_cells, path_window
+from earthbench.cut import apply_cut, cut_along, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
@@ -235,7 +235,7 @@ class _Greedy:
         for k in order:
             contact = (float(p[k, 0]), float(p[k, 1]))
             cells = path_cells(self.terrain, self.z.shape, contact, float(h[k]), e.bucket_width, e.max_drag_length)
-            if self.undermines(float(level[k]), track_level, cells):
+            if self.undermines(contact, float(h[k]), float(level[k]), track_level, cells):
                 continue  # the referee's undermining rule
             vol = self.trial_cut(contact, float(h[k]), float(level[k]), cells)
             if best is None or vol > best[0] + 1e-9:
@@ -249,21 +249,19 @@ class _Greedy:
         return cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level,
                          e.bucket_capacity, cells, apply=False).volume
 
-    def undermines(self, level: float, track_level: float, cells: PathCells) -> bool:
+    def undermines(self, contact: tuple[float, float], heading: float, level: float, track_level: float,
+                   cells: PathCells) -> bool:
         """Whether the stroke along ``cells`` (its :func:`path_cells`) breaks the referee's
-        undermining rule: its cut cells lowered on the grid for the check, then put back."""
+        undermining rule: the cut applied to the grid for the check, then its path put back."""
         if level >= track_level:
             return False  # nothing is cut below the tracks' ground
         e = self.exc
-        jj, ii, dist = cells
+        jj, ii, _ = cells
         before = self.z[jj, ii]
-        _, full, part = cut_heights(before, dist, level, e.bucket_capacity, self.terrain.resolution * self.terrain.resolution)
-        n = full + (part > 0)
-        after = lowered(before, level, full, part)
-        cut = after < before[:n]
-        self.z[jj[:n], ii[:n]] = after
-        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[:n][cut], ii[:n][cut])
-        self.z[jj[:n], ii[:n]] = before[:n]
+        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity, cells)
+        cut = self.z[jj, ii] < before
+        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
+        self.z[jj, ii] = before
         return excess > -ABS_TOL
 
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
