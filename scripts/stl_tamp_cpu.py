@@ -2,19 +2,23 @@
 solves ended (README's stl-tamp section, docs/DESIGN.md §11).
 
     python scripts/stl_tamp_cpu.py SEEDS TARGET [key=value ...]   # e.g. 0-9 7 max_iter=150
+    python scripts/stl_tamp_cpu.py 0-9 7 --ipopt-local '{"perturb_dec_fact": 0.6}' --ipopt-global '{"mu_init": 0.1}'
 
 Plans ``paper-extensive``'s scenarios of TARGET m³ for SEEDS (``a-b``) one after another in this
 process (the first plan also pays the solvers' construction), each timed with
 ``time.process_time``; one JSON line per plan, then a summary line. ``key=value`` overrides a
-field of stl-tamp's ``Config``.
+field of stl-tamp's ``Config``; ``--ipopt-local`` and ``--ipopt-global`` (JSON objects) add IPOPT
+options to the local or the global solves, for experiments that are no setting of the planner.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import sys
 import time
+from typing import Any
 
 from earthbench.cli import parse_config
 from earthbench.referee import judge
@@ -23,14 +27,32 @@ from earthbench_metrics.run import core_metrics
 from earthbench_planners.stl_tamp import StlTampPlanner
 
 
+def with_ipopt(local_opts: dict[str, Any], global_opts: dict[str, Any]) -> type[StlTampPlanner]:
+    """stl-tamp with extra IPOPT options for its local and its global solves."""
+
+    class Planner(StlTampPlanner):
+        def _ipopt_options(self, local: bool = True) -> dict[str, Any]:
+            return {**super()._ipopt_options(local), **(local_opts if local else global_opts)}
+
+    return Planner
+
+
 def main(argv: list[str]) -> None:
-    target, kw = float(argv[1]), parse_config(argv[2:], StlTampPlanner)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("seeds")
+    ap.add_argument("target", type=float)
+    ap.add_argument("settings", nargs="*", metavar="key=value")
+    ap.add_argument("--ipopt-local", type=json.loads, default={}, metavar="JSON")
+    ap.add_argument("--ipopt-global", type=json.loads, default={}, metavar="JSON")
+    args = ap.parse_args(argv)
+    target, kw = args.target, parse_config(args.settings, StlTampPlanner)
+    planner = with_ipopt(args.ipopt_local, args.ipopt_global) if args.ipopt_local or args.ipopt_global else StlTampPlanner
     rows = []
-    for sc in load_suite("paper-extensive").select(parse_seed_range(argv[0])):
+    for sc in load_suite("paper-extensive").select(parse_seed_range(args.seeds)):
         if abs(sc.task.target_volume - target) > 1e-6:
             continue
         c0 = time.process_time()
-        plan = StlTampPlanner(**kw).plan(sc)
+        plan = planner(**kw).plan(sc)
         cpu = time.process_time() - c0
         verdict = judge(sc, plan)
         info, g = plan.info, plan.info["global"]
