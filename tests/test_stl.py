@@ -93,3 +93,54 @@ def test_robustness_constraints_decompose_top_level_min():
         parts = robustness_constraints(spec, sig)
         assert len(parts) == 7
         assert min(parts) == pytest.approx(spec.rho(sig))
+
+
+def test_robustness_constraints_keep_a_top_level_constant():
+    """``G(x > 0) ∧ −1`` has robustness −1; its constraints must not allow the signal's 0.5."""
+    from earthbench_planners.stl_tamp.stl import robustness_constraints
+
+    spec = And((Globally(Predicate.gt("x", 0.0), 0, 2), Const(-1.0)))
+    sig = {"x": np.array([0.5, 2.0, 3.0])}
+    assert spec.rho(sig) == -1.0
+    assert min(robustness_constraints(spec, sig)) == -1.0
+
+
+def _formulas():
+    from hypothesis import strategies as st
+
+    windows = st.tuples(st.integers(0, 3), st.integers(0, 4)).map(lambda ab: (ab[0], ab[0] + ab[1]))
+    leaves = st.one_of(
+        st.builds(Predicate.gt, st.sampled_from(["x", "y"]), st.floats(-2, 2)),
+        st.builds(Predicate.lt, st.sampled_from(["x", "y"]), st.floats(-2, 2)),
+        st.builds(Const, st.floats(-3, 3)),
+    )
+
+    def extend(children):
+        return st.one_of(
+            st.lists(children, min_size=1, max_size=3).map(lambda xs: And(tuple(xs))),
+            st.lists(children, min_size=1, max_size=3).map(lambda xs: Or(tuple(xs))),
+            st.builds(Not, children),
+            st.builds(lambda f, w: Globally(f, *w), children, windows),
+            st.builds(lambda f, w: Finally(f, *w), children, windows),
+        )
+
+    return st.recursive(leaves, extend, max_leaves=8)
+
+
+def test_robustness_constraints_min_is_the_exact_robustness():
+    """For any formula (constants anywhere, nested ∧/G at the top), ``min_j r_j = ρ^φ`` exactly."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    from earthbench_planners.stl_tamp.stl import robustness_constraints
+
+    values = arrays(float, 40, elements=st.floats(-3, 3))
+
+    @settings(max_examples=300, deadline=None)
+    @given(_formulas(), values, values)
+    def check(spec, x, y):
+        sig = {"x": x, "y": y}
+        assert min(float(r) for r in robustness_constraints(spec, sig)) == spec.rho(sig)
+
+    check()

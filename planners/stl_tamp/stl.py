@@ -231,7 +231,8 @@ def robustness_constraints(formula: Formula, signal: Signal, k: int = 0, *, smoo
     the top level, and each constraint touches only its own steps — the smoothed minimum over
     a long horizon ties every step's variables together and makes the Hessian dense. Below the
     top-level ``∧``/``G`` (inside ``∨``, ``F``, ``¬``) the robustness is evaluated as usual,
-    smooth when ``smooth`` is given.
+    smooth when ``smooth`` is given. A constant conjunct is returned as its value (a number
+    among the expressions), so ``min_j r_j = ρ^φ`` holds for every formula.
     """
     if isinstance(formula, And):
         out: list[Any] = []
@@ -243,6 +244,6 @@ def robustness_constraints(formula: Formula, signal: Signal, k: int = 0, *, smoo
         for j in _window(signal, k, formula.a, formula.b):
             out.extend(robustness_constraints(formula.arg, signal, j, smooth=smooth))
         return out
-    if isinstance(formula, Const):
-        return []
+    # anything else, a constant conjunct included, is one constraint: min_j r_j must be ρ^φ, so
+    # a conjunct ``Const(-1)`` bounds the robustness by −1 whatever the signal
     return [formula.rho(signal, k, smooth=smooth)]
