@@ -19,7 +19,9 @@ its CSVs alike:
   with bootstrap intervals of ``time_per_target_m3`` (the primary time metric; with ``_q1`` /
   ``_q3``), ``time_per_target_m3_ratio`` (to the scenario's lower bound) and ``time_per_m3``.
 * ``solve_time_median`` (with interval) / ``_p90`` and ``solve_cpu_median``: over every run with
-  a measured solve time, failures included (a timeout's solve time is the time it was given).
+  a measured solve time, failures included (a timeout's solve time is the time it was given);
+  ``prepare_max``: the longest preparation (wall s) the runs used, NaN for a planner without one
+  (docs/DESIGN.md §6 "Preparation": paid once per machine, never in the solve times).
 * ``n_<reason>`` for each termination reason; ``cpu_models``: how many CPU models the runs
   came from (solve times from different models are not comparable).
 
@@ -62,7 +64,7 @@ SUMMARY_COLUMNS = [
     "time_per_target_m3_q3", "time_per_target_m3_ratio_median", "time_per_target_m3_ratio_lo",
     "time_per_target_m3_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
     "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "solve_time_median",
-    "solve_time_lo", "solve_time_hi", "solve_time_p90", "solve_cpu_median",
+    "solve_time_lo", "solve_time_hi", "solve_time_p90", "solve_cpu_median", "prepare_max",
     *(f"n_{r}" for r in REASONS), "n_other", "cpu_models",
 ]
 
@@ -103,6 +105,8 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
     st = st[np.isfinite(st)]
     cpu = _num(g, "solve_cpu_s")
     cpu = cpu[np.isfinite(cpu)]
+    prep = _num(g, "prepare_s")
+    prep = prep[np.isfinite(prep)]
     counts = {f"n_{r}": int((reason == r).sum()) for r in REASONS}
     n_sc = int(g["scenario_digest"].nunique())
     of = max(int(of), n_sc) if of else n_sc
@@ -135,6 +139,7 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
         "solve_time_median": st_med, "solve_time_lo": st_lo, "solve_time_hi": st_hi,
         "solve_time_p90": float(np.percentile(st, 90)) if len(st) else math.nan,
         "solve_cpu_median": float(np.median(cpu)) if len(cpu) else math.nan,
+        "prepare_max": float(prep.max()) if len(prep) else math.nan,
         **counts, "n_other": int(len(g) - sum(counts.values())),
         "cpu_models": int(g["cpu_model"].dropna().nunique()) if "cpu_model" in g else 0,
     }

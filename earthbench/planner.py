@@ -18,6 +18,7 @@ import hashlib
 import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 from .errors import PluginError
@@ -117,6 +118,29 @@ class Planner(ABC):
         elif overrides:
             config = dataclasses.replace(config, **overrides)
         self.config = config
+
+    #: The folder this configuration's preparation wrote (read only; docs/DESIGN.md §6
+    #: "Preparation"), set by the harness before the first :meth:`plan` or :meth:`step` call;
+    #: None when the planner declares no preparation or runs without one (e.g. in a script).
+    prepared: Path | None = None
+
+    def prepare(self, folder: Path, jobs: int = 1) -> dict[str, Any] | None:
+        """Optional, scenario-blind preparation: write into ``folder`` whatever later cases of
+        this planner, version and configuration may load on this machine (e.g. compiled code).
+
+        A planner declares a preparation by overriding this method. The harness runs it once
+        per planner, version, configuration, earthbench version and machine, before that
+        planner's first case, in a fenced process with its own budget (``[budget] prepare_s``,
+        ``prepare_memory_mb``), with no scenario and no store; ``jobs`` is the number of cores
+        it may keep busy. Returns a small JSON-able summary (kept with the folder) or None.
+        Its time is reported beside the solve times, never inside them.
+        """
+        return None
+
+    @classmethod
+    def prepares(cls) -> bool:
+        """Whether this planner declares a preparation (overrides :meth:`prepare`)."""
+        return getattr(cls.prepare, "__func__", cls.prepare) is not Planner.prepare
 
     @abstractmethod
     def plan(self, scenario: Scenario) -> Plan:

@@ -177,6 +177,7 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                 ("Solve s (median)", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
                  r["solve_time_median"]),
                 ("Solve s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
+                ("Prepare s", _f(r.get("prepare_max", math.nan), ".0f"), r.get("prepare_max", math.nan)),
                 *((reason, str(r[f"n_{reason}"]), r[f"n_{reason}"]) for reason in FAILURE_COLUMNS),
             ]
         })
@@ -280,6 +281,10 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     for solver, g in machine.groupby(timed["solver"] if "solver" in timed else timed["planner"], sort=True):
         where = "; ".join(f"{m} ({n} run{'s' if n != 1 else ''})" for m, n in g.value_counts().sort_index().items())
         solve_machines.append(f"solve times of {solver}: {where}")
+    prepared = runs[runs["prepare_s"].notna()] if "prepare_s" in runs else runs.iloc[:0]
+    for solver, g in prepared.groupby(prepared["solver"] if "solver" in prepared else prepared["planner"], sort=True):
+        solve_machines.append(f"preparation of {solver} (once per machine, before its first case, not in its solve times): "
+                              f"{g['prepare_s'].max():.0f} s wall, {g['prepare_cpu_s'].max():.0f} s CPU")
     versions = set(zip(runs["planner"], runs["planner_version"])) if len(runs) else set()
     spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),

@@ -23,9 +23,10 @@ pandas. Tables:
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
-version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
-read as open-loop runs.
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. An
+older store opened for writing is upgraded by the steps of ``_MIGRATIONS`` (version 2: the
+``steps`` column; version 3: ``prepare_s`` and ``prepare_cpu_s``, the planner's preparation);
+read-only, its runs read as open-loop runs without a preparation.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -103,10 +104,33 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
+    prepare_s REAL, prepare_cpu_s REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
+
+
+def _add_column(db: sqlite3.Connection, column: str, sql_type: str) -> None:
+    if column not in {r[1] for r in db.execute("PRAGMA table_info(runs)")}:
+        db.execute(f"ALTER TABLE runs ADD COLUMN {column} {sql_type}")
+
+
+def _migrate_2_steps(db: sqlite3.Connection) -> None:
+    """Version 2: the closed-loop steps of a run; nothing else changed."""
+    _add_column(db, "steps", "TEXT")
+
+
+def _migrate_3_prepare_times(db: sqlite3.Connection) -> None:
+    """Version 3: the wall and CPU seconds of the planner's preparation a run used (NULL for a
+    planner without one and for every run stored before; docs/DESIGN.md §6 "Preparation")."""
+    _add_column(db, "prepare_s", "REAL")
+    _add_column(db, "prepare_cpu_s", "REAL")
+
+
+#: Schema upgrades in order: the step at index i takes a store from version i + 1 to i + 2.
+#: Each is a function of its own, so columns other work adds are steps of their own too.
+_MIGRATIONS = (_migrate_2_steps, _migrate_3_prepare_times)
 
 
 def _compress(text: str) -> bytes:
@@ -214,11 +238,11 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version == 1:  # version 2 added the closed-loop steps of a run; nothing else changed
+            if version < SCHEMA_VERSION:
                 with self.db:
                     self.db.execute("BEGIN IMMEDIATE")
-                    if "steps" not in {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}:
-                        self.db.execute("ALTER TABLE runs ADD COLUMN steps TEXT")
+                    for step in _MIGRATIONS[version - 1:]:
+                        step(self.db)
                     self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
@@ -309,6 +333,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    "prepare_s": result.prepare_s, "prepare_cpu_s": result.prepare_cpu_s,
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -458,7 +483,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``family``, ``seed``, ``track``, ``target_volume``, ``planner``, ``planner_version``,
     ``config_hash``, ``config`` (JSON text), ``reason`` (ok | invalid | timeout | memory |
     error | crashed), ``success`` (bool), ``threshold``, ``solve_time_s``, ``solve_cpu_s``,
-    ``startup_s``, ``peak_rss_mb``, then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
+    ``startup_s``, ``peak_rss_mb``, ``prepare_s`` and ``prepare_cpu_s`` (the planner's preparation
+    the run used, NaN without one), then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
     ``n_violations`` (the metric ``violations``, renamed), ``loaded_volume``,
     ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
     ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
@@ -475,10 +501,12 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
+        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
+        prep = ", ".join(f"r.{c}" if c in have else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))  # version < 3
         rows = store.db.execute(
-            """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
+            f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
-                      r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
+                      r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
                       e.project_commit, e.plugin_commit
@@ -491,7 +519,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             store.close()
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
-            "solve_cpu_s", "startup_s", "peak_rss_mb"]
+            "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
             "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit"]
     metric_names: list[str] = []

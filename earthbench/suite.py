@@ -25,6 +25,8 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     memory_mb = 4096
     step_s = 60                      # optional: one closed-loop step's limit (s; default 300)
     max_steps = 1000                 # optional: the closed-loop step cap
+    prepare_s = 1800                 # optional: a planner's preparation (s; docs/DESIGN.md §6)
+    prepare_memory_mb = 4096         # optional: its memory
     [[family]]
     name = "rbf14"
     generator = "rbf"
@@ -425,9 +427,10 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         raise SuiteError(f"{where} [budget]: cores must be an integer, got {budget_doc['cores']!r}")
     if "memory_mb" in budget_doc and not isinstance(budget_doc["memory_mb"], int):
         raise SuiteError(f"{where} [budget]: memory_mb must be an integer, got {budget_doc['memory_mb']!r}")
-    if "max_steps" in budget_doc and not isinstance(budget_doc["max_steps"], int):
-        raise SuiteError(f"{where} [budget]: max_steps must be an integer, got {budget_doc['max_steps']!r}")
-    for k in ("wall_s", "step_s"):  # 60 and 60.0 must give the same scenario digest
+    for k in ("max_steps", "prepare_memory_mb"):
+        if k in budget_doc and not isinstance(budget_doc[k], int):
+            raise SuiteError(f"{where} [budget]: {k} must be an integer, got {budget_doc[k]!r}")
+    for k in ("wall_s", "step_s", "prepare_s"):  # 60 and 60.0 must give the same scenario digest
         if k in budget_doc:
             budget_doc = {**budget_doc, k: float(budget_doc[k])}
     budget = Budget(**budget_doc)

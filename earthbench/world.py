@@ -380,6 +380,9 @@ class Budget:
     ``wall_s`` bounds the planner's compute, over all steps of a closed-loop run; ``step_s``
     bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6). The two step
     limits are left out of the JSON at their defaults, so scenarios keep their digests.
+    ``prepare_s`` and ``prepare_memory_mb`` bound a planner's scenario-blind preparation, run
+    once per machine before its first case (docs/DESIGN.md §6 "Preparation"); left out at
+    their defaults too.
     """
 
     wall_s: float = 300.0
@@ -387,6 +390,8 @@ class Budget:
     memory_mb: int = 4096
     step_s: float = _later(300.0)
     max_steps: int = _later(1000)
+    prepare_s: float = _later(1800.0)
+    prepare_memory_mb: int = _later(4096)
 
 
 def _number(value: Any, where: str, *, lo: float | None = None, hi: float | None = None,

@@ -24,6 +24,7 @@ COMMANDS = [
     "show",
     "suites",
     "run",
+    "prepare",
     "runs",
     "rescore",
     "new_planner",

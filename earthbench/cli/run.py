@@ -153,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
             )
         old = signal.signal(signal.SIGTERM, _sigterm) if _main_thread() else None
         try:
-            report = run_cases(cases, store, executor, rerun=args.rerun, progress=progress)
+            report = run_cases(cases, store, executor, rerun=args.rerun, progress=progress,
+                               log=None if args.quiet else (lambda m: print(f"earthbench: {m}", file=sys.stderr, flush=True)))
         finally:
             if old is not None:
                 signal.signal(signal.SIGTERM, old)

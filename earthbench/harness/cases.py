@@ -41,6 +41,8 @@ class PlannerRef:
     config_hash: str = ""
     overrides: dict[str, Any] = field(default_factory=dict, hash=False, compare=False)
     tracks: tuple[str, ...] = ("backhoe",)
+    #: Whether the planner declares a preparation (docs/DESIGN.md §6 "Preparation").
+    prepares: bool = field(default=False, compare=False)
 
     @classmethod
     def resolve(cls, name: str, overrides: dict[str, Any] | None = None) -> PlannerRef:
@@ -57,6 +59,7 @@ class PlannerRef:
             config_hash=probe.config_hash,
             overrides=overrides,
             tracks=tuple(klass.tracks),
+            prepares=klass.prepares(),
         )
 
 
@@ -97,6 +100,21 @@ class Case:
 
 
 @dataclass(frozen=True)
+class Prepared:
+    """A finished preparation of a planner on this machine (:mod:`.prepare`): its folder and
+    what it cost (the harness's measurements)."""
+
+    key: str
+    path: str
+    wall_s: float
+    cpu_s: float
+    peak_rss_mb: float | None = None
+    #: True when this process ran it just now (not found on disk).
+    ran: bool = False
+    summary: Any = field(default=None, compare=False)
+
+
+@dataclass(frozen=True)
 class CaseResult:
     """What happened in one case. ``metrics`` is None unless the planner returned a plan."""
 
@@ -122,6 +140,10 @@ class CaseResult:
     #: A closed-loop run's planner calls: (actions executed, harness-measured compute seconds)
     #: each, in order (0 actions: the call that said done or was cut short); None when open loop.
     steps: tuple[tuple[int, float], ...] | None = None
+    #: The wall and CPU seconds of the planner's preparation this case used (None: it has none);
+    #: the harness's measurements of that job, never part of the solve time.
+    prepare_s: float | None = None
+    prepare_cpu_s: float | None = None
 
     @classmethod
     def failure(cls, case: Case, reason: str, error: str) -> CaseResult:

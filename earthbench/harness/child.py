@@ -99,6 +99,12 @@ def main(case_file: str, fd: int) -> None:
 
         cls = load_planner_class(doc["source"], doc["name"])
         overrides = doc.get("overrides", {})
+        prepared = doc.get("prepared")
+        if doc.get("job") == "prepare":  # a preparation, not a case (earthbench.harness.prepare)
+            del doc
+            _prepare(cls, overrides, send)
+            out.close()
+            return
         del doc
     except BaseException as exc:  # noqa: BLE001 - everything the planner's import can do is reported
         outcome = "memory" if isinstance(exc, MemoryError) else "error"
@@ -111,6 +117,10 @@ def main(case_file: str, fd: int) -> None:
     try:
         doc = json.loads(sys.stdin.buffer.readline())
         planner = cls(**overrides)
+        if prepared is not None:
+            from pathlib import Path
+
+            planner.prepared = Path(prepared)
         if planner.closed_loop:
             if not _steps(planner, doc, send):
                 out.close()
@@ -142,6 +152,29 @@ def main(case_file: str, fd: int) -> None:
     except (TypeError, ValueError) as exc:  # e.g. a to_json() that returned something JSON cannot write
         send({"event": "done", "outcome": "error", "error": "the plan could not be written as JSON:\n" + _tb(exc)})
     out.close()
+
+
+def _prepare(cls: type, overrides: dict[str, Any], send: Any) -> None:
+    """A preparation job: say ready, read ``{"folder": PATH, "jobs": N}``, call ``prepare``,
+    answer ``{"event": "done", "outcome": "prepared", "summary": JSON text}`` (or an error)."""
+    from pathlib import Path
+
+    send({"event": "ready"})
+    outcome, error, summary = "prepared", "", None
+    try:
+        job = json.loads(sys.stdin.buffer.readline())
+        summary = cls(**overrides).prepare(Path(job["folder"]), int(job["jobs"]))
+    except MemoryError:
+        outcome, error = "memory", "MemoryError: the preparation exceeded its memory budget\n" + _short_tb()
+    except BaseException as exc:  # noqa: BLE001 - SystemExit and KeyboardInterrupt too
+        outcome, error = "error", _tb(exc)
+    msg: dict[str, Any] = {"event": "done", "outcome": outcome, "error": error}
+    if outcome == "prepared":
+        try:
+            msg["summary"] = json.dumps(summary)
+        except (TypeError, ValueError) as exc:
+            msg.update(outcome="error", error="prepare() returned what JSON cannot write:\n" + _tb(exc))
+    send(msg)
 
 
 def _steps(planner: Any, doc: dict[str, Any], send: Any) -> bool:

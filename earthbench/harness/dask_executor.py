@@ -60,7 +60,8 @@ from typing import Any
 
 from ..errors import EarthbenchError
 from .cases import Case, CaseResult
-from .sandbox import STARTUP_S, run_case
+from .prepare import run_prepared_case
+from .sandbox import STARTUP_S
 from .slots import make_slots
 
 #: The Dask resource a worker declares (``--resources "slots=K"``) and each case task needs one of.
@@ -167,14 +168,15 @@ def _cancelled(case: Case) -> CaseResult:
 
 
 def run_on_worker(case: Case, run_id: str, startup_s: float = STARTUP_S) -> CaseResult:
-    """The Dask task of one case: take a slot of this machine, then :func:`run_case` in it."""
+    """The Dask task of one case: take a slot of this machine, then :func:`run_case` in it (after
+    the planner's preparation on this worker: each worker prepares once, :mod:`.prepare`)."""
     stop = _stop_event(run_id)
     if stop.is_set():
         return _cancelled(case)
     with host_slot(case.scenario.budget.cores, stop) as cores:
         if cores is None:
             return _cancelled(case)
-        return run_case(case, cores, stop=stop, startup_s=startup_s)
+        return run_prepared_case(case, cores, stop=stop, startup_s=startup_s)
 
 
 # -- on the client -------------------------------------------------------------------------------

@@ -9,7 +9,8 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from typing import Protocol
 
 from .cases import Case, CaseResult
-from .sandbox import STARTUP_S, HarnessError, run_case
+from .prepare import run_prepared_case
+from .sandbox import STARTUP_S, HarnessError
 from .slots import SlotPool, make_slots
 
 
@@ -28,6 +29,9 @@ class Executor(Protocol):
 class LocalExecutor:
     """Runs cases on this machine, one per slot, each slot a thread supervising one subprocess."""
 
+    #: Planners are prepared here, before the first case (:func:`.orchestrate.prepare_planners`).
+    prepares_here = True
+
     def __init__(self, jobs: int | None = None, cores_per_case: int = 2, *, startup_s: float = STARTUP_S):
         self.slots = make_slots(cores_per_case, jobs)
         self.startup_s = startup_s
@@ -40,7 +44,7 @@ class LocalExecutor:
         def task(case: Case) -> CaseResult:
             with slots.slot() as slot:
                 try:
-                    return run_case(case, slot, stop=self._stop, startup_s=self.startup_s)
+                    return run_prepared_case(case, slot, stop=self._stop, startup_s=self.startup_s)
                 except HarnessError:
                     raise  # this machine cannot run any case: stop the run, store nothing of it
                 except Exception:  # noqa: BLE001 - a harness fault on one case must not stop the suite

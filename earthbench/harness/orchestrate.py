@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,6 +13,7 @@ from .local import Executor, LocalExecutor
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..progress import Progress
+    from .prepare import Prepared
     from ..store import Store
     from ..suite import Suite
 
@@ -71,8 +72,13 @@ def run_cases(
     *,
     rerun: bool = False,
     progress: Progress | None = None,
+    log: Callable[[str], None] | None = None,
 ) -> RunReport:
     """Run every case not yet in ``store`` (all with ``rerun``) and store each as it finishes.
+
+    Each planner that declares a preparation is prepared first, on this machine when the
+    executor runs cases here (``log`` hears when it starts and what it took), else by each
+    worker before its first case of that planner (:mod:`.prepare`).
 
     Only this function writes the store, one transaction per case, so an executor may run
     cases anywhere. Ctrl-C (KeyboardInterrupt) cancels the cases in flight (nothing of them is
@@ -86,6 +92,8 @@ def run_cases(
             by_key.setdefault(c.key, c)
     todo = list(by_key.values())
     report.skipped = len(cases) - len(todo)
+    if getattr(executor, "prepares_here", False):
+        prepare_planners(todo, getattr(executor, "slots", [None])[0], log=log)
     if progress is not None:
         progress.total = len(todo)
         progress.start()
@@ -108,6 +116,29 @@ def run_cases(
         if progress is not None:
             progress.close()
     return report
+
+
+def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, *,
+                     log: Callable[[str], None] | None = None) -> dict[str, Prepared | None]:
+    """Prepare, once each and before any case, every planner configuration of ``cases`` that
+    declares a preparation and has none on this machine. A failure is logged; that planner's
+    cases then end as errors with its message (:func:`.sandbox.run_case`)."""
+    from .prepare import PrepareError, ensure
+
+    out: dict[str, Prepared | None] = {}
+    seen: set[tuple[str, str, str]] = set()
+    for c in cases:
+        ref = c.planner
+        if not ref.prepares or (ref.name, ref.version, ref.config_hash) in seen:
+            continue
+        seen.add((ref.name, ref.version, ref.config_hash))
+        try:
+            out[ref.name] = ensure(ref, c.scenario.budget, cores, log=log)
+        except PrepareError as exc:
+            out[ref.name] = None
+            if log is not None:
+                log(str(exc))
+    return out
 
 
 def run_suite(

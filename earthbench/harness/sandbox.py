@@ -32,6 +32,7 @@ Termination reasons: ``ok`` (a valid plan), ``invalid`` (the referee found viola
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import glob
 import json
@@ -55,7 +56,7 @@ import psutil
 
 from ..errors import EarthbenchError
 from ..world import Budget
-from .cases import Case, CaseResult, utc_now
+from .cases import Case, CaseResult, Prepared, utc_now
 from .child import BOOTSTRAP
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
@@ -144,8 +145,11 @@ def run_case(
     *,
     stop: threading.Event | None = None,
     startup_s: float = STARTUP_S,
+    prepared: Prepared | None = None,
 ) -> CaseResult:
-    """Run one case in a fresh process tree on ``cores``.
+    """Run one case in a fresh process tree on ``cores``; ``prepared``: the planner's preparation
+    on this machine, whose folder the case is told and whose times go with its result (the
+    executors find or run it first: :func:`.prepare.run_prepared_case`).
 
     Without ``cores`` the case waits for a free slot of a process-wide :class:`SlotPool`, so
     concurrent calls in one process (threads of a distributed worker) never share cores.
@@ -158,7 +162,7 @@ def run_case(
     budget = case.scenario.budget
     if cores is None:  # e.g. on a distributed worker: take a free slot of this process's pool
         with SlotPool.shared(budget.cores).slot() as slot:
-            return run_case(case, slot, stop=stop, startup_s=startup_s)
+            return run_case(case, slot, stop=stop, startup_s=startup_s, prepared=prepared)
     cores = tuple(cores)
     started_at = utc_now()
     tmp = _case_dir()
@@ -166,8 +170,8 @@ def run_case(
         case_file = os.path.join(tmp, "case.json")
         try:
             with open(case_file, "w") as f:
-                json.dump({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides}, f)
-            log = open(os.path.join(tmp, "log.txt"), "wb")
+                json.dump({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides,
+                           "prepared": prepared.path if prepared is not None else None}, f)
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
         scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
@@ -176,37 +180,109 @@ def run_case(
             if case.planner.config.get("closed_loop")
             else None
         )
-        mr, mw = os.pipe()
-        rr, rw = os.pipe()
-        mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
         t_spawn = time.monotonic()
-        try:
-            proc = subprocess.Popen(
-                [sys.executable, "-c", BOOTSTRAP, case_file, str(mw), str(rw), ",".join(map(str, cores)), str(mem), str(os.getpid())],
-                stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, pass_fds=(mw, rw),
-                cwd=tmp, env=_child_env(len(cores), tag), start_new_session=True,
-            )
-        except BaseException:
-            os.close(mr)
-            os.close(rr)
-            raise
-        finally:
-            os.close(mw)
-            os.close(rw)
-            log.close()
+        proc, mr, rr = _spawn(case_file, tmp, cores, budget, _child_env(len(cores), tag))
         try:
             out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop).run()
         finally:
             os.close(mr)
             os.close(rr)
-        with open(os.path.join(tmp, "log.txt"), "rb") as f:
-            f.seek(0, os.SEEK_END)
-            f.seek(max(0, f.tell() - LOG_TAIL))
-            log_tail = f.read().decode(errors="replace")
+        log_tail = _read_tail(tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return _result(case, out, cores, started_at, log_tail)
+    res = _result(case, out, cores, started_at, log_tail)
+    if prepared is not None:
+        res = dataclasses.replace(res, prepare_s=prepared.wall_s, prepare_cpu_s=prepared.cpu_s)
+    return res
+
+
+# -- a job that is not a case: a planner's preparation (.prepare) ----------------------------------
+# The same process tree, warden, limits and supervision as a case; what differs is only the
+# job file ("job": "prepare"), the one line it is given (no scenario) and its one result
+# ("prepared"). The isolation work (namespaces, cgroups) applies to it through _spawn.
+
+
+@dataclass(frozen=True)
+class JobOutcome:
+    """What the supervisor measured of a non-case job: its result message (None: none came),
+    why it ended otherwise, and the wall and CPU seconds from hand-over to result."""
+
+    done: dict[str, Any] | None
+    fault: str
+    timed_out: bool
+    cancelled: bool
+    status: int | None
+    wall_s: float | None
+    cpu_s: float | None
+    peak_rss_mb: float | None
+    log_tail: str
+
+
+def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *,
+            stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> JobOutcome:
+    """Run a non-case job (``job`` is the case file's content, with ``"job"`` naming it) in a
+    fresh, fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one
+    line of input once it is ready. Only a ``prepare`` job exists (:mod:`.prepare`)."""
+    cores = tuple(cores)
+    tmp = _case_dir()
+    try:
+        case_file = os.path.join(tmp, "case.json")
+        try:
+            with open(case_file, "w") as f:
+                json.dump(job, f)
+        except OSError as exc:
+            raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+        tag = os.path.basename(tmp)
+        t_spawn = time.monotonic()
+        proc, mr, rr = _spawn(case_file, tmp, cores, budget, _child_env(len(cores), tag))
+        try:
+            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn)
+            sup.prepare = job.get("job") == "prepare"
+            o = sup.run()
+        finally:
+            os.close(mr)
+            os.close(rr)
+        tail = _read_tail(tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb, tail)
+
+
+def _spawn(case_file: str, tmp: str, cores: tuple[int, ...], budget: Budget,
+           env: dict[str, str]) -> tuple[subprocess.Popen, int, int]:
+    """Start the warden and its planner process on ``case_file`` (a case or a preparation job):
+    the process, the read ends of its message and report pipes."""
+    try:
+        log = open(os.path.join(tmp, "log.txt"), "wb")
+    except OSError as exc:
+        raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+    mr, mw = os.pipe()
+    rr, rw = os.pipe()
+    mem = int(budget.memory_mb) * 1024 * 1024
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-c", BOOTSTRAP, case_file, str(mw), str(rw), ",".join(map(str, cores)), str(mem), str(os.getpid())],
+            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, pass_fds=(mw, rw),
+            cwd=tmp, env=env, start_new_session=True,
+        )
+    except BaseException:
+        os.close(mr)
+        os.close(rr)
+        raise
+    finally:
+        os.close(mw)
+        os.close(rw)
+        log.close()
+    return proc, mr, rr
+
+
+def _read_tail(tmp: str) -> str:
+    """The last :data:`LOG_TAIL` bytes of the job's output."""
+    with open(os.path.join(tmp, "log.txt"), "rb") as f:
+        f.seek(0, os.SEEK_END)
+        f.seek(max(0, f.tell() - LOG_TAIL))
+        return f.read().decode(errors="replace")
 
 
 @dataclass
@@ -269,6 +345,7 @@ class _Supervisor:
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
                  budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
+        self.prepare = False  # a preparation job (set by .prepare), not a case
         self.budget, self.stop = budget, stop
         self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s, loop=loop)
         self.outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
@@ -370,7 +447,7 @@ class _Supervisor:
         elif event == "ready":
             o.fault = "the case said 'ready' twice"
         elif event == "done":
-            problem = _check_done(msg, o.t_ready is not None, o.loop is not None)
+            problem = _check_done(msg, o.t_ready is not None, o.loop is not None, self.prepare)
             if problem:
                 o.fault = problem
             else:
@@ -572,9 +649,14 @@ def _sweep(tag: str) -> None:
             continue
 
 
-def _check_done(msg: dict[str, Any], ready: bool, closed_loop: bool = False) -> str:
-    """Why a result message is malformed, or '' when it is well formed."""
+def _check_done(msg: dict[str, Any], ready: bool, closed_loop: bool = False, prepare: bool = False) -> str:
+    """Why a result message is malformed, or '' when it is well formed. ``prepare``: the job is a
+    preparation (:mod:`.prepare`), whose one result is ``prepared`` (or an error)."""
     outcome = msg.get("outcome")
+    if (outcome == "prepared") != prepare and outcome not in ("error", "memory"):
+        return f"the {'preparation' if prepare else 'case'}'s result has outcome {_clip(outcome)}"
+    if outcome == "prepared":
+        return "" if ready and isinstance(msg.get("summary"), str) else "the preparation's result is malformed"
     if outcome not in ("plan", "error", "memory", "steps"):
         return f"the case's result has outcome {_clip(outcome)}, not one of plan, error, memory, steps"
     if outcome == "steps" and not (closed_loop and ready):

@@ -1,0 +1,148 @@
+"""The preparation phase (docs/DESIGN.md §6 "Preparation"): once per planner configuration and
+machine, before the first case, in a fenced job with its own budget; cases see its folder read
+only; its times are stored beside the solve times, never in them."""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from earthbench.cli import main
+from earthbench.harness import LocalExecutor, build_cases, run_cases
+from earthbench.harness.cases import PlannerRef
+from earthbench.harness.prepare import PrepareError, ensure, find, prepare_key
+from earthbench.registry import load_plugin_file
+from earthbench.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.suite import parse_suite
+from earthbench.world import Budget
+
+from helpers import tiny_suite_toml
+
+PLUGIN = str(Path(__file__).parent / "plugins" / "preparing_planners.py")
+
+pytestmark = pytest.mark.usefixtures("forget_test_planners")
+
+
+@pytest.fixture(autouse=True)
+def prepared_root(tmp_path, monkeypatch):
+    root = tmp_path / "prepared"
+    monkeypatch.setenv("EARTHBENCH_PREPARED", str(root))
+    monkeypatch.setenv("EARTHBENCH_TEST_PREPARE_COUNT", str(tmp_path / "count.txt"))
+    load_plugin_file(PLUGIN)
+    return root
+
+
+def _run(tmp_path, planners, seeds="0-1", budget="", config="", db="r.db"):
+    suite = parse_suite(tiny_suite_toml(seeds=seeds, budget=budget, config=config))
+    cases, _ = build_cases(suite, planners, plugins=[PLUGIN])
+    log: list[str] = []
+    with Store(tmp_path / db) as store:
+        store.register_suite(suite)
+        report = run_cases(cases, store, LocalExecutor(jobs=1), log=log.append)
+    return report, load_runs(tmp_path / db), log
+
+
+def _infos(db):
+    with Store(db) as store:
+        return [json.loads(store.plan_json(int(i)))["info"] for i in load_runs(db).id]
+
+
+def test_a_planner_is_prepared_once_and_its_cases_read_the_folder(tmp_path, prepared_root):
+    report, df, log = _run(tmp_path, ["t-prepares"])
+    assert report.stored == 2 and set(df.reason) == {"ok"}
+    assert (tmp_path / "count.txt").read_text() == "x"  # one preparation for both cases
+    assert any(m.startswith("preparing t-prepares") for m in log) and any(m.startswith("prepared t-prepares") for m in log)
+    ref = PlannerRef.resolve("t-prepares")
+    folder = prepared_root / prepare_key(ref)
+    for info in _infos(tmp_path / "r.db"):
+        assert info["prepared"] == str(folder) and info["token"] == "a"
+        assert info["mode"] == "0o444"  # read only (the isolation's mounts enforce it for root too)
+    # the harness measured it and stored it beside the solve times, not in them
+    assert (df.prepare_s > 0).all() and (df.prepare_cpu_s >= 0).all()
+    assert df.prepare_s.nunique() == 1
+    manifest = json.loads((folder / "prepare.json").read_text())
+    assert manifest["summary"] == {"wrote": ["token.txt", "seen.json"]}
+    assert manifest["machine"]["cpu_model"] and manifest["wall_s"] == pytest.approx(df.prepare_s.iloc[0])
+    seen = json.loads((folder / "seen.json").read_text())
+    assert seen["jobs"] == 2 and seen["pid"] != os.getpid()  # its own process, on the slot's cores
+    # a second run on this machine finds it and does not prepare again
+    _, df2, log2 = _run(tmp_path, ["t-prepares"], seeds="2-2", db="r2.db")
+    assert (tmp_path / "count.txt").read_text() == "x" and not log2
+    assert df2.prepare_s.iloc[0] == pytest.approx(df.prepare_s.iloc[0])
+
+
+def test_another_configuration_is_prepared_apart(tmp_path):
+    _run(tmp_path, ["t-prepares"], seeds="0-0")
+    _, df, _ = _run(tmp_path, ["t-prepares"], seeds="0-0", config='[config.t-prepares]\ntoken = "b"', db="b.db")
+    assert (tmp_path / "count.txt").read_text() == "xx"
+    assert _infos(tmp_path / "b.db")[0]["token"] == "b"
+    assert prepare_key(PlannerRef.resolve("t-prepares")) != prepare_key(PlannerRef.resolve("t-prepares", {"token": "b"}))
+
+
+def test_a_failed_preparation_fails_the_planners_cases_once(tmp_path, prepared_root):
+    report, df, log = _run(tmp_path, ["t-prepare-fails"])
+    assert set(df.reason) == {"error"} and len(df) == 2
+    assert all("failed: RuntimeError: no compiler here" in e for e in df.error)
+    assert any("no compiler here" in m for m in log)
+    assert not list(prepared_root.glob("t-prepare-fails*"))  # nothing half-made is left for a case
+    with pytest.raises(PrepareError, match="no compiler here"):  # not run again in this process
+        ensure(PlannerRef.resolve("t-prepare-fails"), Budget())
+
+
+def test_a_preparation_has_its_own_budget(tmp_path):
+    ref = PlannerRef.resolve("t-prepare-sleeps")
+    with pytest.raises(PrepareError, match="ran past its budget of 1 s"):
+        ensure(ref, Budget(prepare_s=1.0))
+    assert find(ref) is None
+
+
+def test_a_planner_without_preparation_has_none(tmp_path):
+    from earthbench.registry import load_plugin_file as load
+
+    load(str(Path(__file__).parent / "plugins" / "faulty_planners.py"))
+    ref = PlannerRef.resolve("t-fast")
+    assert not ref.prepares and ensure(ref, Budget()) is None
+
+
+def test_prepare_command(tmp_path, capsys):
+    assert main(["prepare", "t-prepares", "--plugin", PLUGIN]) == 0
+    out = capsys.readouterr().out
+    assert "ran now" in out and "wall" in out and "CPU" in out
+    assert main(["prepare", "t-prepares", "--plugin", PLUGIN]) == 0
+    assert "found on this machine" in capsys.readouterr().out
+    assert (tmp_path / "count.txt").read_text() == "x"
+    assert main(["prepare", "t-prepares", "--plugin", PLUGIN, "--again"]) == 0
+    assert (tmp_path / "count.txt").read_text() == "xx"
+    assert main(["prepare", "t-prepare-fails", "--plugin", PLUGIN]) == 2
+    assert "no compiler here" in capsys.readouterr().err
+    load_plugin_file(str(Path(__file__).parent / "plugins" / "faulty_planners.py"))
+    assert main(["prepare", "t-fast", "--plugin", str(Path(__file__).parent / "plugins" / "faulty_planners.py")]) == 1
+
+
+def test_suite_budget_takes_the_preparation_limits():
+    suite = parse_suite(tiny_suite_toml(budget="prepare_s = 600\nprepare_memory_mb = 2048"))
+    assert suite.budget.prepare_s == 600.0 and suite.budget.prepare_memory_mb == 2048
+    # at their defaults they stay out of the scenario documents (digests unchanged)
+    plain = parse_suite(tiny_suite_toml())
+    assert "prepare_s" not in json.dumps(plain.scenarios[0].to_dict()["budget"])
+
+
+def test_a_version_2_store_gains_the_preparation_columns(tmp_path):
+    db = tmp_path / "old.db"
+    with Store(db):
+        pass
+    con = sqlite3.connect(db)
+    con.execute("ALTER TABLE runs DROP COLUMN prepare_s")
+    con.execute("ALTER TABLE runs DROP COLUMN prepare_cpu_s")
+    con.execute("PRAGMA user_version = 2")
+    con.commit()
+    con.close()
+    assert "prepare_s" in load_runs(Store(db, read_only=True)).columns  # read only: NULLs, untouched
+    with Store(db) as store:
+        cols = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
+        assert {"prepare_s", "prepare_cpu_s"} <= cols
+        assert store.db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
