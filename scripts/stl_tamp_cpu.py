@@ -3,17 +3,24 @@ solves ended (README's stl-tamp section, docs/DESIGN.md §11).
 
     python scripts/stl_tamp_cpu.py SEEDS TARGET [key=value ...]   # e.g. 0-9 7 max_iter=150
     python scripts/stl_tamp_cpu.py 0-9 7 --ipopt-local '{"perturb_dec_fact": 0.6}' --ipopt-global '{"mu_init": 0.1}'
+    python scripts/stl_tamp_cpu.py 0-9 7 --fresh --side-by-side DIR   # uncompiled vs prepared in DIR
 
 Plans ``paper-extensive``'s scenarios of TARGET m³ for SEEDS (``a-b``) one after another in this
 process (the first plan also pays the solvers' construction), each timed with
 ``time.process_time``; one JSON line per plan, then a summary line. ``key=value`` overrides a
 field of stl-tamp's ``Config``; ``--ipopt-local`` and ``--ipopt-global`` (JSON objects) add IPOPT
 options to the local or the global solves, for experiments that are no setting of the planner.
+``--prepared DIR`` plans with the NLPs compiled in DIR (``earthbench prepare stl-tamp`` prints
+the folder); ``--fresh`` forgets the process's NLPs before each plan, so every plan pays what a
+case's fresh process pays (the NLPs' load); ``--side-by-side DIR`` plans each scenario twice in
+turn, without and with DIR (alternating which goes first), and reports both CPU times and
+whether the two plans' actions are the same (their digests).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import statistics
 import sys
@@ -24,7 +31,7 @@ from earthbench.cli import parse_config
 from earthbench.referee import judge
 from earthbench.suite import load_suite, parse_seed_range
 from earthbench_metrics.run import core_metrics
-from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench_planners.stl_tamp import StlTampPlanner, hierarchy
 
 
 def with_ipopt(local_opts: dict[str, Any], global_opts: dict[str, Any]) -> type[StlTampPlanner]:
@@ -37,6 +44,21 @@ def with_ipopt(local_opts: dict[str, Any], global_opts: dict[str, Any]) -> type[
     return Planner
 
 
+def digest(plan: Any) -> str:
+    """The plan's actions' digest (tests/test_plan_digests.py's)."""
+    return hashlib.sha256(json.dumps(plan.to_dict()["actions"], sort_keys=True).encode()).hexdigest()[:16]
+
+
+def plan_once(planner: Any, sc: Any, prepared: str | None, fresh: bool) -> tuple[Any, float]:
+    if fresh:
+        hierarchy._NLP_CACHE.clear()
+    p = planner
+    p.prepared = prepared
+    c0 = time.process_time()
+    plan = p.plan(sc)
+    return plan, time.process_time() - c0
+
+
 def main(argv: list[str]) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("seeds")
@@ -44,22 +66,30 @@ def main(argv: list[str]) -> None:
     ap.add_argument("settings", nargs="*", metavar="key=value")
     ap.add_argument("--ipopt-local", type=json.loads, default={}, metavar="JSON")
     ap.add_argument("--ipopt-global", type=json.loads, default={}, metavar="JSON")
+    ap.add_argument("--prepared", metavar="DIR")
+    ap.add_argument("--fresh", action="store_true")
+    ap.add_argument("--side-by-side", metavar="DIR")
     args = ap.parse_args(argv)
     target, kw = args.target, parse_config(args.settings, StlTampPlanner)
     planner = with_ipopt(args.ipopt_local, args.ipopt_global) if args.ipopt_local or args.ipopt_global else StlTampPlanner
     rows = []
-    for sc in load_suite("paper-extensive").select(parse_seed_range(args.seeds)):
-        if abs(sc.task.target_volume - target) > 1e-6:
-            continue
-        c0 = time.process_time()
-        plan = planner(**kw).plan(sc)
-        cpu = time.process_time() - c0
+    for n, sc in enumerate(s for s in load_suite("paper-extensive").select(parse_seed_range(args.seeds))
+                           if abs(s.task.target_volume - target) <= 1e-6):
+        if args.side_by_side:
+            runs = {}
+            for which in (("old", "new") if n % 2 == 0 else ("new", "old")):
+                runs[which] = plan_once(planner(**kw), sc, args.side_by_side if which == "new" else None, args.fresh)
+            (plan, cpu), (old_plan, old_cpu) = runs["new"], runs["old"]
+        else:
+            plan, cpu = plan_once(planner(**kw), sc, args.prepared, args.fresh)
         verdict = judge(sc, plan)
         info, g = plan.info, plan.info["global"]
         row = {"id": sc.id, "valid": verdict.valid, "tpt": round(core_metrics(sc, plan, verdict)["time_per_target_m3"], 3),
                "cpu_s": round(cpu, 2), "build_s": round(info["build_time_s"], 2), "global_status": g.get("status"),
                "global_iterations": g.get("iterations", 0), "local_iterations": sum(r.get("iterations", 0) for r in info["local"]),
-               "local_solves": info["local_solves"]}
+               "local_solves": info["local_solves"], "nlps": info["nlp_cache"]}
+        if args.side_by_side:
+            row.update(old_cpu_s=round(old_cpu, 2), same_plan=digest(plan) == digest(old_plan), digest=digest(plan))
         rows.append(row)
         print(json.dumps(row), flush=True)
     counts = {k: sum(r["local_solves"][k] for r in rows) for k in ("succeeded", "acceptable", "capped", "fallback", "other")}
@@ -67,6 +97,10 @@ def main(argv: list[str]) -> None:
           f"CPU per plan median {statistics.median(r['cpu_s'] for r in rows):.2f} s, iterations global "
           f"{sum(r['global_iterations'] for r in rows)} local {sum(r['local_iterations'] for r in rows)}, local solves {counts} "
           f"({counts['succeeded'] / max(1, sum(counts.values())):.0%} succeeded)")
+    if args.side_by_side:
+        old = statistics.median(r["old_cpu_s"] for r in rows)
+        print(f"side by side: CPU per plan median {old:.2f} s uncompiled, {statistics.median(r['cpu_s'] for r in rows):.2f} s "
+              f"prepared; same plan {sum(r['same_plan'] for r in rows)}/{len(rows)}")
 
 
 if __name__ == "__main__":

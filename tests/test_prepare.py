@@ -100,6 +100,14 @@ def test_a_preparation_has_its_own_budget(tmp_path):
     assert find(ref) is None
 
 
+def test_preparation_can_be_switched_off(tmp_path, monkeypatch):
+    monkeypatch.setenv("EARTHBENCH_PREPARE", "off")
+    _, df, log = _run(tmp_path, ["t-prepares"], seeds="0-0")
+    assert not (tmp_path / "count.txt").exists() and not log
+    assert df.reason[0] == "error" and "NoneType" in df.error[0]  # this planner needs its folder
+    assert df.prepare_s.isna().all()
+
+
 def test_a_planner_without_preparation_has_none(tmp_path):
     from earthbench.registry import load_plugin_file as load
 

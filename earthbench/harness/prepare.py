@@ -37,6 +37,10 @@ from ..world import Budget
 from .cases import Case, CaseResult, PlannerRef, Prepared, utc_now
 
 ENV = "EARTHBENCH_PREPARED"
+#: ``EARTHBENCH_PREPARE=off``: no preparation is run or used; cases run without their planner's
+#: folder (a planner must work without it: stl-tamp then loads its NLPs uncompiled, with the
+#: same plans) and their runs store no preparation time.
+SWITCH = "EARTHBENCH_PREPARE"
 MANIFEST = "prepare.json"
 
 
@@ -108,9 +112,10 @@ _LOCKS_LOCK = threading.Lock()
 def ensure(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
            stop: threading.Event | None = None, log: Callable[[str], None] | None = None) -> Prepared | None:
     """The preparation of ``ref`` on this machine: found on disk, or run now (once per process
-    and key; concurrent callers wait for it). None when the planner declares none. Raises
+    and key; concurrent callers wait for it). None when the planner declares none or
+    ``$EARTHBENCH_PREPARE`` is ``off``. Raises
     :class:`PrepareError` when it fails."""
-    if not ref.prepares:
+    if not ref.prepares or os.environ.get(SWITCH, "").strip().lower() == "off":
         return None
     key = prepare_key(ref)
     with _LOCKS_LOCK:

@@ -46,7 +46,9 @@ processes.
 from __future__ import annotations
 
 import math
+import os
 import time
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -55,8 +57,35 @@ import numpy as np
 from earthbench.world import ExcavatorSpec, TruckSpec
 from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
-from . import nlp_cache
+from . import compiled, nlp_cache
 from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, PIVOT_HEIGHT, Shape, Solution, quantize
+
+
+_PREPARED: list[Path | None] = [None]
+
+
+def use_prepared(folder: str | os.PathLike[str] | None) -> None:
+    """Load NLPs compiled in the planner's preparation from ``folder`` (None: none), for the NLPs
+    this process builds from now on (:mod:`.compiled`)."""
+    _PREPARED[0] = Path(folder) if folder is not None else None
+
+
+def prepared_dir() -> Path | None:
+    return _PREPARED[0]
+
+
+def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> tuple[str, dict[str, Any]]:
+    """The key and the built (uncompiled) functions of an NLP, from the disk cache or built here;
+    what the preparation compiles."""
+    name = nlp_cache.key(shape, exc, truck)
+    path = nlp_cache.load(name)
+    fns = _unpack(path) if path is not None else None
+    if fns is None:
+        nlp = object.__new__(PhaseNLP)
+        nlp._setup(shape, exc, truck)
+        fns = nlp._build()
+        nlp_cache.save(name, lambda tmp: _pack(fns, tmp))  # where a case without the compiled ones finds it
+    return name, fns
 
 
 def one_blas_thread() -> bool:
@@ -132,26 +161,19 @@ class PhaseNLP:
 
     def __init__(self, shape: Shape, exc: ExcavatorSpec, truck: TruckSpec, site_box: tuple[float, float, float, float]):
         t0 = time.perf_counter()
-        self.shape, self.exc, self.truck = shape, exc, truck
+        self._setup(shape, exc, truck)
         self.site_box = site_box
-        sh = shape
-        m1, n = sh.phases + 1, sh.steps
-        self.m1, self.n = m1, n
-        self.N = N = m1 * n
-        self.kc = [n] + [sh.contact_step] * sh.phases  # phase 0: all move steps
-        K = sh.terrain_shape[0] * sh.terrain_shape[1]
-        self.K = K
-
-        if sh.symbolic not in ("SX", "MX"):
-            raise ValueError(f"Shape.symbolic must be 'SX' or 'MX', got {sh.symbolic!r}")
-        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
-        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in _PHASE_VARS] + [("slack", 2)]
-        self.nw = sum(ln for _, ln in self.v_parts)
-        # the built functions come from the disk cache when this NLP was built before (nlp_cache)
+        # the built functions: compiled in the planner's preparation (compiled), else from the
+        # disk cache when this NLP was built before (nlp_cache), else built here
         name = nlp_cache.key(shape, exc, truck)  # the site's box only bounds g (below)
-        path = nlp_cache.load(name)
-        fns = _unpack(path) if path is not None else None
-        self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
+        self.key = name
+        fns = compiled.load(prepared_dir(), name)
+        if fns is not None:
+            self.cache = "compiled"
+        else:
+            path = nlp_cache.load(name)
+            fns = _unpack(path) if path is not None else None
+            self.cache = "hit" if fns is not None else "miss" if nlp_cache.directory() is not None else "off"
         if fns is None:
             fns = self._build()
             if self.cache == "miss":
@@ -169,6 +191,22 @@ class PhaseNLP:
         self._solvers: dict[tuple, Any] = {}
         self._unreported_build_s = self.build_time_s
         self._cache_unreported = True
+
+    def _setup(self, shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> None:
+        """The sizes and layouts of the shape (what :meth:`_build` and the solves read)."""
+        self.shape, self.exc, self.truck = shape, exc, truck
+        sh = shape
+        m1, n = sh.phases + 1, sh.steps
+        self.m1, self.n = m1, n
+        self.N = N = m1 * n
+        self.kc = [n] + [sh.contact_step] * sh.phases  # phase 0: all move steps
+        K = sh.terrain_shape[0] * sh.terrain_shape[1]
+        self.K = K
+        if sh.symbolic not in ("SX", "MX"):
+            raise ValueError(f"Shape.symbolic must be 'SX' or 'MX', got {sh.symbolic!r}")
+        self.p_parts = [("w", K), ("o", 2), ("s0", NX), ("vt", 1), ("alpha", 5), ("goal", 2), ("floor", 1)]
+        self.v_parts = [("X", NX * N), ("U", NU * N)] + [(k, m1) for k in _PHASE_VARS] + [("slack", 2)]
+        self.nw = sum(ln for _, ln in self.v_parts)
 
     def _build(self) -> dict[str, Any]:
         """The CasADi graph: the NLP (x, p) → (f, g), its derivatives (SX) and the helpers."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -12,7 +13,7 @@ import numpy as np
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
-from earthbench.world import Scenario
+from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
@@ -154,16 +155,26 @@ class Config(LocalNLPConfig):
 
 
 class StlTampPlanner(Planner):
-    """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1)."""
+    """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
+
+    0.10.0: the planner declares a preparation (:meth:`prepare`, docs/DESIGN.md §6): its NLPs'
+    derivatives and helpers compiled to C once per machine (:mod:`.compiled`), loaded by each
+    case instead of evaluated on CasADi's virtual machine. The compiled code computes the same
+    values to the bit, so the plans are 0.9.0's (plan digests and the reproducibility test are
+    unchanged); the version moves because the code path and the solve times do.
+    """
 
     name = "stl-tamp"
-    version = "0.9.0"
+    version = "0.10.0"
     tracks = ("backhoe",)
     Config = Config
 
     # -- shapes ---------------------------------------------------------------------------------
     def local_shape(self, scenario: Scenario) -> Shape:
-        c, e = self.config, scenario.machines.excavator
+        return self._local_shape(scenario.machines.excavator)
+
+    def _local_shape(self, e: ExcavatorSpec) -> Shape:
+        c = self.config
         nt = int(round(2 * c.local_fit_half / c.local_fit_spacing)) + 1
         return Shape(phases=c.m_local, steps=c.n_steps, contact_step=c.contact_step, unit_width=e.bucket_width,
                      unit_length=e.max_drag_length, unit_depth=min(c.dig_depth, e.max_cut_depth), vmax=e.bucket_capacity,
@@ -178,17 +189,70 @@ class StlTampPlanner(Planner):
         e = scenario.machines.excavator
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
 
+    def _global_shape(self, exc: ExcavatorSpec, m_g: int, side: float, lattice: tuple[int, int], spacing: float,
+                      sigma: float) -> Shape:
+        c = self.config
+        cap = exc.bucket_capacity * c.fill_estimate
+        return Shape(phases=m_g, steps=c.n_global, contact_step=c.n_global // 2, unit_width=side, unit_length=side,
+                     unit_depth=c.dig_depth, vmax=c.area_vmax,
+                     work_time=c.area_vmax / cap * (exc.min_stroke_time + exc.min_dump_time + 2.0),
+                     terrain_shape=lattice, terrain_spacing=spacing, terrain_sigma=sigma, quad=(3, 3),
+                     dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
+                     eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
+
+    # -- preparation (docs/DESIGN.md §6 "Preparation") -----------------------------------------
+    def prepared_shapes(self) -> list[tuple[str, Shape, ExcavatorSpec, TruckSpec]]:
+        """The NLPs :meth:`prepare` compiles, from the benchmark's machines and this configuration
+        alone (no scenario): the local NLP, and the global NLP of one window (``global_window``,
+        the lattice every windowed site and a site of the window's size share) with 2 to
+        ``block_phases`` phases (a plan's global problem has min(need + 1, areas) phases, at most
+        ``block_phases`` on a windowed site). A plan on any other shape loads that NLP from the
+        disk cache as before (:mod:`.nlp_cache`): the same plan, uncompiled."""
+        c = self.config
+        exc, truck = ExcavatorSpec(), TruckSpec()
+        side = math.sqrt(c.area_buckets * exc.bucket_width * exc.max_drag_length)
+        lattice = global_lattice(c.global_window, c.global_fit_spacing)
+        sigma = c.global_fit_spacing  # fit_rbf's width: one lattice step (sigma_factor 1)
+        out = [("local", self._local_shape(exc), exc, truck)]
+        if c.global_layer:
+            out += [(f"global {m}", self._global_shape(exc, m, side, lattice, c.global_fit_spacing, sigma), exc, truck)
+                    for m in range(c.block_phases, 1, -1)]
+        return out
+
+    def prepare(self, folder: Path, jobs: int = 1) -> dict[str, Any]:
+        """Compile the NLPs of :meth:`prepared_shapes` into ``folder`` (:mod:`.compiled`), the
+        compilers ``jobs`` at a time; returns what was compiled and how long it took."""
+        from . import compiled
+        from .model import build_functions
+
+        out: dict[str, Any] = {"compiler": compiled.compiler_version(), "nlps": {}}
+        for label, shape, exc, truck in self.prepared_shapes():
+            t0 = time.perf_counter()
+            name, fns = build_functions(shape, exc, truck)
+            t_build = time.perf_counter() - t0
+            took = compiled.build(fns, folder, name, jobs=jobs, log=lambda m: print(m, flush=True))
+            out["nlps"][label] = {"key": name, "build_s": round(t_build, 2), "compile_s": {k: round(v, 2) for k, v in took.items()}}
+            print(f"{label}: built in {t_build:.1f} s, compiled in {sum(took.values()):.1f} s of compiler time", flush=True)
+        return out
+
+    def _use_prepared(self) -> None:
+        from .model import use_prepared
+
+        use_prepared(self.prepared)
+
     # -- the plan -------------------------------------------------------------------------------
     def step(self, observation: Observation) -> Plan | None:
         """Closed loop: one receding-horizon step (:mod:`.receding`)."""
         from .receding import Horizon, step
 
         if observation.step == 0:
+            self._use_prepared()
             self._horizon = Horizon()
         return step(self, observation, self._horizon)
 
     def plan(self, scenario: Scenario) -> Plan:
         t_start = time.perf_counter()
+        self._use_prepared()
         c = self.config
         if scenario.machines.excavator is None:
             raise EarthbenchError("stl-tamp plans for a backhoe excavator; this scenario has none")
@@ -301,13 +365,7 @@ class StlTampPlanner(Planner):
         c, exc = self.config, scenario.machines.excavator
         need = int(math.ceil(target / c.area_vmax))
         m_g = c.block_phases if fixed_phases else max(1, min(c.m_global_max, need + 1, len(tour)))
-        cap = exc.bucket_capacity * c.fill_estimate
-        shape = Shape(phases=m_g, steps=c.n_global, contact_step=c.n_global // 2, unit_width=side, unit_length=side,
-                      unit_depth=c.dig_depth, vmax=c.area_vmax,
-                      work_time=c.area_vmax / cap * (exc.min_stroke_time + exc.min_dump_time + 2.0),
-                      terrain_shape=surf.shape, terrain_spacing=surf.spacing, terrain_sigma=surf.sigma, quad=(3, 3),
-                      dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
-                      eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
+        shape = self._global_shape(exc, m_g, side, surf.shape, surf.spacing, surf.sigma)
         t0 = time.perf_counter()
         nlp, _ = get_nlp(shape, scenario, box)
         floor = scenario.site.floor if scenario.site.floor is not None else 0.0

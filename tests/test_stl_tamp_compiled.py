@@ -1,0 +1,88 @@
+"""stl-tamp's NLPs compiled in its preparation (``earthbench_planners.stl_tamp.compiled``): a small
+shape compiled here evaluates to the bit as CasADi's virtual machine does, and IPOPT takes the
+same iterates on it. The real shapes are compiled by ``earthbench prepare stl-tamp`` and
+tests/bench/ (a minute of compiler time and more each)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from earthbench.world import ExcavatorSpec, TruckSpec
+from earthbench_planners.stl_tamp import StlTampPlanner, compiled, model, nlp_cache
+from earthbench_planners.stl_tamp.problem import Shape
+
+pytestmark = pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler")
+
+SHAPE = Shape(phases=1, steps=3, contact_step=1, unit_width=0.7, unit_length=1.0, unit_depth=0.4, vmax=0.28,
+              work_time=5.0, terrain_shape=(3, 4), terrain_spacing=0.6, terrain_sigma=0.6)
+BOX = (0.0, 6.0, 0.0, 3.0)
+
+
+class Small(StlTampPlanner):
+    """stl-tamp whose preparation compiles one small shape (what the test can afford)."""
+
+    def prepared_shapes(self):
+        return [("small", SHAPE, ExcavatorSpec(), TruckSpec())]
+
+
+@pytest.fixture(scope="module")
+def prepared(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("compiled")
+    mp = pytest.MonkeyPatch()
+    mp.setenv(nlp_cache.ENV, str(tmp / "nlp"))
+    folder = tmp / "prepared"
+    summary = Small().prepare(folder, jobs=2)
+    yield folder, summary
+    model.use_prepared(None)
+    mp.undo()
+
+
+def test_compiled_functions_evaluate_as_the_virtual_machine(prepared):
+    folder, summary = prepared
+    key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
+    assert summary["nlps"]["small"]["key"] == key
+    assert set(summary["nlps"]["small"]["compile_s"]) == set(compiled.NAMES)
+    model.use_prepared(None)
+    vm = model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX)
+    model.use_prepared(folder)
+    cc = model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX)
+    assert (vm.cache, cc.cache) == ("hit", "compiled")  # the preparation filled the NLP cache too
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        w, p = rng.normal(size=vm.nw), rng.normal(size=sum(n for _, n in vm.p_parts))
+        lam = rng.normal(size=vm.ng)
+        for name in ("hess_lag", "jac_g", "grad_f"):
+            args = [w, p, 1.0, lam] if name == "hess_lag" else [w, p]
+            for a, b in zip(vm._derivs[name].call(args), cc._derivs[name].call(args)):
+                assert np.array_equal(np.array(a), np.array(b))
+        ev, ec = vm.evaluate(w, p), cc.evaluate(w, p)
+        assert all(np.array_equal(ev[k], ec[k]) for k in ev)
+    assert np.array_equal(vm.lbg, cc.lbg) and np.array_equal(vm.ubg, cc.ubg)
+
+
+def test_ipopt_takes_the_same_iterates_on_compiled_functions(prepared):
+    folder, _ = prepared
+    sols = []
+    for where in (None, folder):
+        model.use_prepared(where)
+        nlp = model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX)
+        p = nlp.pack_p(w=np.full(nlp.K, 0.3), o=(0.0, 0.0), s0=np.array([3.0, 1.5, 0, 0, 0.3, -1.5, 6.0, 1.5, 0]), vt=0.3,
+                       alpha=(0.01, 1.0, 2e4, 2.0, 0.2), goal=(3.0, 1.5), floor=0.0)
+        w0 = np.zeros(nlp.nw)
+        sols.append(nlp.solve(p, w0, BOX, max_iter=40))
+    a, b = sols
+    assert a.status == b.status and a.iterations == b.iterations
+    assert np.array_equal(a.info["w"], b.info["w"])
+
+
+def test_an_nlp_without_its_compiled_files_is_loaded_as_before(prepared, tmp_path):
+    import shutil
+
+    folder = tmp_path / "partial"
+    shutil.copytree(prepared[0], folder)
+    key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
+    (folder / f"{key}.hess_lag.so").unlink()
+    model.use_prepared(folder)
+    assert model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX).cache == "hit"  # the preparation filled the cache too
+    assert compiled.load(folder, key) is None
