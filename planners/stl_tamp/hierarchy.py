@@ -292,7 +292,7 @@ def shared_truck_stand(bases: list[tuple[float, float]], trucks: list[tuple[floa
     """Where the global guess parks the truck: it stays put after phase 0 (``Shape.hold_truck``),
     so it must be in dump reach of every base the guess visits and clear of each. The candidates
     are the areas' own stands and their mean; the one with the least total shortfall (first on a
-    tie). docs/DESIGN.md §11: from the first area's stand alone, later bases stood up to 11 m
+    tie). planners/stl_tamp/NOTES.md: from the first area's stand alone, later bases stood up to 11 m
     away (a violation of 73 m² at the start), and IPOPT spent its first ~60 iterations there."""
     mean = (sum(t[0] for t in trucks) / len(trucks), sum(t[1] for t in trucks) / len(trucks))
 
