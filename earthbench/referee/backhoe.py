@@ -99,12 +99,9 @@ def _station(r: Replay, n: int, spec: ExcavatorSpec, base: Pose) -> tuple[float,
 
 def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     truck_spec = r.sc.machines.truck
-    truck = r.timelines["truck"]
-    if truck.moving_during(a.t_start, a.t_end):
-        r.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+    tpos = r.truck_for_dump(n, a.t_start, a.t_end)
     base = r.timelines[a.machine].pose(a.t_start)
     _station(r, n, spec, base)
-    tpos = truck.pose(a.t_start)
     off = dump_reach_excess(base, (tpos.x, tpos.y), spec, truck_spec)
     if off > ABS_TOL:
         dist = math.hypot(tpos.x - base.x, tpos.y - base.y)
@@ -112,11 +109,7 @@ def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     need = min_dump_time(base, r.turn, (tpos.x, tpos.y), spec)
     if a.t_end - a.t_start < need - ABS_TOL:
         r.flag(n, "duration", need - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the swing and dump need {need:.3f} s")
-    take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
-    r.loaded += take
-    r.bucket -= take
-    r.dumps += 1
-    r.load_curve.append((a.t_end, r.loaded))
+    r.empty_bucket(a.t_end)
     r.turn = math.atan2(tpos.y - base.y, tpos.x - base.x) - base.yaw
 
 

@@ -128,11 +128,8 @@ def _overfill(r: Replay, n: int, penetration: float, level: float, full_at: floa
 
 def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
     truck_spec = r.sc.machines.truck
-    truck = r.timelines["truck"]
-    if truck.moving_during(a.t_start, a.t_end):
-        r.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+    tpos = r.truck_for_dump(n, a.t_start, a.t_end)
     pose = r.timelines[a.machine].pose(a.t_start)
-    tpos = truck.pose(a.t_start)
     gap, off = loader_dump_excess(pose, (tpos.x, tpos.y), spec, truck_spec)
     if gap > ABS_TOL:
         r.flag(
@@ -150,11 +147,7 @@ def dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
             spec.min_dump_time - (a.t_end - a.t_start),
             f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s",
         )
-    take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
-    r.loaded += take
-    r.bucket -= take
-    r.dumps += 1
-    r.load_curve.append((a.t_end, r.loaded))
+    r.empty_bucket(a.t_end)
 
 
 # moved to earthbench.rules (0.2): the old names keep working for a release, with a warning

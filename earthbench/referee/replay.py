@@ -263,6 +263,22 @@ class Replay:
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
         self.violations.append(Violation(n, rule, float(magnitude), message))
 
+    def truck_for_dump(self, n: int, t_start: float, t_end: float) -> Pose:
+        """Where the truck stands for a dump from ``t_start`` to ``t_end``; a truck that moves
+        meanwhile breaks ``truck_moving`` (both machines' dump rule)."""
+        truck = self.timelines["truck"]
+        if truck.moving_during(t_start, t_end):
+            self.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+        return truck.pose(t_start)
+
+    def empty_bucket(self, t_end: float) -> None:
+        """A dump ending at ``t_end`` moves the bucket's load into the truck, up to its capacity."""
+        take = min(self.bucket, max(self.truck_capacity - self.loaded, 0.0))
+        self.loaded += take
+        self.bucket -= take
+        self.dumps += 1
+        self.load_curve.append((t_end, self.loaded))
+
     def verdict(self) -> Verdict:
         return Verdict(
             violations=tuple(self.violations),

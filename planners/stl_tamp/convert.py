@@ -39,7 +39,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at, wrap
+from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at
 from earthbench.plan import Dig, Dump, Move
 from earthbench.rules import bodies_touch, reach_of, track_level_and_tilt, undermining_excess
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
@@ -466,8 +466,3 @@ class Converter:
         st.loaded += take
         st.digs += 1
         return take
-
-
-def wrap_to(angle: float, ref: float) -> float:
-    """``angle`` shifted by multiples of 2π to lie within π of ``ref``."""
-    return ref + wrap(angle - ref)
