@@ -23,10 +23,11 @@ pandas. Tables:
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. An
-older store opened for writing is upgraded by the steps of ``_MIGRATIONS`` (version 2: the
-``steps`` column; version 3: ``prepare_s`` and ``prepare_cpu_s``, the planner's preparation);
-read-only, its runs read as open-loop runs without a preparation.
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
+store from an older schema opened for writing is brought up to date by the named steps of
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 ``prepare_s`` and
+``prepare_cpu_s``); read-only, it is read as it is (a version-1 store's runs read as open-loop
+runs, an older store's runs as runs without a preparation).
 """
 
 from __future__ import annotations
@@ -50,7 +51,17 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 3
+#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
+#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
+#: its own named step (never edits an old one); a new store is created at the latest version
+#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
+#: add a column the table already has is skipped, so a step is safe to re-run.
+MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
+    ("3: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
+     ("ALTER TABLE runs ADD COLUMN prepare_s REAL", "ALTER TABLE runs ADD COLUMN prepare_cpu_s REAL")),
+)
+SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -109,28 +120,6 @@ CREATE TABLE runs (
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
-
-
-def _add_column(db: sqlite3.Connection, column: str, sql_type: str) -> None:
-    if column not in {r[1] for r in db.execute("PRAGMA table_info(runs)")}:
-        db.execute(f"ALTER TABLE runs ADD COLUMN {column} {sql_type}")
-
-
-def _migrate_2_steps(db: sqlite3.Connection) -> None:
-    """Version 2: the closed-loop steps of a run; nothing else changed."""
-    _add_column(db, "steps", "TEXT")
-
-
-def _migrate_3_prepare_times(db: sqlite3.Connection) -> None:
-    """Version 3: the wall and CPU seconds of the planner's preparation a run used (NULL for a
-    planner without one and for every run stored before; docs/DESIGN.md §6 "Preparation")."""
-    _add_column(db, "prepare_s", "REAL")
-    _add_column(db, "prepare_cpu_s", "REAL")
-
-
-#: Schema upgrades in order: the step at index i takes a store from version i + 1 to i + 2.
-#: Each is a function of its own, so columns other work adds are steps of their own too.
-_MIGRATIONS = (_migrate_2_steps, _migrate_3_prepare_times)
 
 
 def _compress(text: str) -> bytes:
@@ -239,11 +228,20 @@ class Store:
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
             if version < SCHEMA_VERSION:
-                with self.db:
-                    self.db.execute("BEGIN IMMEDIATE")
-                    for step in _MIGRATIONS[version - 1:]:
-                        step(self.db)
-                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
+        with self.db:
+            self.db.execute("BEGIN IMMEDIATE")
+            for _, statements in MIGRATIONS[version - 1:]:
+                for stmt in statements:
+                    words = stmt.split()
+                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
+                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
+                            continue
+                    self.db.execute(stmt)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
