@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from ..harness.steps import run_closed_loop
 from ..registry import PLANNERS
@@ -38,6 +39,12 @@ def run(args: argparse.Namespace) -> int:
     view = observe(scenario)  # the planner sees the scan and the nominal soil, as under the harness
     t0 = time.perf_counter()
     planner = cls(**overrides)
+    if cls.prepares():  # its preparation on this machine, if there is one (never run here: `earthbench prepare`)
+        from ..harness.cases import PlannerRef
+        from ..harness.prepare import find
+
+        found = find(PlannerRef.resolve(args.planner, overrides))
+        planner.prepared = Path(found.path) if found is not None else None
     # a closed-loop configuration is run step by step, each step executed on the truth as the harness does
     plan = run_closed_loop(planner, scenario) if planner.closed_loop else planner.plan(view)
     dt = time.perf_counter() - t0
