@@ -295,3 +295,33 @@ def test_the_host_slot_pool_hands_out_disjoint_cores(tmp_path, monkeypatch):
             assert c is None  # every core is taken and the run was stopped
     with host_slot(2) as d:
         assert len(d) == 2  # the locks were released
+
+
+def test_each_worker_prepares_before_its_first_case_at_most_once(cluster, tmp_path):
+    """A planner with a preparation: a worker that finds none on disk prepares before its first case."""
+    lc, client = cluster
+    prepared, count = str(tmp_path / "prepared"), str(tmp_path / "count.txt")
+
+    def setenv(**kw):
+        os.environ.update(kw)
+
+    def unsetenv(*names):
+        for n in names:
+            os.environ.pop(n, None)
+
+    client.run(setenv, EARTHBENCH_PREPARED=prepared, EARTHBENCH_TEST_PREPARE_COUNT=count)
+    try:
+        plugin = str(PLUGINS / "preparing_planners.py")
+        load_plugin_file(plugin)
+        suite = nap_suite(4)
+        cases, _ = build_cases(suite, ["t-prepares"], plugins=[plugin])
+        with Store(tmp_path / "p.db") as store:
+            store.register_suite(suite)
+            report = run_cases(cases, store, DaskExecutor(client))
+    finally:
+        client.run(unsetenv, "EARTHBENCH_PREPARED", "EARTHBENCH_TEST_PREPARE_COUNT")
+    assert report.counts == {"ok": 4}
+    assert 1 <= len(Path(count).read_text()) <= 2  # once per worker at most (both may start at once)
+    rows = stored(tmp_path / "p.db").values()
+    assert all(r["prepare_s"] > 0 for r in rows)
+    assert all(json.loads(r["plan"])["info"]["prepared"].startswith(prepared) for r in rows)

@@ -48,13 +48,17 @@ def test_compiled_functions_evaluate_as_the_virtual_machine(prepared):
     model.use_prepared(folder)
     cc = model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX)
     assert (vm.cache, cc.cache) == ("hit", "compiled")  # the preparation filled the NLP cache too
+    sv, sc = vm.solver(50), cc.solver(50)
+    assert sorted(sc.get_function()) == sorted(compiled.SOLVER_NAMES[1:])
+    assert all(sc.get_function(k).class_name() == "External" for k in sc.get_function())
     rng = np.random.default_rng(0)
     for _ in range(3):
         w, p = rng.normal(size=vm.nw), rng.normal(size=sum(n for _, n in vm.p_parts))
         lam = rng.normal(size=vm.ng)
-        for name in ("hess_lag", "jac_g", "grad_f"):
-            args = [w, p, 1.0, lam] if name == "hess_lag" else [w, p]
-            for a, b in zip(vm._derivs[name].call(args), cc._derivs[name].call(args)):
+        for name in compiled.SOLVER_NAMES[1:]:
+            f, g = sv.get_function(name), sc.get_function(name)
+            args = [w, p, 1.0, lam][:f.n_in()]
+            for a, b in zip(f.call(args), g.call(args)):
                 assert np.array_equal(np.array(a), np.array(b))
         ev, ec = vm.evaluate(w, p), cc.evaluate(w, p)
         assert all(np.array_equal(ev[k], ec[k]) for k in ev)
@@ -76,13 +80,13 @@ def test_ipopt_takes_the_same_iterates_on_compiled_functions(prepared):
     assert np.array_equal(a.info["w"], b.info["w"])
 
 
-def test_an_nlp_without_its_compiled_files_is_loaded_as_before(prepared, tmp_path):
+def test_an_nlp_without_its_compiled_library_is_loaded_as_before(prepared, tmp_path):
     import shutil
 
     folder = tmp_path / "partial"
     shutil.copytree(prepared[0], folder)
     key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
-    (folder / f"{key}.hess_lag.so").unlink()
+    compiled.library(folder, key).unlink()
     model.use_prepared(folder)
     assert model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX).cache == "hit"  # the preparation filled the cache too
     assert compiled.load(folder, key) is None

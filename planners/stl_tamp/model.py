@@ -179,7 +179,8 @@ class PhaseNLP:
             if self.cache == "miss":
                 nlp_cache.save(name, lambda tmp: _pack(fns, tmp))
         self._nlp_fn, self._tip_fn, self._rho_fn, self._vol_fn, self._pz_fn = (fns[k] for k in _FUNCTIONS)
-        self._derivs = {k: fns[k] for k in _DERIVATIVES if k in fns}
+        # compiled: the oracle's library holds the derivatives, and nlpsol finds them there
+        self._derivs = {} if self.cache == "compiled" else {k: fns[k] for k in _DERIVATIVES if k in fns}
         lbg, ubg, site_rows = (np.array(v).reshape(-1) for v in fns["bounds"].call([]))
         rows = site_rows.astype(int)
         xmin, xmax, ymin, ymax = site_box  # every corner of every dig rectangle inside the site
