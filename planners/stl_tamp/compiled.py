@@ -22,6 +22,7 @@ once per solve (:data:`ONCE`).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
@@ -44,8 +45,11 @@ NAMES = SOLVER_NAMES + HELPER_NAMES
 BASE_FLAGS = ("-fPIC", "-ffp-contract=off", "-fno-fast-math")
 #: Instructions above which a function is compiled at -O0 (see the module's docstring).
 O1_LIMIT = 250_000
-#: Evaluated once per solve (the multipliers of the parameters): not worth -O1's compile time.
-ONCE = ("nlp_grad",)
+#: Evaluated once per solve (the multipliers of the parameters) or never (the oracle, which
+#: only tells ``nlpsol`` where the others are): not worth -O1's compile time.
+ONCE = ("nlp_grad", "nlp")
+#: This module's code, part of a library's name: other flags or layout, another library.
+_SOURCE = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:8]
 
 
 def compiler() -> str | None:
@@ -77,7 +81,7 @@ def flags(key: str, fn: Any) -> tuple[str, ...]:
 
 def library(folder: Path, name: str) -> Path:
     """The one shared library of an NLP: every function of :data:`NAMES`."""
-    return folder / f"{name}.so"
+    return folder / f"{name}.{_SOURCE}.so"
 
 
 def solver_functions(fns: dict[str, Any]) -> dict[str, Any]:
