@@ -213,11 +213,11 @@ def _tmp_dir(parent: Path, key: str) -> str:
 
 
 def _read_only(folder: Path) -> None:
-    """Take every write bit off (a case sees the folder read only; the sandbox's namespaces
-    enforce it for root too: docs/DESIGN.md §6)."""
+    """Readable by everyone, writable by no one (a case, whichever user the sandbox runs it as,
+    sees the folder read only; for root the sandbox's mounts must enforce it: docs/DESIGN.md §6)."""
     for p in [*folder.rglob("*"), folder]:
-        mode = p.stat().st_mode
-        p.chmod(stat.S_IMODE(mode) & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+        mode = stat.S_IMODE(p.stat().st_mode)
+        p.chmod(0o555 if p.is_dir() or mode & stat.S_IXUSR else 0o444)
 
 
 def _writable(folder: Path) -> None:
