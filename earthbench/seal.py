@@ -94,6 +94,8 @@ class SealKey:
     key: bytes
     commitment: str = ""
     created_at: str = ""
+    #: The suite file the key was made from; where :func:`public_suite` finds an unregistered suite.
+    path: str = ""
 
     def derive(self, public_id: str, purpose: str) -> int:
         """A 63-bit seed for one random choice of one scenario: HMAC-SHA256(key, id and purpose)."""
@@ -107,7 +109,8 @@ class SealKey:
 
     def to_json(self) -> str:
         return json.dumps({"schema": SEAL_SCHEMA, "suite": self.suite, "suite_digest": self.suite_digest,
-                           "key": self.key.hex(), "commitment": self.commitment, "created_at": self.created_at}, indent=1) + "\n"
+                           "key": self.key.hex(), "commitment": self.commitment, "created_at": self.created_at,
+                           "path": self.path}, indent=1) + "\n"
 
     def write(self, path: str | Path) -> None:
         """Write the key file, readable by its owner only; an existing file is never overwritten."""
@@ -129,7 +132,8 @@ class SealKey:
             if doc.get("schema") != SEAL_SCHEMA:
                 raise SealError(f"{str(path)!r} is not an earthbench key file (schema {doc.get('schema')!r}, expected {SEAL_SCHEMA!r})")
             key = bytes.fromhex(doc["key"])
-            out = cls(str(doc["suite"]), str(doc["suite_digest"]), key, str(doc["commitment"]), str(doc.get("created_at", "")))
+            out = cls(str(doc["suite"]), str(doc["suite_digest"]), key, str(doc["commitment"]), str(doc.get("created_at", "")),
+                      str(doc.get("path", "")))
         except SealError:
             raise
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
@@ -141,7 +145,8 @@ class SealKey:
 
 def new_key(suite: Suite) -> tuple[SealKey, Suite]:
     """A fresh random key for ``suite`` and the sealed suite it draws (its commitment computed)."""
-    draft = SealKey(suite.name, suite.digest, secrets.token_bytes(KEY_BYTES), created_at=datetime.now(UTC).isoformat(timespec="seconds"))
+    draft = SealKey(suite.name, suite.digest, secrets.token_bytes(KEY_BYTES), created_at=datetime.now(UTC).isoformat(timespec="seconds"),
+                    path=suite.path)
     return _complete(draft, suite)
 
 
@@ -151,6 +156,13 @@ def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
     c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios])
     full = dataclasses.replace(key, commitment=c)
     return full, suite.sealed(full, drawn=probe.scenarios)
+
+
+def public_suite(key: SealKey) -> Suite:
+    """The public suite a key was made for: the registered suite of its name, else its suite file."""
+    from .suite import known_suites, load_suite
+
+    return load_suite(key.suite if key.suite in known_suites() or not key.path else key.path)
 
 
 def open_sealed(suite: Suite, key: SealKey) -> Suite:

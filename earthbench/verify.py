@@ -457,12 +457,11 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     of the draw is the regenerated one. Re-judging the draw's runs is :func:`audit`'s
     (on ``run_rows``); this is the cost sealing adds to verifying a store.
     """
-    from .seal import SealError, open_sealed
-    from .suite import load_suite
+    from .seal import SealError, open_sealed, public_suite
 
     out = SealCheck(key.name)
     try:
-        sealed = open_sealed(load_suite(key.suite), key)
+        sealed = open_sealed(public_suite(key), key)
     except (SealError, EarthbenchError) as exc:
         out.problems.append(f"key for {key.name}: {exc}")
         return out
