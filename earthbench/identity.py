@@ -51,12 +51,12 @@ def variant_name(name: str, digest: str) -> str:
 @functools.cache
 def registered_digest(name: str) -> str | None:
     """The digest of the registered suite ``name`` (None: no such suite is registered)."""
-    from .suite import known_suites, load_suite
+    from .suite import known_suites, registered_suite
 
     if name not in known_suites():
         return None
     try:
-        return load_suite(name).digest
+        return registered_suite(name).digest
     except EarthbenchError:
         return None  # a broken installed suite pins nothing
 

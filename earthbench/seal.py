@@ -158,13 +158,6 @@ def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
     return full, suite.sealed(full, drawn=probe.scenarios)
 
 
-def public_suite(key: SealKey) -> Suite:
-    """The public suite a key was made for: the registered suite of its name, else its suite file."""
-    from .suite import known_suites, load_suite
-
-    return load_suite(key.suite if key.suite in known_suites() or not key.path else key.path)
-
-
 def open_sealed(suite: Suite, key: SealKey) -> Suite:
     """The sealed suite ``key`` draws from ``suite``, after checking the key is for this suite
     version and that its scenarios reproduce the key's commitment."""

@@ -57,7 +57,7 @@ import math
 import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cache, cached_property
 from importlib import resources
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -241,6 +241,20 @@ def known_suites() -> dict[str, Path]:
             if item.name.endswith(".toml") and item.is_file():
                 found.setdefault(item.name[: -len(".toml")], Path(str(item)))
     return found
+
+
+@cache
+def registered_suite(name: str) -> Suite:
+    """The registered suite ``name``, loaded and generated once per process (for the checks that
+    compare stored suites with it: :mod:`earthbench.identity`, ``verify --key``). Not for
+    running: a run may change its copy's planner settings."""
+    return load_suite(name)
+
+
+def public_suite(key: SealKey) -> Suite:
+    """The public suite a sealed key was drawn from: the registered suite of its name, else the
+    suite file the key was made from."""
+    return registered_suite(key.suite) if key.suite in known_suites() or not key.path else load_suite(key.path)
 
 
 def load_suite(name_or_path: str | Path) -> Suite:
