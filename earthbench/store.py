@@ -27,9 +27,11 @@ was drawn from (``sealed_from``), that suite's digest (``public_digest``) and th
 ``commitment``; its scenarios and runs carry ``sealed = 1``. Nothing of the key is stored.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. An older
-store opened for writing is brought up to date by the named steps of :data:`MIGRATIONS`, in
-order, in one transaction each; read-only, it reads as it is (its runs as open-loop, public runs).
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
+store from an older schema opened for writing is brought up to date by the named steps of
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns);
+read-only, it is read as it is (a version-1 store's runs read as open-loop runs, a store
+before version 3 as public runs).
 """
 
 from __future__ import annotations
@@ -53,7 +55,22 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 3
+#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
+#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
+#: its own named step (never edits an old one); a new store is created at the latest version
+#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
+#: add a column the table already has is skipped, so a step is safe to re-run.
+MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
+    ("3: sealed draws (earthbench.seal): a suite version's public origin and commitment, a sealed mark on scenarios and runs", (
+        "ALTER TABLE suites ADD COLUMN sealed_from TEXT",
+        "ALTER TABLE suites ADD COLUMN public_digest TEXT",
+        "ALTER TABLE suites ADD COLUMN commitment TEXT",
+        "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+    )),
+)
+SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -116,31 +133,6 @@ CREATE INDEX runs_planner ON runs (planner, planner_version);
 
 def _columns(db: sqlite3.Connection, table: str) -> set[str]:
     return {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
-
-
-def _add_columns(db: sqlite3.Connection, table: str, columns: dict[str, str]) -> None:
-    have = _columns(db, table)
-    for name, decl in columns.items():
-        if name not in have:
-            db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {decl}")
-
-
-def _migrate_steps(db: sqlite3.Connection) -> None:
-    """Version 2: the closed-loop steps of a run (docs/DESIGN.md §6); nothing else changed."""
-    _add_columns(db, "runs", {"steps": "TEXT"})
-
-
-def _migrate_seal(db: sqlite3.Connection) -> None:
-    """Version 3: sealed draws (:mod:`earthbench.seal`): a suite version's public origin and
-    commitment, and a ``sealed`` mark on scenarios and runs (0 for every run stored before)."""
-    _add_columns(db, "suites", {"sealed_from": "TEXT", "public_digest": "TEXT", "commitment": "TEXT"})
-    _add_columns(db, "scenarios", {"sealed": "INTEGER NOT NULL DEFAULT 0"})
-    _add_columns(db, "runs", {"sealed": "INTEGER NOT NULL DEFAULT 0"})
-
-
-#: Schema version → the step that brings a store from the version before up to it. Each step is
-#: idempotent (it adds what is missing), so steps written on separate branches compose in any order.
-MIGRATIONS = {2: _migrate_steps, 3: _migrate_seal}
 
 
 def _compress(text: str) -> bytes:
@@ -248,11 +240,21 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            for target in range(version + 1, SCHEMA_VERSION + 1):
-                with self.db:
-                    self.db.execute("BEGIN IMMEDIATE")
-                    MIGRATIONS[target](self.db)
-                    self.db.execute(f"PRAGMA user_version = {target}")
+            if version < SCHEMA_VERSION:
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
+        with self.db:
+            self.db.execute("BEGIN IMMEDIATE")
+            for _, statements in MIGRATIONS[version - 1:]:
+                for stmt in statements:
+                    words = stmt.split()
+                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
+                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
+                            continue
+                    self.db.execute(stmt)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
