@@ -146,7 +146,7 @@ class SealKey:
 def new_key(suite: Suite) -> tuple[SealKey, Suite]:
     """A fresh random key for ``suite`` and the sealed suite it draws (its commitment computed)."""
     draft = SealKey(suite.name, suite.digest, secrets.token_bytes(KEY_BYTES), created_at=datetime.now(UTC).isoformat(timespec="seconds"),
-                    path=suite.path)
+                    path=str(Path(suite.path).resolve()) if suite.path else "")
     return _complete(draft, suite)
 
 
