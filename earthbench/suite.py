@@ -148,11 +148,6 @@ class Suite:
             )
         return out
 
-    @property
-    def public_name(self) -> str:
-        """The public suite a sealed suite was drawn from (its own name when it is public)."""
-        return self.sealing.suite if self.sealing is not None else self.name
-
     @cached_property
     def scenarios(self) -> tuple[Scenario, ...]:
         """Every scenario of the suite, in file order (family, then target, then seed).
