@@ -92,11 +92,13 @@ def test_every_observation_is_anonymous_on_both_tracks():
         assert (view.id, view.meta) == (ANONYMOUS_ID, {}) and sc.id != ANONYMOUS_ID and sc.meta
 
 
-def test_a_case_process_reads_no_name_of_its_scenario(realistic, tmp_path):
+def test_a_case_process_reads_no_name_of_its_scenario(realistic, tmp_path, monkeypatch):
     d, suite_file, key_file = realistic
+    monkeypatch.setenv("EARTHBENCH_DB", str(tmp_path / "the-store.db"))  # the harness is told where its store is; a case is not
     sealed = open_sealed(load_suite(suite_file), SealKey.read(key_file))
     (case,), _ = build_cases(sealed, ["t-witness"], plugins=[PLUGIN], seeds=[1])
     seen = json.dumps(json.loads(run_case(case).plan_json)["info"])
+    assert "the-store.db" not in seen
     sc = case.scenario
     for secret in (sc.id, sc.digest, sealed.name, "tiny-realistic/rbf14-sand/s1", SealKey.read(key_file).commitment[:12],
                    str(key_file), suite_file.name, "~sealed-", "rbf14-sand"):
