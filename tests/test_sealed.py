@@ -26,7 +26,7 @@ from earthbench.generalisation import gap_table
 from earthbench.harness import build_cases, run_case
 from earthbench.identity import variant_name
 from earthbench.merge import MergeError, merge
-from earthbench.registry import load_plugin_file
+from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import score
 from earthbench.seal import SealError, SealKey, SiteTransform, new_key, open_sealed, public_name
 from earthbench.sensing import ANONYMOUS_ID, observe
@@ -60,7 +60,11 @@ occlusion = false
 
 @pytest.fixture(scope="module")
 def realistic(tmp_path_factory):
-    """A two-scenario realistic suite file, its sealed key, and the hostile planners' configuration."""
+    """A two-scenario realistic suite file, its sealed key, and the hostile planners' configuration.
+
+    The hostile planners are registered for this module only (they must not join later tests'
+    default planner lists)."""
+    before = set(PLANNERS.names())
     load_plugin_file(PLUGIN)
     d = tmp_path_factory.mktemp("sealed")
     suite_file = d / "tiny-realistic.toml"
@@ -71,7 +75,9 @@ def realistic(tmp_path_factory):
     suite_file.write_text(REALISTIC + f'[config.t-oracle]\nsuites = ["{suite_file}"]\n[config.t-lookup]\ntable = "{d / "table.json"}"\n')
     key, _ = new_key(load_suite(suite_file))
     key.write(d / "tiny.key")
-    return d, suite_file, d / "tiny.key"
+    yield d, suite_file, d / "tiny.key"
+    for name in set(PLANNERS.names()) - before:
+        PLANNERS.unregister(name)
 
 
 def _tricks(db: Path, suite: str) -> dict[str, list[str]]:
