@@ -139,14 +139,14 @@ def test_suite_budget_takes_the_preparation_limits():
     assert "prepare_s" not in json.dumps(plain.scenarios[0].to_dict()["budget"])
 
 
-def test_a_version_2_store_gains_the_preparation_columns(tmp_path):
+def test_a_version_3_store_gains_the_preparation_columns(tmp_path):
     db = tmp_path / "old.db"
     with Store(db):
         pass
     con = sqlite3.connect(db)
     con.execute("ALTER TABLE runs DROP COLUMN prepare_s")
     con.execute("ALTER TABLE runs DROP COLUMN prepare_cpu_s")
-    con.execute("PRAGMA user_version = 2")
+    con.execute("PRAGMA user_version = 3")
     con.commit()
     con.close()
     assert "prepare_s" in load_runs(Store(db, read_only=True)).columns  # read only: NULLs, untouched
