@@ -83,6 +83,14 @@ def test_another_configuration_is_prepared_apart(tmp_path):
     assert prepare_key(PlannerRef.resolve("t-prepares")) != prepare_key(PlannerRef.resolve("t-prepares", {"token": "b"}))
 
 
+def test_open_and_closed_loop_share_a_preparation():
+    from earthbench.registry import PLANNERS
+
+    open_loop, closed = PlannerRef.resolve("stl-tamp"), PlannerRef.resolve("stl-tamp", {"closed_loop": True})
+    assert open_loop.config_hash != closed.config_hash and PLANNERS.get("stl-tamp").prepares()
+    assert prepare_key(open_loop) == prepare_key(closed)
+
+
 def test_a_failed_preparation_fails_the_planners_cases_once(tmp_path, prepared_root):
     report, df, log = _run(tmp_path, ["t-prepare-fails"])
     assert set(df.reason) == {"error"} and len(df) == 2

@@ -88,8 +88,11 @@ def machine_stamp() -> dict[str, str]:
 
 
 def prepare_key(ref: PlannerRef) -> str:
-    """The folder's name: a hash of planner, version, configuration and :func:`machine_stamp`."""
-    doc = {"planner": ref.name, "version": ref.version, "config_hash": ref.config_hash, "machine": machine_stamp()}
+    """The folder's name: a hash of planner, version, configuration and :func:`machine_stamp`.
+    The configuration's ``closed_loop`` setting is left out: it is how the harness calls the
+    planner (docs/DESIGN.md §6), so open and closed loop share one preparation."""
+    config = {k: v for k, v in ref.config.items() if k != "closed_loop"}
+    doc = {"planner": ref.name, "version": ref.version, "config": config, "machine": machine_stamp()}
     return f"{ref.name}-{hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:24]}"
 
 
