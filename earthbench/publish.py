@@ -152,9 +152,12 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
     """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
 
     Medians and the success rate carry their 95 % bootstrap interval in brackets; a
-    configuration hash in ``closed`` (closed loop, docs/DESIGN.md §6) is labelled so.
+    configuration hash in ``closed`` (closed loop, docs/DESIGN.md §6) is labelled so; a
+    "Prepare s" column (the longest preparation a row's runs used) appears when a row has one.
     """
     rows = []
+    # the preparation's wall seconds (docs/DESIGN.md §6), in a column of their own when a row has one
+    prepared = "prepare_max" in summary and bool(summary["prepare_max"].notna().any())
     for _, r in summary.iterrows():
         vr = _f(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else f" ± {_f(r['volume_ratio_sd'])}")
         rows.append({
@@ -178,7 +181,7 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                 ("Solve s (median)", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
                  r["solve_time_median"]),
                 ("Solve s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
-                ("Prepare s", _f(r.get("prepare_max", math.nan), ".0f"), r.get("prepare_max", math.nan)),
+                *((("Prepare s", _f(r["prepare_max"], ".0f"), r["prepare_max"]),) if prepared else ()),
                 *((reason, str(r[f"n_{reason}"]), r[f"n_{reason}"]) for reason in FAILURE_COLUMNS),
             ]
         })

@@ -162,3 +162,14 @@ def test_a_version_3_store_gains_the_preparation_columns(tmp_path):
         cols = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
         assert {"prepare_s", "prepare_cpu_s"} <= cols
         assert store.db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+
+
+def test_a_board_shows_the_preparation_beside_the_solve_times(tmp_path):
+    from earthbench.publish import publish
+
+    _run(tmp_path, ["t-prepares"], seeds="0-0")
+    res = publish(tmp_path / "r.db", tmp_path / "lb", figures=False, generated="(fixed)")
+    text = (res.out / "README.md").read_text()
+    assert "| Prepare s |" in text
+    line = next(ln for ln in text.splitlines() if "preparation of" in ln)
+    assert "prepares" in line and "not in its solve times" in line and "s wall" in line
