@@ -19,6 +19,7 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     track = "backhoe"
     success_threshold = 0.9          # optional
     planners = ["greedy"]            # optional; default: every planner supporting the track
+    prepare = false                  # optional: run no planner's preparation (docs/DESIGN.md §6)
     [budget]                         # earthbench.world.Budget
     wall_s = 60
     cores = 2
@@ -77,7 +78,8 @@ DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
 #: The most cells a generated heightmap may have (e.g. 2,000 × 2,000); a family asking for more is refused
 #: when the suite is loaded, before anything is generated.
 MAX_CELLS = 4_000_000
-_TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include")
+_TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include",
+             "prepare")
 _FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params", "soil", "sensing")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
 
@@ -134,6 +136,9 @@ class Suite:
     path: str = ""
     #: The key of a sealed draw of this suite (:mod:`earthbench.seal`); None for the public suite.
     sealing: SealKey | None = field(default=None, repr=False)
+    #: Whether the planners' preparations run before this suite's cases (docs/DESIGN.md §6);
+    #: ``prepare = false`` in the file: its cases run without them (a quick first look).
+    prepare: bool = True
 
     def sealed(self, key: SealKey, *, drawn: Iterable[Scenario] = ()) -> Suite:
         """This suite drawn with ``key`` (:mod:`earthbench.seal`), named by the key's commitment.
@@ -489,6 +494,9 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         if k in budget_doc:
             budget_doc = {**budget_doc, k: float(budget_doc[k])}
     budget = Budget(**budget_doc)
+    prepare = doc.get("prepare", True)
+    if not isinstance(prepare, bool):
+        raise SuiteError(f"{where}: prepare must be true or false, got {prepare!r}")
     planners = doc.get("planners")
     if planners is not None and (not isinstance(planners, list) or not all(isinstance(p, str) for p in planners)):
         raise SuiteError(f"{where}: planners must be a list of planner names, got {planners!r}")
@@ -536,6 +544,7 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         description=desc,
         success_threshold=float(threshold),
         planners=tuple(planners) if planners is not None else None,
+        prepare=prepare,
         config={k: dict(v) for k, v in config.items()},
         path=path,
     )

@@ -356,7 +356,9 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
         if key not in refs:
             cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
             refs[key] = _ref_for(r, json.loads(cfg[0]) if cfg else {})
-        cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key]))
+        # re-timed as it was timed: with its planner's preparation when the run used one
+        prepared = "prepare_s" in r.keys() and r["prepare_s"] is not None
+        cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key], prepare=prepared))
     by_key = {c.key: r for c, r in zip(cases, sample)}
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
     here = machine_label(environment())

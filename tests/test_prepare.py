@@ -173,3 +173,21 @@ def test_a_board_shows_the_preparation_beside_the_solve_times(tmp_path):
     assert "| Prepare s |" in text
     line = next(ln for ln in text.splitlines() if "preparation of" in ln)
     assert "prepares" in line and "not in its solve times" in line and "s wall" in line
+
+
+def test_a_suite_can_run_without_preparations(tmp_path):
+    from earthbench.errors import SuiteError
+    from earthbench.suite import load_suite
+
+    toml = tiny_suite_toml().replace('track = "backhoe"', 'track = "backhoe"\nprepare = false')
+    suite = parse_suite(toml)
+    assert not suite.prepare and not load_suite("quick").prepare and load_suite("smoke").prepare
+    cases, _ = build_cases(suite, ["t-prepares"], plugins=[PLUGIN])
+    log: list[str] = []
+    with Store(tmp_path / "n.db") as store:
+        store.register_suite(suite)
+        run_cases(cases, store, LocalExecutor(jobs=1), log=log.append)
+    assert not (tmp_path / "count.txt").exists() and not log
+    assert load_runs(tmp_path / "n.db").prepare_s.isna().all()
+    with pytest.raises(SuiteError, match="prepare must be true or false"):
+        parse_suite(toml.replace("prepare = false", 'prepare = "no"'))

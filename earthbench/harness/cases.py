@@ -87,6 +87,8 @@ class Case:
     scenario: Scenario
     planner: PlannerRef
     plugins: tuple[str, ...] = ()
+    #: Whether the planner's preparation runs (or is used) for this case: the suite's ``prepare``.
+    prepare: bool = True
 
     @property
     def key(self) -> tuple[str, str, str, str]:

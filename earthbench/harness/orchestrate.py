@@ -58,7 +58,7 @@ def build_cases(
             notes.append(f"the suite configures planner {name!r}, which is not registered: its [config.{name}] is unused")
     plugin_paths = tuple(str(Path(p).resolve()) for p in plugins)
     cases = [
-        Case(suite.name, suite.digest, suite.success_threshold, sc, ref, plugin_paths)
+        Case(suite.name, suite.digest, suite.success_threshold, sc, ref, plugin_paths, prepare=suite.prepare)
         for sc in suite.select(seeds)
         for ref in refs
     ]
@@ -129,7 +129,7 @@ def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, 
     seen: set[tuple[str, str, str]] = set()
     for c in cases:
         ref = c.planner
-        if not ref.prepares or (ref.name, ref.version, ref.config_hash) in seen:
+        if not ref.prepares or not c.prepare or (ref.name, ref.version, ref.config_hash) in seen:
             continue
         seen.add((ref.name, ref.version, ref.config_hash))
         try:

@@ -150,7 +150,7 @@ def run_prepared_case(case: Case, cores: Sequence[int], *, stop: threading.Event
     from .sandbox import STARTUP_S, run_case
 
     try:
-        prepared = ensure(case.planner, case.scenario.budget, cores, stop=stop)
+        prepared = ensure(case.planner, case.scenario.budget, cores, stop=stop) if case.prepare else None
     except PrepareError as exc:
         return CaseResult.failure(case, "error", str(exc))
     return run_case(case, cores, stop=stop, startup_s=STARTUP_S if startup_s is None else startup_s, prepared=prepared)
