@@ -72,6 +72,7 @@ class Published:
 
     out: Path
     files: list[Path] = field(default_factory=list)
+    removed: list[Path] = field(default_factory=list)  #: figures of an earlier board in ``figures/``, deleted
     runs: pd.DataFrame | None = None
     summary: pd.DataFrame | None = None
 
@@ -451,7 +452,7 @@ def terrain_figure(scenario_json: str, plan_json: str, title: str):
     from .referee import judge
     from .world import Scenario
 
-    scenario = Scenario.from_json(scenario_json)
+    scenario = Scenario.from_text(scenario_json)
     plan = Plan.from_json(plan_json)
     verdict = judge(scenario, plan)
     fig = terrain_before_after(scenario, plan, verdict)
@@ -893,6 +894,11 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     (out / "README.md").write_text(markdown_page(sections, generated))
     (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
+    written = {f.resolve() for f in result.files}
+    for old in fig_dir.glob("*"):  # figures of an earlier board (another suite, planner or version) would mislead
+        if old.suffix in (".png", ".svg") and old.is_file() and old.resolve() not in written:
+            old.unlink()
+            result.removed.append(old)
     return result
 
 

@@ -214,7 +214,7 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
             out[d] = f"its scenario {d[:12]}… is not stored"
             continue
         try:
-            sc = Scenario.from_json(decompress(row[0]))
+            sc = Scenario.from_text(decompress(row[0]))
         except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
             out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
             continue

@@ -3,7 +3,8 @@
 Referee figures in a store can be re-judged from its plans (``merge`` does); solve times,
 CPU times and memory cannot: they come from the machine that ran each case. This command
 reruns N randomly chosen runs (``--seed``) under the harness here, with the same planner
-version and configuration (which must be installed), and reports per planner whether the
+version and configuration (which must be installed, or given with
+``--plugin FILE.py``), and reports per planner whether the
 referee figures agree (identical for a deterministic planner) and the ratio of solve times
 here to those stored. The result is kept in the store (table ``spot_checks``, unless
 ``--no-record``) so that ``earthbench leaderboard`` shows it in the table's stamp. Exits 1
@@ -14,10 +15,12 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_plugin_arg, load_plugins, plain
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("verify", help="rerun a random sample of a store's cases here and compare",
-                       description=__doc__.replace("``", "`"), formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("store", metavar="STORE", help="results database or export bundle")
     p.add_argument("--sample", type=int, required=True, metavar="N", help="how many runs to rerun")
     p.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
@@ -25,12 +28,15 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--planner", action="append", default=[], metavar="NAME", help="sample only this planner (repeatable)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="cases at once (default: cores / 2)")
     p.add_argument("--no-record", action="store_true", help="do not keep the result in the store")
+    add_plugin_arg(p)
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     from ..store import Store
     from ..verify import record_spot_checks, spot_check
+
+    load_plugins(args)
 
     with Store(args.store, create=False) as store:
         if not args.no_record:
