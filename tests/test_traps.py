@@ -302,3 +302,17 @@ def test_stored_scenarios_are_never_read_as_file_names(tmp_path):
     con.close()
     with Store(db) as store, pytest.raises(Exception, match="not valid JSON"):
         store.scenario(digest)
+
+
+@pytest.mark.slow
+def test_the_documented_dask_script_runs_as_written(tmp_path):
+    """docs/running.md's LocalCluster block, saved as a script: its workers re-import it, so it needs its guard."""
+    pytest.importorskip("distributed")
+    text = (ROOT / "docs" / "running.md").read_text()
+    block = text[text.index("```python\nfrom distributed import Client, LocalCluster"):]
+    code = block[len("```python\n"):block.index("```", 10)]
+    (tmp_path / "cluster.py").write_text(code)
+    res = subprocess.run([sys.executable, "cluster.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    runs = load_runs(tmp_path / "earthbench.db")
+    assert len(runs) == 4 and set(runs.reason) == {"ok"}
