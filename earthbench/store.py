@@ -24,8 +24,9 @@ pandas. Tables:
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
-version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
-read as open-loop runs.
+store from an older schema opened for writing is brought up to date by the named steps of
+:data:`MIGRATIONS` (version 2 added the ``steps`` column); read-only, it is read as it is (a
+version-1 store's runs read as open-loop runs).
 """
 
 from __future__ import annotations
@@ -49,7 +50,15 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 2
+#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
+#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
+#: its own named step (never edits an old one); a new store is created at the latest version
+#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
+#: add a column the table already has is skipped, so a step is safe to re-run.
+MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
+)
+SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -214,12 +223,21 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version == 1:  # version 2 added the closed-loop steps of a run; nothing else changed
-                with self.db:
-                    self.db.execute("BEGIN IMMEDIATE")
-                    if "steps" not in {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}:
-                        self.db.execute("ALTER TABLE runs ADD COLUMN steps TEXT")
-                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            if version < SCHEMA_VERSION:
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
+        with self.db:
+            self.db.execute("BEGIN IMMEDIATE")
+            for _, statements in MIGRATIONS[version - 1:]:
+                for stmt in statements:
+                    words = stmt.split()
+                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
+                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
+                            continue
+                    self.db.execute(stmt)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""

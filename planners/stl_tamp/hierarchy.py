@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from shapely.geometry import Polygon
 
-from earthbench.referee.backhoe import track_level_and_tilt
+from earthbench.rules import track_level_and_tilt
 from earthbench.world import Pose, Scenario
 from .surface import RbfSurface
 
@@ -233,7 +233,7 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
     """The stand nearest the nominal one (``base_offset`` from the area's centre toward the
     truck's side) on which the referee's tilt rule lets the excavator work, facing the area;
     None when every stand in reach is too steep. The referee judges the tilt where the machine
-    stands (:func:`earthbench.referee.backhoe.track_level_and_tilt`), so a plan from a steep
+    stands (:func:`earthbench.rules.track_level_and_tilt`), so a plan from a steep
     stand would be invalid whatever the NLP does there."""
     es = scenario.machines.excavator
     ux, uy = toward
