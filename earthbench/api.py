@@ -3,7 +3,7 @@
 One list, here and in docs/plugins.md ("The public API"); ``tests/test_api.py`` imports every
 name, checks that the two lists agree and that the built-in plugins import nothing else from
 earthbench. A name on this list keeps working for at least one release after it moves or is
-renamed, with a :class:`DeprecationWarning` (:mod:`earthbench.deprecated`), and
+renamed, with a :class:`DeprecationWarning` (:func:`earthbench.lazy.moved_getattr`), and
 ``CHANGELOG.md`` says so. Import each name from the module it is listed under.
 """
 
@@ -31,17 +31,18 @@ PUBLIC: dict[str, tuple[str, ...]] = {
                           "loader_dump_excess", "min_dig_time", "min_dump_time", "poses_at", "swing_time",
                           "turn_drive_turn", "wrap"),
     "earthbench.cut": ("apply_cut", "charge_cut", "cut_along", "cut_level", "footprint", "path_cells", "path_window"),
+    "earthbench.rules": ("STEP_FLOOR", "Spec", "bodies_touch", "cell_heights", "densify", "ground_under", "loader_base_level",
+                         "off_map_excess", "reach_of", "rectangles_touch", "step_excess", "track_level_and_tilt",
+                         "undermining_excess", "wheel_step_excess"),
+    # the judge, for metrics (a Verdict) and scripts; a planner calls the rules above, never the judge
     "earthbench.referee": ("Execution", "RULES", "Verdict", "Violation", "judge"),
-    "earthbench.referee.replay": ("bodies_touch", "off_map_excess", "reach_of"),
-    "earthbench.referee.backhoe": ("track_level_and_tilt", "undermining_excess"),
-    "earthbench.referee.loader": ("cell_heights", "loader_base_level", "step_excess", "wheel_step_excess"),
     # the realistic track
     "earthbench.soil": ("draw", "nominal", "slump"),
     "earthbench.sensing": ("observe",),
     # metrics: a metric plugin is a callable (scenario, plan, verdict) -> dict; the scoring rule
     "earthbench.scoring": ("evaluate", "is_success"),
     # scripts and notebooks: run suites, read results
-    "earthbench.suite": ("load_suite",),
+    "earthbench.suite": ("MAX_CELLS", "load_suite"),
     "earthbench.store": ("Store", "load_runs"),
     "earthbench.harness": ("LocalExecutor", "run_suite"),
     "earthbench.harness.dask_executor": ("DaskExecutor",),

@@ -48,12 +48,20 @@ def test_builtin_plugins_import_only_public_names():
     assert not private
 
 
-@pytest.mark.parametrize("name, new", [("apply_cut", "earthbench.cut"), ("charge_cut", "earthbench.cut"),
-                                       ("cut_level", "earthbench.cut"), ("footprint", "earthbench.cut"),
-                                       ("LOADER_DUMP_HALF_ANGLE", "earthbench.motion")])
-def test_moved_referee_names_still_import_with_a_warning(name, new):
-    with pytest.warns(DeprecationWarning, match=rf"earthbench\.referee\.{name} moved to {re.escape(new)}\.{name}"):
-        exec(f"from earthbench.referee import {name} as got", ns := {})
+@pytest.mark.parametrize("old, name, new", [
+    ("earthbench.referee", "apply_cut", "earthbench.cut"), ("earthbench.referee", "charge_cut", "earthbench.cut"),
+    ("earthbench.referee", "cut_level", "earthbench.cut"), ("earthbench.referee", "footprint", "earthbench.cut"),
+    ("earthbench.referee", "LOADER_DUMP_HALF_ANGLE", "earthbench.motion"),
+    ("earthbench.referee.replay", "bodies_touch", "earthbench.rules"),
+    ("earthbench.referee.replay", "off_map_excess", "earthbench.rules"),
+    ("earthbench.referee.backhoe", "track_level_and_tilt", "earthbench.rules"),
+    ("earthbench.referee.backhoe", "undermining_excess", "earthbench.rules"),
+    ("earthbench.referee.loader", "wheel_step_excess", "earthbench.rules"),
+])
+def test_names_documented_in_0_1_still_import_with_a_warning(old, name, new):
+    """Every name the 0.1.0 README told plugins to import from a place it has left."""
+    with pytest.warns(DeprecationWarning, match=rf"{re.escape(old)}\.{name} moved to {re.escape(new)}\.{name}"):
+        exec(f"from {old} import {name} as got", ns := {})
     assert ns["got"] is getattr(importlib.import_module(new), name)
 
 
