@@ -316,3 +316,16 @@ def test_the_documented_dask_script_runs_as_written(tmp_path):
     assert res.returncode == 0, res.stderr[-2000:]
     runs = load_runs(tmp_path / "earthbench.db")
     assert len(runs) == 4 and set(runs.reason) == {"ok"}
+
+
+def test_the_tutorial_package_tests_run_from_inside_a_project_with_other_pytest_settings(tmp_path):
+    """The README runs `python -m pytest earthbench-my-planner/tests` in the earthbench clone, whose
+    pyproject.toml asks for pytest-benchmark's --benchmark-skip: the package's own settings must win."""
+    from earthbench.cli.new_planner import write_package
+
+    (tmp_path / "pyproject.toml").write_text('[tool.pytest.ini_options]\naddopts = "--an-option-only-the-clone-knows"\n')
+    write_package("clone-demo", tmp_path / "earthbench-clone-demo")
+    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "earthbench-clone-demo/tests"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": str(tmp_path / "earthbench-clone-demo")})
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]

@@ -95,6 +95,11 @@ dependencies = ["earthbench", "numpy", "shapely"]
 
 [tool.setuptools]
 packages = ["{module}"]
+
+# The package's own test settings: run from a folder whose pyproject.toml has others (the
+# earthbench clone's asks for pytest-benchmark), pytest still uses these.
+[tool.pytest.ini_options]
+testpaths = ["tests"]
 '''
 
 README = '''
