@@ -87,8 +87,10 @@ def test_a_plugin_written_against_the_previous_readme_runs(tmp_path):
     assert "from earthbench.cut import apply_cut, cut_level, footprint" in text
     src.write_text(text.replace("from earthbench.cut import", "from earthbench.referee import"))
     try:
-        with pytest.warns(DeprecationWarning, match="earthbench.referee.apply_cut moved"):
+        with pytest.warns(DeprecationWarning) as caught:
             load_plugin_file(src)
+        assert {str(w.message).split(" moved")[0] for w in caught} == {
+            f"earthbench.referee.{n}" for n in ("apply_cut", "cut_level", "footprint")}
         scenario = rbf(0, 0.56, n_bases=14)
         verdict = earthbench.judge(scenario, PLANNERS.get("old-api-demo")().plan(scenario))
         assert verdict.valid and verdict.loaded_volume > 0

@@ -131,6 +131,11 @@ def test_verify_takes_plugin_files(tmp_path, capsys):
     capsys.readouterr()
     assert main(["verify", db, "--sample", "2", "--plugin", str(plugin)]) == 0
     assert "2/2" in capsys.readouterr().out
+    from earthbench.registry import PLANNERS
+
+    PLANNERS.unregister("file-greedy")  # as in a new process, where only --plugin registers it
+    assert main(["verify", db, "--sample", "2"]) == 2  # without the file: the error says how to give it
+    assert "--plugin FILE.py" in capsys.readouterr().err
 
 
 def test_merge_skips_identical_duplicates_on_request_only(tmp_path, capsys):
