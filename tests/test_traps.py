@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from earthbench.cli import main
+from earthbench.cli import COMMANDS, main
 from earthbench.harness import Case, PlannerRef, run_case
 from earthbench.store import load_runs
 from earthbench.suite import load_suite
@@ -225,8 +225,7 @@ def test_a_new_board_removes_the_figures_of_the_old_one(tmp_path):
     assert {p.name for p in res.removed} == old
 
 
-@pytest.mark.parametrize("command", ["list", "plan", "validate", "show", "suites", "run", "runs", "rescore", "new-planner",
-                                     "leaderboard", "compare", "merge", "export", "verify"])
+@pytest.mark.parametrize("command", [c.rstrip("_").replace("_", "-") for c in COMMANDS])
 def test_help_texts_are_plain_text(command, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])

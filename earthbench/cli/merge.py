@@ -6,8 +6,10 @@ or metrics differ from the re-judged ones (``--rescore`` merges the re-judged fi
 and says how many changed), when a run has a verdict but no plan, when a scenario or suite
 does not reproduce its digest, when a run is in two stores (same scenario digest, planner,
 version and config hash; with ``--skip-duplicates`` only when the two differ in plan or
-outcome, and an identical one is merged once) or when a suite name has different digests in
-different stores.
+outcome, and an identical one is merged once), when a suite name has different digests in
+different stores, or
+when a registered suite's name (built in or installed) holds another digest: a different world
+under a known name, which ``--as-variant`` stores as ``NAME~variant-D`` instead.
 Runs without a plan (timeout, memory, crashed, error) are merged with the harness's reason,
 which cannot be re-checked. Solve times come from the machine that ran each case. An
 ``earthbench export`` bundle is a store like any other. OUT.db is created if missing.
@@ -16,9 +18,9 @@ which cannot be re-checked. Solve times come from the machine that ran each case
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ._common import plain
-import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -28,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="+", metavar="IN.db", help="databases or export bundles to merge")
     p.add_argument("--rescore", action="store_true",
                    help="merge runs whose stored figures differ with the re-judged figures instead of refusing")
+    p.add_argument("--as-variant", action="store_true",
+                   help="store a registered suite name holding another world as NAME~variant-DIGEST instead of refusing it")
     p.add_argument("--skip-duplicates", action="store_true",
                    help="merge once a run that is in several stores with the same plan and outcome (e.g. a deterministic "
                         "baseline run on two machines; the first store's solve times are kept), instead of refusing")
@@ -37,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..merge import merge
 
-    report = merge(args.out, args.inputs, rescore=args.rescore, skip_duplicates=args.skip_duplicates)
+    report = merge(args.out, args.inputs, rescore=args.rescore, as_variant=args.as_variant, skip_duplicates=args.skip_duplicates)
     for line in report.changes[:20]:
         print(f"re-scored {line}", file=sys.stderr)
     if len(report.changes) > 20:
