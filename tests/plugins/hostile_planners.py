@@ -1,8 +1,8 @@
 """Planners that attack the harness on purpose: forged messages, escapes, bloated results.
 
 Loaded as a plugin file, like :mod:`faulty_planners`. A planner that starts processes writes
-their pids, one per line, to ``$EARTHBENCH_TEST_PIDDIR/<name>.pids`` so the zoo can check that
-none outlives its case.
+their pids, one per line, to ``$EARTHBENCH_TEST_PIDDIR/<name>.pids`` where it can (without
+isolation) so the zoo can check that none outlives its case.
 """
 
 from __future__ import annotations
@@ -18,12 +18,17 @@ from earthbench import Plan, Planner
 
 def _harness_pipe() -> int:
     """The descriptor a case reports on: anyone in the process can find it (here: the argv)."""
-    return int(sys.argv[2])
+    return int(sys.argv[1])
 
 
 def _note(name: str, *pids: int) -> None:
-    with open(os.path.join(os.environ["EARTHBENCH_TEST_PIDDIR"], f"{name}.pids"), "a") as f:
-        f.write("".join(f"{p}\n" for p in pids))
+    """Without isolation the zoo checks these pids; in a sandbox the folder is out of reach (and
+    the pids are its PID namespace's), so the zoo looks for the case's processes by their tag."""
+    try:
+        with open(os.path.join(os.environ["EARTHBENCH_TEST_PIDDIR"], f"{name}.pids"), "a") as f:
+            f.write("".join(f"{p}\n" for p in pids))
+    except OSError:
+        pass
 
 
 def _sleeper(**kw) -> subprocess.Popen:

@@ -115,7 +115,7 @@ class ForgesDictStep(StepPlanner):
     name = "s-forge-dict"
 
     def step(self, observation):
-        os.write(int(sys.argv[2]), b'{"event": "step", "plan": {"actions": []}}\n')
+        os.write(int(sys.argv[1]), b'{"event": "step", "plan": {"actions": []}}\n')
         time.sleep(60)
 
 
@@ -126,7 +126,7 @@ class ForgesExtraStep(StepPlanner):
 
     def step(self, observation):
         first = super().step(observation)
-        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": first.to_json()}) + "\n").encode())
+        os.write(int(sys.argv[1]), (__import__("json").dumps({"event": "step", "plan": first.to_json()}) + "\n").encode())
         return first
 
 
@@ -142,6 +142,6 @@ class OpenLoopSendsStep(StepPlanner):
     Config = OpenConfig
 
     def plan(self, scenario):
-        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": Plan().to_json()}) + "\n").encode())
+        os.write(int(sys.argv[1]), (__import__("json").dumps({"event": "step", "plan": Plan().to_json()}) + "\n").encode())
         time.sleep(60)
         return Plan()
