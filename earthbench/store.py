@@ -25,7 +25,9 @@ pandas. Tables:
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
 version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
-read as open-loop runs.
+read as open-loop runs. Version 3 added ``isolation`` (the fences a case ran in,
+docs/isolation.md) and ``processes`` (the most processes it held, from its cgroup); runs stored
+before read as ``isolation: none`` (they ran with per-process fences).
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -103,6 +105,7 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
+    isolation TEXT, processes INTEGER,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
@@ -214,11 +217,13 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version == 1:  # version 2 added the closed-loop steps of a run; nothing else changed
+            if version < SCHEMA_VERSION:  # 2: a closed-loop run's steps; 3: the isolation stamp, the process count
                 with self.db:
                     self.db.execute("BEGIN IMMEDIATE")
-                    if "steps" not in {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}:
-                        self.db.execute("ALTER TABLE runs ADD COLUMN steps TEXT")
+                    have = {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}
+                    for col, kind in (("steps", "TEXT"), ("isolation", "TEXT"), ("processes", "INTEGER")):
+                        if col not in have:
+                            self.db.execute(f"ALTER TABLE runs ADD COLUMN {col} {kind}")
                     self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
@@ -309,6 +314,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    "isolation": result.isolation, "processes": result.processes,
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -465,7 +471,9 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``volume_prediction_error``, ``makespan_prediction_error`` and any metric a plugin adds —
     then ``violation_rules`` (comma-separated rules broken), ``error``, ``log_tail`` (the end
     of the case's stdout/stderr), ``exit_status``,
-    ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
+    ``cores``, ``started_at``, ``finished_at``, ``rescored_at``, ``isolation`` (the fences the
+    case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
+    held, from its cgroup) and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
     ``project_commit``, ``plugin_commit``. Metrics are NaN for runs without a plan (timeout,
     memory, error, crashed); ``time_per_m3`` is ``inf`` when a plan loaded nothing.
@@ -475,12 +483,14 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
+        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
+        stamp = "r.isolation, r.processes" if "isolation" in have else "NULL AS isolation, NULL AS processes"  # a version-2 file, read-only
         rows = store.db.execute(
-            """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
+            f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                      e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
+                      {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
                       e.project_commit, e.plugin_commit
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
@@ -492,7 +502,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
-    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
+    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
+            "isolation", "processes", "hostname",
             "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit"]
     metric_names: list[str] = []
     records = []
@@ -518,6 +529,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         d["violation_rules"] = ",".join(sorted({v["rule"] for v in json.loads(r["violations"] or "[]")}))
         for k in tail[1:]:
             d[k] = r[k]
+        d["isolation"] = d["isolation"] or "none"  # stored before the stamp existed: per-process fences
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)
     return df.infer_objects()

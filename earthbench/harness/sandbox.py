@@ -488,10 +488,10 @@ class _Supervisor:
                 if o.t_ready is None
                 else "the case sent a step it was not asked for"
             )
-        elif problem := self._unechoed(msg):
-            o.fault = problem
         elif not isinstance(msg.get("plan"), str):
             o.fault = f"the case's step has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
+        elif problem := self._unechoed(msg):
+            o.fault = problem
         else:
             self.nonce = None
             took = o.replied(now)
@@ -728,6 +728,9 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)
     if o.fault:
         return CaseResult(reason="error", error=o.fault + "; the case was ended", **times, **common)
+    if o.oom_kills:  # the whole tree's memory is the budget, whatever the planner made of a lost process
+        return CaseResult(reason="memory", error=f"the kernel ended {o.oom_kills} process(es) of the case at its memory budget "
+                          f"of {budget.memory_mb} MB (the whole process tree's; peak {o.maxrss_mb or 0:.0f} MB)", **times, **common)
     if o.cpu_out and o.done is None:
         over = f" over {len(loop.steps)} step(s)" if loop is not None else ""
         return CaseResult(reason="timeout", error=f"the planner used more than its CPU budget of {budget.cpu_s:g} s{over} and was ended",
@@ -745,9 +748,6 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         st = o.status
         how = f"killed by {signal.Signals(-st).name}" if st is not None and st < 0 else f"exited with status {st}"
         near = MEMORY_KILL_FRACTION * budget.memory_mb
-        if o.oom_kills:
-            return CaseResult(reason="memory", error=f"the case process {how}: the kernel ended {o.oom_kills} process(es) of the case "
-                              f"at its memory budget of {budget.memory_mb} MB (the whole process tree's)", **times, **common)
         if (o.maxrss_mb or 0) >= near or o.peak_vms_mb >= near or _mentions_memory(log_tail):
             return CaseResult(reason="memory", error=f"the case process {how} near its memory budget of {budget.memory_mb} MB "
                               f"(peak {o.maxrss_mb or 0:.0f} MB resident, {o.peak_vms_mb:.0f} MB address space seen)", **times, **common)
