@@ -358,12 +358,13 @@ class _Supervisor:
         finally:
             sel.close()
             o.t_end = time.monotonic()
+            if o.done is None:
+                self._cpu_at_end()
             if o.status is None:  # still running: past a deadline, a fault, or cancelled
                 self._end()
             self._read_report()
             if self.cgroup is not None:
                 self.cgroup.kill()  # what the warden left (none, unless it was killed)
-                o.cgroup_cpu_s = self.cgroup.cpu_s()
                 o.cgroup_peak_mb = self.cgroup.peak_bytes() / 2**20
                 o.oom_kills = self.cgroup.oom_kills()
                 o.processes = self.cgroup.pids_peak
@@ -438,6 +439,7 @@ class _Supervisor:
         o.replied(o.t_done)
         o.done = msg
         self.nonce = None
+        self._cpu_at_end()
         self.deadline = o.t_done + EXIT_GRACE_S
         self.outbox.put(None)
 
@@ -508,10 +510,17 @@ class _Supervisor:
             elif loop.ended:
                 o.done = {"event": "done", "outcome": "steps"}
                 o.t_done = now
+                self._cpu_at_end()
                 self.deadline = now + EXIT_GRACE_S
                 self.outbox.put(None)
             else:
                 self._give(data, time.monotonic())
+
+    def _cpu_at_end(self) -> None:
+        """The cgroup's CPU seconds when the planner's last call ended (what its processes burn
+        while the case exits is not the planner's compute)."""
+        if self.cgroup is not None and self.o.cgroup_cpu_s is None:
+            self.o.cgroup_cpu_s = self.cgroup.cpu_s()
 
     def _unechoed(self, msg: dict[str, Any]) -> str:
         """Why a reply is not an answer to the input the case was last given ('' when it is)."""
