@@ -6,7 +6,6 @@ every case (no case stops the suite), and no process any case started may outliv
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -14,12 +13,11 @@ import psutil
 import pytest
 
 from earthbench.harness import LocalExecutor, build_cases, run_cases
-from earthbench.harness.sandbox import CASE_TAG
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
-from helpers import tiny_suite_toml
+from helpers import case_processes, tiny_suite_toml
 
 PLUGINS = [str(Path(__file__).parent / "plugins" / f) for f in ("faulty_planners.py", "hostile_planners.py")]
 
@@ -42,20 +40,6 @@ def _alive(pid: int) -> bool:
         return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
     except psutil.Error:
         return False
-
-
-def case_processes() -> list[int]:
-    """Live processes of this process's cases, found by the tag every case process carries
-    (inside a sandbox too: its processes are ours to see, not the other way round)."""
-    mine = f"earthbench-case-{os.getpid()}-"
-    out = []
-    for p in psutil.process_iter():
-        try:
-            if p.environ().get(CASE_TAG, "").startswith(mine) and p.status() != psutil.STATUS_ZOMBIE:
-                out.append(p.pid)
-        except psutil.Error:
-            continue
-    return out
 
 
 def test_the_zoo_in_one_run(tmp_path, monkeypatch):
@@ -125,7 +109,7 @@ def test_case_folders_of_a_killed_harness_are_cleared_by_the_next(tmp_path):
     mine = tmp_path / "earthbench-case-1-notours"  # pid 1 is alive: not ours to remove
     mine.mkdir()
     script = (
-        "import sys; sys.path.insert(0, sys.argv[1]); from helpers import tiny_suite_toml\n"
+        "import sys; sys.path.insert(0, sys.argv[1]); from helpers import case_processes, tiny_suite_toml\n"
         "from earthbench.harness import build_cases, run_case\n"
         "from earthbench.registry import load_plugin_file\n"
         "from earthbench.suite import parse_suite\n"

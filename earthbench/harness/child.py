@@ -205,6 +205,11 @@ if prctl is not None:
     prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG: the harness died -> end the case
 if harness and os.getppid() != harness:  # 0: in a PID namespace of its own (bubblewrap's init is the parent)
     os._exit(70)
+if not harness and os.getsid(0) != os.getpid():  # in a sandbox: lead a session of its own there too
+    try:
+        os.setsid()
+    except OSError:
+        pass
 if not harness and os.getuid() == 0:  # the sandbox's root is the harness's: the case runs as nobody
     os.setgroups([])
     os.setgid(65534)

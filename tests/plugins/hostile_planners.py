@@ -284,7 +284,8 @@ class ForgesReport(Planner):
     def plan(self, scenario):
         import json
 
-        report = (json.dumps({"planner": os.getpid()}) + "\n" + json.dumps({"status": 0, "cpu_s": 0.0, "maxrss_kb": 1024, "others": 0}) + "\n")
+        forged = {"status": 0, "cpu_s": 0.0, "maxrss_kb": 1024, "others": 0}
+        report = json.dumps({"planner": os.getpid()}) + "\n" + json.dumps(forged) + "\n"
         try:
             fd = os.open(f"/proc/{os.getppid()}/fd/{sys.argv[2]}", os.O_WRONLY)
             os.write(fd, report.encode())
