@@ -498,13 +498,13 @@ class _Supervisor:
             self.nonce = None
             took = o.replied(now)
             if self.cgroup is not None:  # no compute between steps: the case stands still while the harness works
-                self.cgroup.freeze(True)
+                self.cgroup.freeze(True, wait=False)
             try:
                 problem = loop.take(msg["plan"], took)
                 data = loop.next_observation() if not (problem or loop.ended) else b""
             finally:
                 if self.cgroup is not None:
-                    self.cgroup.freeze(False)
+                    self.cgroup.freeze(False, wait=False)
             if problem:
                 o.fault = problem
             elif loop.ended:
