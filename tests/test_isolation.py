@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.harness import LocalExecutor, build_cases, isolation, run_cases
+from earthbench.publish import stamp
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
@@ -101,3 +102,6 @@ def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path, monkeypat
         monkeypatch.delenv(isolation.SWITCH)
         isolation.support.cache_clear()
     assert df.reason["t-fast"] == "ok" and df.isolation["t-fast"] == "none" and df.processes.isna()["t-fast"]
+    # the leaderboard's stamp says how many of a table's runs had no fences
+    lines = stamp(df.reset_index(), "bare", "backhoe", "now").lines()
+    assert any(line.startswith("isolation: none for 1 of 1 runs") for line in lines)
