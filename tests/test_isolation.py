@@ -9,6 +9,7 @@ namespaces); where a fence is missing they are skipped, saying which and why.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -105,3 +106,20 @@ def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path, monkeypat
     # the leaderboard's stamp says how many of a table's runs had no fences
     lines = stamp(df.reset_index(), "bare", "backhoe", "now").lines()
     assert any(line.startswith("isolation: none for 1 of 1 runs") for line in lines)
+
+
+@pytest.mark.skipif(isolation.support().cgroup is None, reason=isolation.describe())
+def test_case_cgroups_of_a_killed_harness_are_removed_by_the_next(tmp_path):
+    import subprocess
+    import sys
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    probe = isolation.CaseCgroup.create(isolation.support().cgroup, cores=(), memory_bytes=64 * 2**20)
+    stale = [os.path.join(os.path.dirname(d), f"earthbench-{dead.pid}-0") for d in probe.dirs.values()]
+    probe.remove()
+    for d in stale:
+        os.mkdir(d)
+    isolation._clear_stale.cache_clear()
+    isolation.CaseCgroup.create(isolation.support().cgroup, cores=(), memory_bytes=64 * 2**20).remove()
+    assert not [d for d in stale if os.path.exists(d)]

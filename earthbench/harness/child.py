@@ -1,8 +1,12 @@
 """The inside of one case: a warden process and, under it, the planner's process.
 
-:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``. The bootstrap is plain
-Python that imports nothing of earthbench, numpy or the plugin; it becomes the case's
-*warden*:
+:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``, in a sandbox of its own
+where the machine allows it (:mod:`.isolation`). The bootstrap is plain Python that imports
+nothing of earthbench, numpy or the plugin; it becomes the case's *warden*:
+
+* in a sandbox whose root is the harness's (the harness runs as root), it drops to ``nobody``
+  before anything else; it makes itself non-dumpable, so the planner (the same user) cannot
+  open its descriptors or memory through ``/proc``;
 
 * it makes itself a child subreaper (``prctl(PR_SET_CHILD_SUBREAPER)``), so every descendant
   of the case, also one that left the session (``setsid``) or was double-forked, is
@@ -19,17 +23,20 @@ Python that imports nothing of earthbench, numpy or the plugin; it becomes the c
   every reaped descendant (``getrusage(RUSAGE_CHILDREN)``: CPU seconds and peak resident
   memory), so CPU and memory figures cover the case's own process tree and nothing else.
 
-The planner process talks to the harness over another inherited pipe, one JSON object per
-line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has read the
-scenario that the harness writes to its stdin in answer (one line of JSON), ``{"event": "done",
-"outcome": "plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The
+The planner process reads the case's specification (planner name, source, overrides) from the
+first line of its stdin, then talks to the harness over another inherited pipe, one JSON
+object per line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has
+read the scenario that the harness writes to its stdin in answer (one line,
+``{"nonce": N, "input": SCENARIO}``), ``{"event": "done", "outcome": "plan" | "error" |
+"memory", "plan": JSON, "error": text, "detail": {...}, "nonce": N}``: every reply echoes the
+nonce of the input it answers. The
 harness validates every message and owns every time: it starts the wall budget when it hands
 over the scenario and stops it when the result arrives; ``detail`` (the child's own timings) is
 kept for information only. The child never judges its own plan.
 
 A closed-loop configuration (docs/DESIGN.md §6) answers instead with ``{"event": "step",
-"plan": JSON}`` per step; the harness executes the step on the truth and writes the next
-observation as the next line of stdin, or closes stdin to end the run. When ``step()``
+"plan": JSON, "nonce": N}`` per step; the harness executes the step on the truth and writes
+the next observation (with a fresh nonce) as the next line of stdin, or closes stdin to end the run. When ``step()``
 returns None the child sends ``{"event": "done", "outcome": "steps"}``.
 """
 

@@ -343,12 +343,13 @@ class CaseCgroup:
         if version == "v1":
             bases = _v1_bases()
             assert bases is not None
-            dirs = {c: os.path.join(b, name) for c, b in bases.items()}
         else:
             base = _v2_base()
             assert base is not None
             _v2_enable(base)
-            dirs = {"": os.path.join(base, name)}
+            bases = {"": base}
+        _clear_stale(tuple(bases.values()))
+        dirs = {c: os.path.join(b, name) for c, b in bases.items()}
         cg = cls(version, {})
         try:
             for c, d in dirs.items():
@@ -507,6 +508,26 @@ class CaseCgroup:
                         break
                     time.sleep(0.005)
             self.dirs.pop(c, None)
+
+
+@functools.lru_cache(maxsize=8)
+def _clear_stale(bases: tuple[str, ...]) -> None:
+    """Once per process: remove the (empty) case cgroups of harnesses that were killed."""
+    for base in bases:
+        try:
+            names = os.listdir(base)
+        except OSError:
+            continue
+        for name in names:
+            parts = name.split("-")
+            if len(parts) == 3 and parts[0] == "earthbench" and parts[1].isdigit() and int(parts[1]) != os.getpid():
+                try:
+                    os.kill(int(parts[1]), 0)
+                except ProcessLookupError:
+                    with contextlib.suppress(OSError):
+                        os.rmdir(os.path.join(base, name))
+                except OSError:
+                    pass
 
 
 def _v2_enable(base: str) -> None:

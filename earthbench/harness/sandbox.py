@@ -8,6 +8,10 @@ results back to the client, which alone writes the store.
 
 What ``run_case`` enforces (the trust model is in the README, "What a plugin can influence"):
 
+* where the machine allows it, its own namespaces and cgroup (:mod:`.isolation`,
+  docs/isolation.md): a read-only view of the Python environment and the planner's files, a
+  private tmpfs, the memory budget for the whole tree, the slot's cores as a cpuset, and the
+  CPU, peak memory and process count read from the cgroup; frozen between closed-loop steps;
 * a fresh interpreter per case in its own session, under a warden process (see
   :mod:`.child`) that is a child subreaper, so every descendant of the case, in any session,
   ends with it; CPU affinity on the slot's cores and OMP/OpenBLAS/MKL/… thread caps, so numpy's
@@ -19,8 +23,10 @@ What ``run_case`` enforces (the trust model is in the README, "What a plugin can
   until the case says it is ready; the wall budget and ``solve_time_s`` run from the moment
   this process hands the scenario over until the result has arrived; ``solve_cpu_s`` is the
   kernel's CPU accounting of the case's process tree over the same span (never negative);
-* every message validated: anything malformed, out of order or larger than
-  :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
+* the specification and every input over the case's stdin, each input with a fresh nonce its
+  reply must echo; every message validated: anything malformed, out of order, not echoing
+  the nonce or larger than :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what
+  was wrong; the CPU budget (``cpu_s``) over the planner's calls, when the suite sets one;
 * the referee runs here, in the harness process, never inside the planner's process;
 * the planner gets :func:`earthbench.sensing.observe` of the scenario (the scan and the
   soil's nominal class), computed here; the referee judges on the truth.
