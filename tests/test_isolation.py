@@ -123,3 +123,30 @@ def test_case_cgroups_of_a_killed_harness_are_removed_by_the_next(tmp_path):
     isolation._clear_stale.cache_clear()
     isolation.CaseCgroup.create(isolation.support().cgroup, cores=(), memory_bytes=64 * 2**20).remove()
     assert not [d for d in stale if os.path.exists(d)]
+
+
+PEEKER = '''
+import os
+from earthbench import Plan, Planner
+
+
+class Peeks(Planner):
+    """A plugin file run from a folder that also holds the store: raises if it sees anything but itself."""
+
+    name = "h-peek-folder"
+
+    def plan(self, scenario):
+        beside = sorted(os.listdir(os.path.dirname(os.path.abspath(__file__))))
+        if beside != [os.path.basename(__file__)]:
+            raise RuntimeError(f"sees its folder: {beside}")
+        return Plan()
+'''
+
+
+@fenced
+def test_a_plugin_file_sees_itself_not_the_folder_it_sits_in(tmp_path):
+    plugin = tmp_path / "peek.py"
+    plugin.write_text(PEEKER)
+    (tmp_path / "secret.toml").write_text("[budget]\n")
+    df, _ = run(tmp_path, tiny_suite_toml("peek"), ["h-peek-folder"], str(plugin), tmp_path / "earthbench.db")
+    assert df.reason["h-peek-folder"] == "ok", df.error["h-peek-folder"]

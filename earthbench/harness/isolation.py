@@ -150,7 +150,7 @@ def visible_paths(planner_source: str = "") -> tuple[str, ...]:
     paths = set(prefixes)
     mods = set(_own_packages())
     if planner_source.endswith(".py"):
-        paths.add(os.path.realpath(planner_source))
+        paths.add(_plugin_files(os.path.realpath(planner_source)))
     elif ":" in planner_source:
         module = planner_source.split(":", 1)[0]
         mods.add(module)
@@ -177,6 +177,16 @@ def visible_paths(planner_source: str = "") -> tuple[str, ...]:
         if not _under(p, out):
             out.append(p)
     return tuple(out)
+
+
+def _plugin_files(path: str) -> str:
+    """A plugin file's own files: the outermost package folder it sits in, or the file alone
+    (its folder may hold anything, e.g. the store a user runs beside it)."""
+    top = ""
+    d = os.path.dirname(path)
+    while os.path.isfile(os.path.join(d, "__init__.py")):
+        top, d = d, os.path.dirname(d)
+    return top or path
 
 
 def _nlp_cache() -> str | None:
@@ -217,22 +227,22 @@ _SYSTEM = ("/usr", "/lib", "/lib64", "/lib32", "/bin", "/sbin", "/etc/ld.so.cach
 def bwrap_args(bwrap: str, visible: Sequence[str], tmp_bytes: int) -> list[str]:
     """The bubblewrap command line of a case: fresh namespaces, a read-only view of ``visible``."""
     args = [bwrap, "--unshare-user", "--unshare-pid", "--unshare-net", "--unshare-ipc", "--unshare-uts",
-            "--unshare-cgroup-try", "--die-with-parent", "--new-session", "--hostname", "case"]
+            "--unshare-cgroup-try", "--die-with-parent", "--new-session", "--hostname", "case", "--perms", "1777"]
+    if tmp_bytes > 0:
+        args += ["--size", str(tmp_bytes)]
+    args += ["--tmpfs", "/tmp"]  # first: a plugin's files under /tmp are bound onto it, not hidden by it
     links = [p for p in _SYSTEM if os.path.islink(p)]
     binds = [p for p in _SYSTEM if os.path.exists(p) and p not in links]
     binds += [p for p in visible if not _under(p, binds)]
     # the folders above a bound path: readable by the case (bubblewrap would make them 0700)
-    above = sorted({a for p in binds for a in _ancestors(p) if not _under(a, binds)}, key=lambda a: a.count(os.sep))
+    above = sorted({a for p in binds for a in _ancestors(p) if not _under(a, binds) and a != "/tmp"}, key=lambda a: a.count(os.sep))
     for a in above:
         args += ["--perms", "0755", "--dir", a]
     for p in links:
         args += ["--symlink", os.readlink(p), p]
     for p in binds:
         args += ["--ro-bind", p, p]
-    args += ["--proc", "/proc", "--dev", "/dev", "--perms", "1777"]
-    if tmp_bytes > 0:
-        args += ["--size", str(tmp_bytes)]
-    args += ["--tmpfs", "/tmp", "--chdir", "/tmp"]
+    args += ["--proc", "/proc", "--dev", "/dev", "--chdir", "/tmp"]
     return args
 
 
