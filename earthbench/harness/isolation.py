@@ -144,10 +144,14 @@ def _prefixes() -> list[str]:
 
 @functools.lru_cache(maxsize=64)
 def visible_paths(planner_source: str = "") -> tuple[str, ...]:
-    """What a case may read: the interpreter's environment, earthbench's packages and the
-    planner's own files (its package, or its plugin file alone)."""
+    """What a case may read: the interpreter's environment (its prefixes and every site folder
+    on the path), earthbench's packages and the planner's own files."""
     prefixes = _prefixes()
     paths = set(prefixes)
+    # site folders added to the path (a .pth's addsitedir, a --system-site-packages venv): installed
+    # packages, whole; a source folder on the path is not (it may hold anything), only the packages used
+    paths.update(os.path.realpath(p) for p in sys.path
+                 if os.path.basename(p.rstrip(os.sep)) in ("site-packages", "dist-packages") and os.path.isdir(p))
     mods = set(_own_packages())
     if planner_source.endswith(".py"):
         paths.add(_plugin_files(os.path.realpath(planner_source)))
