@@ -24,10 +24,11 @@ pandas. Tables:
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
-version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
-read as open-loop runs. Version 3 added ``isolation`` (the fences a case ran in,
-docs/isolation.md) and ``processes`` (the most processes it held, from its cgroup); runs stored
-before read as ``isolation: none`` (they ran with per-process fences).
+store from an older schema opened for writing is brought up to date by the named steps of
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 ``isolation``, the fences a case ran in
+(docs/isolation.md), and ``processes``, the most processes it held, from its cgroup); read-only,
+it is read as it is (a version-1 store's runs read as open-loop runs, runs stored before
+version 3 as ``isolation: none``: they ran with per-process fences).
 """
 
 from __future__ import annotations
@@ -51,7 +52,17 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 3
+#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
+#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
+#: its own named step (never edits an old one); a new store is created at the latest version
+#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
+#: add a column the table already has is skipped, so a step is safe to re-run.
+MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
+    ("3: the isolation stamp and process count of a run",
+     ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
+)
+SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -217,14 +228,21 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version < SCHEMA_VERSION:  # 2: a closed-loop run's steps; 3: the isolation stamp, the process count
-                with self.db:
-                    self.db.execute("BEGIN IMMEDIATE")
-                    have = {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}
-                    for col, kind in (("steps", "TEXT"), ("isolation", "TEXT"), ("processes", "INTEGER")):
-                        if col not in have:
-                            self.db.execute(f"ALTER TABLE runs ADD COLUMN {col} {kind}")
-                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            if version < SCHEMA_VERSION:
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
+        with self.db:
+            self.db.execute("BEGIN IMMEDIATE")
+            for _, statements in MIGRATIONS[version - 1:]:
+                for stmt in statements:
+                    words = stmt.split()
+                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
+                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
+                            continue
+                    self.db.execute(stmt)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
