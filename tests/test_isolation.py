@@ -150,3 +150,16 @@ def test_a_plugin_file_sees_itself_not_the_folder_it_sits_in(tmp_path):
     (tmp_path / "secret.toml").write_text("[budget]\n")
     df, _ = run(tmp_path, tiny_suite_toml("peek"), ["h-peek-folder"], str(plugin), tmp_path / "earthbench.db")
     assert df.reason["h-peek-folder"] == "ok", df.error["h-peek-folder"]
+
+
+@pytest.mark.skipif(isolation.support().cgroup is None, reason=isolation.describe())
+def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypatch):
+    """Where user namespaces are not allowed but cgroups are (e.g. root in a container without
+    them), the kernel still counts and enforces the budgets of the whole tree."""
+    cg = isolation.support().cgroup
+    monkeypatch.setattr(isolation, "support", lambda: isolation.Support(None, cg, ("no namespaces (test)",)))
+    df, _ = run(tmp_path, tiny_suite_toml("bare-cg", wall_s=10.0, memory_mb=1024), ["h-forge-report", "h-tree-memory"], HOSTILE)
+    assert df.reason.to_dict() == {"h-forge-report": "ok", "h-tree-memory": "memory"}
+    assert df.solve_cpu_s["h-forge-report"] >= 1.8 and df.peak_rss_mb["h-forge-report"] >= 290
+    assert df.peak_rss_mb["h-tree-memory"] <= 1024 + 1
+    assert set(df.isolation) == {f"cgroup-{cg}"}

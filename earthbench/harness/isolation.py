@@ -564,6 +564,21 @@ def _v2_enable(base: str) -> None:
         _write(os.path.join(base, "cgroup.subtree_control"), " ".join("+" + c for c in need))
 
 
+def _descendants(pid: int) -> list[int]:
+    """Every descendant of ``pid`` (from /proc's children lists, no scan of the process table)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            with open(f"/proc/{p}/task/{p}/children") as f:
+                kids = [int(k) for k in f.read().split()]
+        except (OSError, ValueError):
+            continue
+        out += kids
+        todo += kids
+    return out
+
+
 # -- one fenced command ----------------------------------------------------------------------
 class FenceError(OSError):
     """The sandbox could not be set up (bubblewrap failed before running the command)."""
@@ -612,8 +627,11 @@ class Fence:
         if not self.bwrap:
             self.proc = subprocess.Popen(self.argv, stdin=self.stdin, stdout=self.stdout, stderr=self.stderr,
                                          pass_fds=self.pass_fds, env=self.env, cwd=self.cwd, start_new_session=True)
-            if self.cgroup is not None:  # before the command can have forked: it waits for its first input
+            if self.cgroup is not None:  # the command and whatever it forked before it was moved
                 self.cgroup.join(self.proc.pid)
+                for pid in _descendants(self.proc.pid):
+                    with contextlib.suppress(OSError):
+                        self.cgroup.join(pid)
             return self.proc
         info_r, info_w = os.pipe()
         block_r, block_w = os.pipe()
