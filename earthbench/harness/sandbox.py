@@ -189,8 +189,8 @@ def run_case(
         mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
         env = _child_env(len(cores), tag)
-        if fences.bwrap:
-            env.update(HOME="/tmp", TMPDIR="/tmp")
+        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
+            env["TMPDIR"] = "/tmp"
         argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
                 "0" if fences.bwrap else str(os.getpid())]
         fence = isolation.Fence(
