@@ -22,13 +22,18 @@ pandas. Tables:
   project and of the planner's plugin, hostname; deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
+Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
+was drawn from (``sealed_from``), that suite's digest (``public_digest``) and the draw's
+``commitment``; its scenarios and runs carry ``sealed = 1``. Nothing of the key is stored.
+
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
 store from an older schema opened for writing is brought up to date by the named steps of
-:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 ``isolation``, the fences a case ran in
-(docs/isolation.md), and ``processes``, the most processes it held, from its cgroup); read-only,
-it is read as it is (a version-1 store's runs read as open-loop runs, runs stored before
-version 3 as ``isolation: none``: they ran with per-process fences).
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
+``isolation``, the fences a case ran in (docs/isolation.md), and ``processes``, the most
+processes it held, from its cgroup); read-only, it is read as it is (a version-1 store's runs
+read as open-loop runs, a store before version 3 as public runs, runs stored before version 4
+as ``isolation: none``: they ran with per-process fences).
 """
 
 from __future__ import annotations
@@ -59,7 +64,14 @@ if TYPE_CHECKING:  # pragma: no cover
 #: add a column the table already has is skipped, so a step is safe to re-run.
 MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
-    ("3: the isolation stamp and process count of a run",
+    ("3: sealed draws (earthbench.seal): a suite version's public origin and commitment, a sealed mark on scenarios and runs", (
+        "ALTER TABLE suites ADD COLUMN sealed_from TEXT",
+        "ALTER TABLE suites ADD COLUMN public_digest TEXT",
+        "ALTER TABLE suites ADD COLUMN commitment TEXT",
+        "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+    )),
+    ("4: the isolation stamp and process count of a run",
      ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
 )
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
@@ -88,12 +100,12 @@ CREATE TABLE planner_configs (
 CREATE TABLE scenarios (
     digest TEXT PRIMARY KEY,
     id TEXT NOT NULL, track TEXT NOT NULL, target_volume REAL NOT NULL,
-    doc BLOB NOT NULL
+    doc BLOB NOT NULL, sealed INTEGER NOT NULL DEFAULT 0
 );
 CREATE TABLE suites (
     id INTEGER PRIMARY KEY,
     name TEXT NOT NULL, digest TEXT NOT NULL, track TEXT NOT NULL, threshold REAL NOT NULL,
-    description TEXT, registered_at TEXT,
+    description TEXT, registered_at TEXT, sealed_from TEXT, public_digest TEXT, commitment TEXT,
     UNIQUE (name, digest)
 );
 CREATE TABLE suite_scenarios (
@@ -116,11 +128,16 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
+    sealed INTEGER NOT NULL DEFAULT 0,
     isolation TEXT, processes INTEGER,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
+
+
+def _columns(db: sqlite3.Connection, table: str) -> set[str]:
+    return {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
 
 
 def _compress(text: str) -> bytes:
@@ -275,9 +292,11 @@ class Store:
         try:
             with self.db:
                 self.db.execute("BEGIN IMMEDIATE")
+                seal = sealed_origin(suite)
                 cur = self.db.execute(
-                    "INSERT INTO suites (name, digest, track, threshold, description, registered_at) VALUES (?, ?, ?, ?, ?, ?)",
-                    (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now()),
+                    "INSERT INTO suites (name, digest, track, threshold, description, registered_at, sealed_from, public_digest,"
+                    " commitment) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now(), *seal),
                 )
                 sid = cur.lastrowid
                 assert sid is not None  # an INSERT always sets it
@@ -333,6 +352,7 @@ class Store:
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
                     "isolation": result.isolation, "processes": result.processes,
+                    "sealed": int(bool(sc.meta.get("sealed"))),
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -351,21 +371,22 @@ class Store:
 
         For merging: the caller has checked that each document reproduces its digest.
         """
-        rows = [r for d in digests
-                if (r := src.db.execute("SELECT digest, id, track, target_volume, doc FROM scenarios WHERE digest=?", (d,)).fetchone())]
+        sealed = "sealed" if "sealed" in _columns(src.db, "scenarios") else "0"
+        rows = [r for d in digests if (r := src.db.execute(
+                f"SELECT digest, id, track, target_volume, doc, {sealed} FROM scenarios WHERE digest=?", (d,)).fetchone())]
         try:
             with self.db:
                 self.db.execute("BEGIN IMMEDIATE")
-                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
-                                    [tuple(r) for r in rows])
+                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc, sealed)"
+                                    " VALUES (?, ?, ?, ?, ?, ?)", [tuple(r) for r in rows])
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 
     def _scenario(self, sc: Scenario) -> None:
         if not self.db.execute("SELECT 1 FROM scenarios WHERE digest=?", (sc.digest,)).fetchone():
             self.db.execute(
-                "INSERT INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
-                (sc.digest, sc.id, sc.track, sc.task.target_volume, _compress(sc.to_json())),
+                "INSERT INTO scenarios (digest, id, track, target_volume, doc, sealed) VALUES (?, ?, ?, ?, ?, ?)",
+                (sc.digest, sc.id, sc.track, sc.task.target_volume, _compress(sc.to_json()), int(bool(sc.meta.get("sealed")))),
             )
 
     def _planner_config(self, case: Case) -> int:
@@ -455,6 +476,17 @@ class Store:
         return Scenario.from_json(decompress(row[0]))
 
 
+def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
+    """(public suite name, its digest, commitment) of a sealed suite version; Nones for a public one.
+
+    Reads a loaded :class:`~earthbench.suite.Suite` (its ``sealing`` key) or a stored version
+    (:mod:`earthbench.merge`'s records: ``sealed_from``, ``public_digest``, ``commitment``)."""
+    key = getattr(suite, "sealing", None)
+    if key is not None:
+        return key.suite, key.suite_digest, key.commitment
+    return getattr(suite, "sealed_from", None), getattr(suite, "public_digest", None), getattr(suite, "commitment", None)
+
+
 def stored_steps(row: Any) -> tuple[tuple[int, float], ...] | None:
     """A ``runs`` row's closed-loop steps ``((actions, compute seconds), …)``, None for an open-loop run."""
     text = row["steps"] if "steps" in row.keys() else None
@@ -493,7 +525,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
     held, from its cgroup) and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
-    ``project_commit``, ``plugin_commit``. Metrics are NaN for runs without a plan (timeout,
+    ``project_commit``, ``plugin_commit``, and ``sealed`` (a run of a sealed draw,
+    :mod:`earthbench.seal`). Metrics are NaN for runs without a plan (timeout,
     memory, error, crashed); ``time_per_m3`` is ``inf`` when a plan loaded nothing.
     """
     import pandas as pd
@@ -501,15 +534,15 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
-        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
-        stamp = "r.isolation, r.processes" if "isolation" in have else "NULL AS isolation, NULL AS processes"  # a version-2 file, read-only
+        sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
+        stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
         rows = store.db.execute(
             f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit
+                      e.project_commit, e.plugin_commit, {sealed}
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
                ORDER BY r.id"""
@@ -521,8 +554,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
-            "isolation", "processes", "hostname",
-            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit"]
+            "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
+            "plugin_commit", "sealed"]
     metric_names: list[str] = []
     records = []
     for r in rows:
@@ -548,6 +581,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         for k in tail[1:]:
             d[k] = r[k]
         d["isolation"] = d["isolation"] or "none"  # stored before the stamp existed: per-process fences
+        d["sealed"] = bool(r["sealed"])
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)
     return df.infer_objects()

@@ -93,15 +93,10 @@ def test_the_cpu_budget_ends_a_case_that_uses_more(tmp_path):
     assert 1.0 <= df.solve_cpu_s["h-forge-report"] < 2.0
 
 
-def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path, monkeypatch):
-    monkeypatch.setenv(isolation.SWITCH, "off")
-    isolation.support.cache_clear()
-    try:
-        assert isolation.describe().startswith("isolation: none — EARTHBENCH_ISOLATION=off")
-        df, _ = run(tmp_path, tiny_suite_toml("bare"), ["t-fast"], FAULTY)
-    finally:
-        monkeypatch.delenv(isolation.SWITCH)
-        isolation.support.cache_clear()
+@pytest.mark.usefixtures("isolation_off")
+def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path):
+    assert isolation.describe().startswith("isolation: none — EARTHBENCH_ISOLATION=off")
+    df, _ = run(tmp_path, tiny_suite_toml("bare"), ["t-fast"], FAULTY)
     assert df.reason["t-fast"] == "ok" and df.isolation["t-fast"] == "none" and df.processes.isna()["t-fast"]
     # the leaderboard's stamp says how many of a table's runs had no fences
     lines = stamp(df.reset_index(), "bare", "backhoe", "now").lines()
