@@ -64,7 +64,7 @@ def test_the_channels_into_the_harness_and_other_cases_are_shut(tmp_path):
     assert df.solve_cpu_s["h-forge-report"] >= 1.8 and df.peak_rss_mb["h-forge-report"] >= 290
     # the memory budget holds for the tree: 1.8 GB asked, never more than the budget held
     assert df.peak_rss_mb["h-tree-memory"] <= 1024 + 1 and "memory budget of 1024 MB" in df.error["h-tree-memory"]
-    assert df.processes["h-tree-memory"] >= 3
+    assert df.processes["h-tree-memory"] >= 4  # counted in the cgroup: bubblewrap's two, the warden, the planner at least
     # the cores of the slot, whatever sched_setaffinity asked for
     with Store(db) as store:
         run_id = int(load_runs(db).set_index("planner").id["h-affinity"])
