@@ -95,12 +95,25 @@ def test_the_cpu_budget_ends_a_case_that_uses_more(tmp_path):
 
 @pytest.mark.usefixtures("isolation_off")
 def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path):
-    assert isolation.describe().startswith("isolation: none — EARTHBENCH_ISOLATION=off")
-    df, _ = run(tmp_path, tiny_suite_toml("bare"), ["t-fast"], FAULTY)
-    assert df.reason["t-fast"] == "ok" and df.isolation["t-fast"] == "none" and df.processes.isna()["t-fast"]
+    import io
+
+    from earthbench.progress import Progress
+
+    suite = parse_suite(tiny_suite_toml("bare", seeds="0-1"))
+    load_plugin_file(FAULTY)
+    cases, _ = build_cases(suite, ["t-fast"], plugins=[FAULTY])
+    out = io.StringIO()
+    with Store(tmp_path / "bare.db") as store:
+        store.register_suite(suite)
+        run_cases(cases, store, LocalExecutor(jobs=2), progress=Progress(len(cases), stream=out, live=False))
+    said = [line for line in out.getvalue().splitlines() if line.startswith("isolation:")]
+    assert said == ["isolation: none — EARTHBENCH_ISOLATION=off; cases run with per-process fences only "
+                    "(docs/isolation.md says how to enable it)"]  # once, for two cases
+    df = load_runs(tmp_path / "bare.db").set_index("planner")
+    assert set(df.reason) == {"ok"} and set(df.isolation) == {"none"} and df.processes.isna().all()
     # the leaderboard's stamp says how many of a table's runs had no fences
     lines = stamp(df.reset_index(), "bare", "backhoe", "now").lines()
-    assert any(line.startswith("isolation: none for 1 of 1 runs") for line in lines)
+    assert any(line.startswith("isolation: none for 2 of 2 runs") for line in lines)
 
 
 @pytest.mark.skipif(isolation.support().cgroup is None, reason=isolation.describe())
