@@ -207,6 +207,8 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
         error=row["error"] or "", log_tail=row["log_tail"] or "", exit_status=row["exit_status"],
         cores=tuple(int(c) for c in (row["cores"] or "").split(",") if c.strip()), started_at=row["started_at"] or "",
         finished_at=row["finished_at"] or "", environment=env, steps=stored_steps(row),
+        isolation=(row["isolation"] if "isolation" in row.keys() else None) or "none",
+        processes=row["processes"] if "processes" in row.keys() else None,
     )
     return case, res
 

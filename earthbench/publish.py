@@ -223,6 +223,7 @@ class Stamp:
     spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
     n_machines: int = 1
     seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``): "seed 0", "seeds 0–2"
+    isolation: str = ""  #: the fences the table's runs had (docs/isolation.md), with the count of those without
 
     @property
     def mixed(self) -> bool:
@@ -239,6 +240,7 @@ class Stamp:
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
             PROVENANCE,
+            *([f"isolation: {self.isolation}"] if self.isolation else []),
             *(["† solve-time columns mix machines: compare those figures only between rows from the same machine"] if self.mixed else []),
         ]
 
@@ -286,7 +288,20 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
-                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds)
+                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds, _isolation(runs))
+
+
+def _isolation(runs: pd.DataFrame) -> str:
+    """The fences of a table's runs; runs without them (``none``) are counted, as they could be gamed."""
+    if "isolation" not in runs or not len(runs):
+        return ""
+    labels = runs["isolation"].fillna("none")
+    bare = int((labels == "none").sum())
+    kinds = ", ".join(sorted(set(labels) - {"none"}))
+    if not bare:
+        return kinds
+    what = "per-process fences only: a planner there could reach past its budget (docs/isolation.md)"
+    return f"{kinds + '; ' if kinds else ''}none for {bare} of {len(runs)} runs ({what})"
 
 
 def seed_list(seeds: Sequence[int]) -> str:
@@ -579,7 +594,7 @@ RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner")
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
                ("time_per_target_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
-               ("cpu_model", "CPU"), ("hostname", "Host")]
+               ("cpu_model", "CPU"), ("hostname", "Host"), ("isolation", "Isolation")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_time_s"}
 
 
