@@ -29,10 +29,13 @@ was drawn from (``sealed_from``), that suite's digest (``public_digest``) and th
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
 store from an older schema opened for writing is brought up to date by the named steps of
-:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns,
-version 4 ``prepare_s`` and ``prepare_cpu_s``); read-only, it is read as it is (a version-1
-store's runs read as open-loop runs, a store before version 3 as public runs, one before
-version 4 as runs without a preparation).
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
+``isolation``, the fences a case ran in (docs/isolation.md), and ``processes``, the most
+processes it held, from its cgroup; version 5 ``prepare_s`` and ``prepare_cpu_s``, the
+planner's preparation); read-only, it is read as it is (a version-1 store's runs
+read as open-loop runs, a store before version 3 as public runs, runs stored before version 4
+as ``isolation: none``: they ran with per-process fences; runs stored before version 5 as runs
+without a preparation).
 """
 
 from __future__ import annotations
@@ -70,7 +73,9 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
         "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
     )),
-    ("4: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
+    ("4: the isolation stamp and process count of a run",
+     ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
+    ("5: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
      ("ALTER TABLE runs ADD COLUMN prepare_s REAL", "ALTER TABLE runs ADD COLUMN prepare_cpu_s REAL")),
 )
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
@@ -128,6 +133,7 @@ CREATE TABLE runs (
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
     sealed INTEGER NOT NULL DEFAULT 0,
+    isolation TEXT, processes INTEGER,
     prepare_s REAL, prepare_cpu_s REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
@@ -350,6 +356,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    "isolation": result.isolation, "processes": result.processes,
                     "sealed": int(bool(sc.meta.get("sealed"))),
                     "prepare_s": result.prepare_s, "prepare_cpu_s": result.prepare_cpu_s,
                 }
@@ -472,7 +479,7 @@ class Store:
         row = self.db.execute("SELECT doc FROM scenarios WHERE digest=?", (digest,)).fetchone()
         if row is None:
             raise StoreError(f"scenario {digest[:12]}… is not in {str(self.path)!r}")
-        return Scenario.from_json(decompress(row[0]))
+        return Scenario.from_text(decompress(row[0]))
 
 
 def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
@@ -521,7 +528,9 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``volume_prediction_error``, ``makespan_prediction_error`` and any metric a plugin adds —
     then ``violation_rules`` (comma-separated rules broken), ``error``, ``log_tail`` (the end
     of the case's stdout/stderr), ``exit_status``,
-    ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
+    ``cores``, ``started_at``, ``finished_at``, ``rescored_at``, ``isolation`` (the fences the
+    case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
+    held, from its cgroup) and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
     ``project_commit``, ``plugin_commit``, and ``sealed`` (a run of a sealed draw,
     :mod:`earthbench.seal`). Metrics are NaN for runs without a plan (timeout,
@@ -533,14 +542,14 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     try:
         view = _suite_view(store, suite) if suite else None
         sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
-        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")}
-        prep = ", ".join(f"r.{c}" if c in have else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))  # version < 3
+        stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
+        prep = ", ".join(f"r.{c}" if c in _columns(store.db, "runs") else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
         rows = store.db.execute(
             f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                      e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
+                      {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
                       e.project_commit, e.plugin_commit, {sealed}
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
@@ -552,8 +561,9 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s"]
-    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
-            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit", "sealed"]
+    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
+            "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
+            "plugin_commit", "sealed"]
     metric_names: list[str] = []
     records = []
     for r in rows:
@@ -578,6 +588,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         d["violation_rules"] = ",".join(sorted({v["rule"] for v in json.loads(r["violations"] or "[]")}))
         for k in tail[1:]:
             d[k] = r[k]
+        d["isolation"] = d["isolation"] or "none"  # stored before the stamp existed: per-process fences
         d["sealed"] = bool(r["sealed"])
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)

@@ -7,8 +7,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r"\]\(([^)\s]+)\)")
-# Pages other branches add (issues 33 and 34); the README links them already.
-PENDING = {"docs/isolation.md", "docs/sealed-evaluation.md"}
 
 
 def _links(md: Path) -> list[str]:
@@ -31,7 +29,7 @@ def test_relative_links_resolve():
     for md in docs:
         for link in _links(md):
             target = (md.parent / link.split("#")[0]).resolve()
-            if not target.exists() and str(target.relative_to(ROOT)) not in PENDING:
+            if not target.exists():
                 broken.append(f"{md.relative_to(ROOT)}: {link}")
     assert not broken, broken
 

@@ -169,12 +169,15 @@ def run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
         out = Path(_tmp_dir(root(), key))
     except OSError as exc:
         raise PrepareError(f"cannot create the preparation folder in {root()}: {exc.strerror}; set ${ENV}") from None
+    # the job may run as another user inside its namespaces (docs/isolation.md): it must be able
+    # to write its fresh, private output folder; _read_only takes every write bit off afterwards
+    out.chmod(0o777)
     started = utc_now()
     job_budget = Budget(wall_s=budget.prepare_s, cores=len(cores), memory_mb=budget.prepare_memory_mb)
     job = {"name": ref.name, "source": ref.source, "overrides": ref.overrides, "job": "prepare"}
     payload = json.dumps({"folder": str(out), "jobs": len(cores)}).encode() + b"\n"
     try:
-        o = run_job(job, payload, cores, job_budget, stop=stop)
+        o = run_job(job, payload, cores, job_budget, writable=str(out), stop=stop)
     except BaseException:
         _writable(out)
         shutil.rmtree(out, ignore_errors=True)

@@ -8,6 +8,10 @@ results back to the client, which alone writes the store.
 
 What ``run_case`` enforces (the trust model is in docs/running.md, "What a plugin can influence"):
 
+* where the machine allows it, its own namespaces and cgroup (:mod:`.isolation`,
+  docs/isolation.md): a read-only view of the Python environment and the planner's files, a
+  private tmpfs, the memory budget for the whole tree, the slot's cores as a cpuset, and the
+  CPU, peak memory and process count read from the cgroup; frozen between closed-loop steps;
 * a fresh interpreter per case in its own session, under a warden process (see
   :mod:`.child`) that is a child subreaper, so every descendant of the case, in any session,
   ends with it; CPU affinity on the slot's cores and OMP/OpenBLAS/MKL/… thread caps, so numpy's
@@ -19,8 +23,10 @@ What ``run_case`` enforces (the trust model is in docs/running.md, "What a plugi
   until the case says it is ready; the wall budget and ``solve_time_s`` run from the moment
   this process hands the scenario over until the result has arrived; ``solve_cpu_s`` is the
   kernel's CPU accounting of the case's process tree over the same span (never negative);
-* every message validated: anything malformed, out of order or larger than
-  :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
+* the specification and every input over the case's stdin, each input with a fresh nonce its
+  reply must echo; every message validated: anything malformed, out of order, not echoing
+  the nonce or larger than :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what
+  was wrong; the CPU budget (``cpu_s``) over the planner's calls, when the suite sets one;
 * the referee runs here, in the harness process, never inside the planner's process;
 * the planner gets :func:`earthbench.sensing.observe` of the scenario (the scan and the
   soil's nominal class), computed here; the referee judges on the truth.
@@ -38,6 +44,7 @@ import glob
 import json
 import os
 import queue
+import secrets
 import selectors
 import shutil
 import signal
@@ -54,6 +61,7 @@ from typing import Any
 
 import psutil
 
+from . import isolation
 from ..errors import EarthbenchError
 from ..world import Budget
 from .cases import Case, CaseResult, Prepared, utc_now
@@ -151,8 +159,8 @@ def run_case(
     prepared: Prepared | None = None,
 ) -> CaseResult:
     """Run one case in a fresh process tree on ``cores``; ``prepared``: the planner's preparation
-    on this machine, whose folder the case is told and whose times go with its result (the
-    executors find or run it first: :func:`.prepare.run_prepared_case`).
+    on this machine, whose folder the case is told (and may read, read only) and whose times go
+    with its result (the executors find or run it first: :func:`.prepare.run_prepared_case`).
 
     Without ``cores`` the case waits for a free slot of a process-wide :class:`SlotPool`, so
     concurrent calls in one process (threads of a distributed worker) never share cores.
@@ -168,32 +176,65 @@ def run_case(
             return run_case(case, slot, stop=stop, startup_s=startup_s, prepared=prepared)
     cores = tuple(cores)
     started_at = utc_now()
-    tmp = _case_dir()
+    fences = isolation.support()
+    _undumpable()
+    tmp = _case_dir()  # the harness's own folder (the case's log); a sandboxed case never sees it
     try:
-        case_file = os.path.join(tmp, "case.json")
         try:
-            with open(case_file, "w") as f:
-                json.dump({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides,
-                           "prepared": prepared.path if prepared is not None else None}, f)
+            log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+        spec = json.dumps({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides,
+                           "prepared": prepared.path if prepared is not None else None}).encode() + b"\n"
         scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
         loop = (
             StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES)
             if case.planner.config.get("closed_loop")
             else None
         )
+        mr, mw = os.pipe()
+        rr, rw = os.pipe()
+        mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
+        env = _child_env(len(cores), tag)
+        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
+            env["TMPDIR"] = "/tmp"
+        argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
+                "0" if fences.bwrap else str(os.getpid())]
+        fence = isolation.Fence(
+            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem,
+            visible=isolation.visible_paths(case.planner.source) + ((prepared.path,) if prepared is not None else ()),
+            pass_fds=(mw, rw), env=env, stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
+        )
         t_spawn = time.monotonic()
-        proc, mr, rr = _spawn(case_file, tmp, cores, budget, _child_env(len(cores), tag))
         try:
-            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop).run()
+            try:
+                proc = fence.start()
+            except isolation.FenceError as exc:
+                raise HarnessError(f"cannot start a sandbox for a case: {exc}") from None
+            finally:
+                os.close(mw)
+                os.close(rw)
+                log.close()
+            assert proc.stdin is not None
+            try:  # the specification: the first line of the case's input (a pipe; no file anyone else can reach)
+                proc.stdin.write(spec)
+                proc.stdin.flush()
+            except OSError:
+                pass
+            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop,
+                              fence.cgroup, bool(fences.bwrap)).run()
         finally:
             os.close(mr)
             os.close(rr)
-        log_tail = _read_tail(tmp)
+            fence.close()
+        with open(os.path.join(tmp, "log.txt"), "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - LOG_TAIL))
+            log_tail = f.read().decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    out.isolation = fence.label
     res = _result(case, out, cores, started_at, log_tail)
     if prepared is not None:
         res = dataclasses.replace(res, prepare_s=prepared.wall_s, prepare_cpu_s=prepared.cpu_s)
@@ -201,9 +242,10 @@ def run_case(
 
 
 # -- a job that is not a case: a planner's preparation (.prepare) ----------------------------------
-# The same process tree, warden, limits and supervision as a case; what differs is only the
-# job file ("job": "prepare"), the one line it is given (no scenario) and its one result
-# ("prepared"). The isolation work (namespaces, cgroups) applies to it through _spawn.
+# The same fences (namespaces, cgroup), warden, limits and supervision as a case; what differs is
+# the specification ("job": "prepare"), the one input it is given (the output folder and the
+# number of cores: no scenario), its one result ("prepared"), and that its output folder is the
+# one path it may write besides its private /tmp.
 
 
 @dataclass(frozen=True)
@@ -220,72 +262,76 @@ class JobOutcome:
     cpu_s: float | None
     peak_rss_mb: float | None
     log_tail: str
+    isolation: str = "none"
 
 
-def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *,
+def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *, writable: str,
             stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> JobOutcome:
-    """Run a non-case job (``job`` is the case file's content, with ``"job"`` naming it) in a
-    fresh, fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one
-    line of input once it is ready. Only a ``prepare`` job exists (:mod:`.prepare`)."""
+    """Run a non-case job (``job`` is its specification, with ``"job"`` naming it) in a fresh,
+    fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one input once
+    it is ready; ``writable`` is the folder it may write. Only a ``prepare`` job exists (:mod:`.prepare`)."""
     cores = tuple(cores)
+    fences = isolation.support()
+    _undumpable()
     tmp = _case_dir()
     try:
-        case_file = os.path.join(tmp, "case.json")
         try:
-            with open(case_file, "w") as f:
-                json.dump(job, f)
+            log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+        spec = json.dumps(job).encode() + b"\n"
+        mr, mw = os.pipe()
+        rr, rw = os.pipe()
+        mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
+        env = _child_env(len(cores), tag)
+        if fences.bwrap:
+            env["TMPDIR"] = "/tmp"
+        argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
+                "0" if fences.bwrap else str(os.getpid())]
+        fence = isolation.Fence(
+            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem,
+            visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,), pass_fds=(mw, rw), env=env,
+            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
+        )
         t_spawn = time.monotonic()
-        proc, mr, rr = _spawn(case_file, tmp, cores, budget, _child_env(len(cores), tag))
         try:
-            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn)
+            try:
+                proc = fence.start()
+            except isolation.FenceError as exc:
+                raise HarnessError(f"cannot start a sandbox for a preparation: {exc}") from None
+            finally:
+                os.close(mw)
+                os.close(rw)
+                log.close()
+            assert proc.stdin is not None
+            try:
+                proc.stdin.write(spec)
+                proc.stdin.flush()
+            except OSError:
+                pass
+            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn, None,
+                              fence.cgroup, bool(fences.bwrap))
             sup.prepare = job.get("job") == "prepare"
             o = sup.run()
         finally:
             os.close(mr)
             os.close(rr)
-        tail = _read_tail(tmp)
+            fence.close()
+        with open(os.path.join(tmp, "log.txt"), "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - LOG_TAIL))
+            tail = f.read().decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb, tail)
+    return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
+                      tail, fence.label)
 
 
-def _spawn(case_file: str, tmp: str, cores: tuple[int, ...], budget: Budget,
-           env: dict[str, str]) -> tuple[subprocess.Popen, int, int]:
-    """Start the warden and its planner process on ``case_file`` (a case or a preparation job):
-    the process, the read ends of its message and report pipes."""
-    try:
-        log = open(os.path.join(tmp, "log.txt"), "wb")
-    except OSError as exc:
-        raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-    mr, mw = os.pipe()
-    rr, rw = os.pipe()
-    mem = int(budget.memory_mb) * 1024 * 1024
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-c", BOOTSTRAP, case_file, str(mw), str(rw), ",".join(map(str, cores)), str(mem), str(os.getpid())],
-            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, pass_fds=(mw, rw),
-            cwd=tmp, env=env, start_new_session=True,
-        )
-    except BaseException:
-        os.close(mr)
-        os.close(rr)
-        raise
-    finally:
-        os.close(mw)
-        os.close(rw)
-        log.close()
-    return proc, mr, rr
-
-
-def _read_tail(tmp: str) -> str:
-    """The last :data:`LOG_TAIL` bytes of the job's output."""
-    with open(os.path.join(tmp, "log.txt"), "rb") as f:
-        f.seek(0, os.SEEK_END)
-        f.seek(max(0, f.tell() - LOG_TAIL))
-        return f.read().decode(errors="replace")
+@functools.lru_cache(maxsize=1)
+def _undumpable() -> None:
+    """Once per process: no case may read the harness's memory or descriptors through /proc."""
+    isolation.make_undumpable()
 
 
 @dataclass
@@ -313,6 +359,14 @@ class _Outcome:
     report: dict[str, Any] | None = None
     peak_vms_mb: float = 0.0
     peak_rss_mb: float = 0.0
+    #: The kernel's figures of the case's cgroup when it has one (None: per-process fences only).
+    cgroup_cpu_s: float | None = None
+    cgroup_peak_mb: float | None = None
+    oom_kills: int = 0
+    processes: int | None = None
+    #: The case used more CPU seconds than its budget's ``cpu_s``.
+    cpu_out: bool = False
+    isolation: str = "none"
 
     @property
     def solve_time_s(self) -> float | None:
@@ -331,12 +385,18 @@ class _Outcome:
 
     @property
     def solve_cpu_s(self) -> float | None:
-        if self.t_ready is None or self.report is None:
+        if self.t_ready is None:
+            return None
+        if self.cgroup_cpu_s is not None:
+            return max(0.0, self.cgroup_cpu_s - self.cpu_ready)
+        if self.report is None:
             return None
         return max(0.0, float(self.report["cpu_s"]) - self.cpu_ready)  # tick-resolution sample vs µs accounting
 
     @property
     def maxrss_mb(self) -> float | None:
+        if self.cgroup_peak_mb is not None:
+            return self.cgroup_peak_mb
         if self.report is not None:
             return float(self.report["maxrss_kb"]) / 1024.0
         return self.peak_rss_mb or None
@@ -346,9 +406,10 @@ class _Supervisor:
     """Hands the scenario over, reads and validates the case's messages, enforces the deadlines."""
 
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
-                 budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None):
+                 budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None,
+                 cgroup: isolation.CaseCgroup | None = None, sandboxed: bool = False):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
-        self.prepare = False  # a preparation job (set by .prepare), not a case
+        self.prepare = False  # a preparation job (run_job), not a case
         self.budget, self.stop = budget, stop
         self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s, loop=loop)
         self.outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
@@ -360,6 +421,11 @@ class _Supervisor:
         self.next_tree_sample = t_spawn + TREE_SAMPLE_S
         self.planner: psutil.Process | None = None
         self.report_buf = bytearray()
+        self.cgroup = cgroup
+        self.sandboxed = sandboxed
+        self.next_cpu_check = 0.0
+        #: The nonce of the input the case is answering (None: no answer is due).
+        self.nonce: str | None = None
         try:
             self.warden: psutil.Process | None = psutil.Process(proc.pid)
         except psutil.Error:
@@ -383,6 +449,8 @@ class _Supervisor:
                 if now >= self.next_sample:
                     self._sample(now)
                     self.next_sample = now + SAMPLE_S
+                if self._over_cpu():
+                    break
                 if not eof:
                     if sel.select(timeout=min(self.deadline - now, 0.25)):
                         eof = self._read()
@@ -395,9 +463,16 @@ class _Supervisor:
         finally:
             sel.close()
             o.t_end = time.monotonic()
+            if o.done is None:
+                self._cpu_at_end()
             if o.status is None:  # still running: past a deadline, a fault, or cancelled
                 self._end()
             self._read_report()
+            if self.cgroup is not None:
+                self.cgroup.kill()  # what the warden left (none, unless it was killed)
+                o.cgroup_peak_mb = self.cgroup.peak_bytes() / 2**20
+                o.oom_kills = self.cgroup.oom_kills()
+                o.processes = self.cgroup.pids_peak
             if self.writer is not None:
                 self.outbox.put(None)
                 self.writer.join(timeout=1.0)
@@ -450,7 +525,8 @@ class _Supervisor:
         elif event == "ready":
             o.fault = "the case said 'ready' twice"
         elif event == "done":
-            problem = _check_done(msg, o.t_ready is not None, o.loop is not None, self.prepare)
+            problem = _check_done(msg, o.t_ready is not None, o.loop is not None, self.prepare) or (
+                self._unechoed(msg) if o.t_ready is not None else "")
             if problem:
                 o.fault = problem
             else:
@@ -468,6 +544,8 @@ class _Supervisor:
         o.t_done = time.monotonic()
         o.replied(o.t_done)
         o.done = msg
+        self.nonce = None
+        self._cpu_at_end()
         self.deadline = o.t_done + EXIT_GRACE_S
         self.outbox.put(None)
 
@@ -479,7 +557,8 @@ class _Supervisor:
         left = self.budget.wall_s - sum(o.calls)
         o.limit = "step" if o.loop is not None and self.budget.step_s < left else "wall"
         self.deadline = now + (min(self.budget.step_s, left) if o.loop is not None else left)
-        self.outbox.put(data)
+        self.nonce = secrets.token_hex(16)
+        self.outbox.put(b'{"nonce": "%s", "input": ' % self.nonce.encode() + data.rstrip(b"\n") + b"}\n")
 
     def _hand_over(self) -> None:
         """The planner's code is loaded: start the clock and give the case its scenario."""
@@ -519,17 +598,55 @@ class _Supervisor:
             )
         elif not isinstance(msg.get("plan"), str):
             o.fault = f"the case's step has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
+        elif problem := self._unechoed(msg):
+            o.fault = problem
         else:
-            problem = loop.take(msg["plan"], o.replied(now))
+            self.nonce = None
+            took = o.replied(now)
+            if self.cgroup is not None:  # no compute between steps: the case stands still while the harness works
+                self.cgroup.freeze(True, wait=False)
+            try:
+                problem = loop.take(msg["plan"], took)
+                data = loop.next_observation() if not (problem or loop.ended) else b""
+            finally:
+                if self.cgroup is not None:
+                    self.cgroup.freeze(False, wait=False)
             if problem:
                 o.fault = problem
             elif loop.ended:
                 o.done = {"event": "done", "outcome": "steps"}
                 o.t_done = now
+                self._cpu_at_end()
                 self.deadline = now + EXIT_GRACE_S
                 self.outbox.put(None)
             else:
-                self._give(loop.next_observation(), time.monotonic())
+                self._give(data, time.monotonic())
+
+    def _cpu_at_end(self) -> None:
+        """The cgroup's CPU seconds when the planner's last call ended (what its processes burn
+        while the case exits is not the planner's compute)."""
+        if self.cgroup is not None and self.o.cgroup_cpu_s is None:
+            self.o.cgroup_cpu_s = self.cgroup.cpu_s()
+
+    def _unechoed(self, msg: dict[str, Any]) -> str:
+        """Why a reply is not an answer to the input the case was last given ('' when it is)."""
+        if self.nonce is None or msg.get("nonce") != self.nonce:
+            return ("the case's reply does not echo the nonce of the input it answers "
+                    "(a reply written before its input arrived, or not by the case's bootstrap)")
+        return ""
+
+    def _over_cpu(self) -> bool:
+        """The planner's calls have used more CPU seconds than the budget's ``cpu_s``."""
+        cap, o = self.budget.cpu_s, self.o
+        if cap is None or o.t_ready is None or o.done is not None:
+            return False
+        if self.cgroup is None and time.monotonic() < self.next_cpu_check:
+            return False  # without a cgroup, reading the tree's CPU is a scan: every SAMPLE_S
+        self.next_cpu_check = time.monotonic() + SAMPLE_S
+        if self._tree_cpu() - o.cpu_ready > cap:
+            o.cpu_out = True
+            return True
+        return False
 
     # -- the process tree ----------------------------------------------------------------------
     def _tree(self) -> list[psutil.Process]:
@@ -539,7 +656,10 @@ class _Supervisor:
             return []
 
     def _planner(self) -> psutil.Process | None:
-        """The planner's process, by the pid its warden reported (no scan of the process table)."""
+        """The planner's process, by the pid its warden reported (no scan of the process table);
+        None in a sandbox of its own (that pid is its PID namespace's, not ours)."""
+        if self.sandboxed:
+            return None
         if self.planner is None:
             self._read_report_pipe()
             first = self.report_buf.split(b"\n", 1)[0]
@@ -555,6 +675,8 @@ class _Supervisor:
         The planner's process (with its reaped children) is read directly; only if its pid is
         not known is the whole tree scanned.
         """
+        if self.cgroup is not None:
+            return self.cgroup.cpu_s()
         planner = self._planner()
         total = 0.0
         for p in [planner] if planner is not None else self._tree():
@@ -567,7 +689,11 @@ class _Supervisor:
 
     def _sample(self, now: float) -> None:
         """Address space (what RLIMIT_AS caps) and resident memory, as we wait: the planner's process
-        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table)."""
+        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table).
+        With a cgroup the kernel keeps the peak itself; the process count is sampled."""
+        if self.cgroup is not None:
+            self.cgroup.sample_pids()
+            return
         if now >= self.next_tree_sample:
             procs = self._tree()
             self.next_tree_sample = now + TREE_SAMPLE_S
@@ -596,7 +722,12 @@ class _Supervisor:
         return True
 
     def _end(self) -> None:
-        """Ask the warden to end the tree; if it does not within the grace, kill every process we find."""
+        """Ask the warden to end the tree; if it does not within the grace, kill every process we find.
+        With a cgroup, the kernel's list of the case's processes is killed at once."""
+        if self.cgroup is not None:
+            self.cgroup.kill()
+            self._reaped(block=True)
+            return
         try:
             os.kill(self.proc.pid, signal.SIGTERM)
         except ProcessLookupError:
@@ -638,7 +769,8 @@ class _Supervisor:
                 if isinstance(rep.get("status"), int) and self.o.status == 0:
                     self.o.status = rep["status"]  # the planner process's own exit status
                 return
-        _sweep(self.tag)
+        if self.cgroup is None:  # with a cgroup, the kernel's list of its processes is killed instead
+            _sweep(self.tag)
 
 
 def _sweep(tag: str) -> None:
@@ -710,11 +842,19 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         environment=environment(case.planner.source),
         detail=dict(o.done.get("detail") or {}) if o.done else {},
         steps=tuple(loop.steps) if loop is not None else None,
+        isolation=o.isolation, processes=o.processes,
     )
     if o.cancelled and o.done is None:
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)
     if o.fault:
         return CaseResult(reason="error", error=o.fault + "; the case was ended", **times, **common)
+    if o.oom_kills:  # the whole tree's memory is the budget, whatever the planner made of a lost process
+        return CaseResult(reason="memory", error=f"the kernel ended {o.oom_kills} process(es) of the case at its memory budget "
+                          f"of {budget.memory_mb} MB (the whole process tree's; peak {o.maxrss_mb or 0:.0f} MB)", **times, **common)
+    if o.cpu_out and o.done is None:
+        over = f" over {len(loop.steps)} step(s)" if loop is not None else ""
+        return CaseResult(reason="timeout", error=f"the planner used more than its CPU budget of {budget.cpu_s:g} s{over} and was ended",
+                          **times, **common)
     if o.done is None:
         if o.timed_out:
             if o.t_ready is not None and o.limit == "step":

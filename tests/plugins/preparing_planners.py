@@ -18,7 +18,8 @@ class Config:
 
 
 class Prepares(Planner):
-    """Writes a token and the process's view (jobs, pid, affinity) into its folder, counts its calls;
+    """Writes a token and the process's view (jobs, pid, affinity) into its folder (the one place
+    it may write: in a sandbox, nothing else is writable);
     its plan reports what it finds there and whether it can write there."""
 
     name = "t-prepares"
@@ -27,10 +28,6 @@ class Prepares(Planner):
     def prepare(self, folder, jobs=1):
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "token.txt").write_text(self.config.token)
-        count = os.environ.get("EARTHBENCH_TEST_PREPARE_COUNT")
-        if count:  # a file outside the folder counts the calls across processes
-            with open(count, "a") as f:
-                f.write("x")
         (folder / "seen.json").write_text(json.dumps({"jobs": jobs, "affinity": sorted(os.sched_getaffinity(0)),
                                                       "pid": os.getpid(), "argv": sys.argv}))
         return {"wrote": ["token.txt", "seen.json"]}
