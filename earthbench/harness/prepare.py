@@ -223,7 +223,10 @@ def _read_only(folder: Path) -> None:
     sees the folder read only; for root the sandbox's mounts must enforce it: docs/DESIGN.md §6)."""
     for p in [*folder.rglob("*"), folder]:
         mode = stat.S_IMODE(p.stat().st_mode)
-        p.chmod(0o555 if p.is_dir() or mode & stat.S_IXUSR else 0o444)
+        try:  # a file the job wrote as another user (its namespace's) may refuse a chmod by ours
+            p.chmod(0o555 if p.is_dir() or mode & stat.S_IXUSR else 0o444)
+        except PermissionError:
+            pass
 
 
 def _writable(folder: Path) -> None:
