@@ -1,5 +1,11 @@
 """The scoring rule, defined once: judge a plan, compute every registered metric, decide success.
 
+Three rules live here and nowhere else: :func:`is_success`, :func:`time_to_target` (with
+:func:`time_per_target`, the primary time metric) and :func:`run_order` (how two runs of one
+scenario compare: the order rankings and paired tests follow). Each is *prefix-monotone*: no
+prefix of a valid plan is a success where the plan is not, reaches the target earlier, or comes
+first in :func:`run_order` (docs/metrics.md, "Why loading less never pays").
+
 Every place that needs to know whether a run succeeded — the harness, ``rescore``, ``validate``,
 :func:`earthbench.store.load_runs` re-labelling a run under another suite's threshold — calls
 :func:`is_success`; every metric comes from the ``earthbench.metrics`` registry (the built-in
@@ -9,6 +15,7 @@ ones are the ``core`` plugin), so the core never imports a metrics package.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover - imported when used: the suite loader needs only the threshold
@@ -18,6 +25,40 @@ if TYPE_CHECKING:  # pragma: no cover - imported when used: the suite loader nee
 
 #: A suite's success threshold when its file names none: volume ratio ≥ 0.9 with a valid plan.
 DEFAULT_SUCCESS_THRESHOLD = 0.9
+#: Relative slack when matching the cumulative loaded volume to the target: float sums only.
+SUM_SLACK = 1e-9
+
+
+def time_to_target(load_curve: Sequence[tuple[float, float]], target: float) -> float:
+    """End of the first dump after which the truck holds the target (s); ``inf`` if it never does.
+
+    ``load_curve``: the referee's ``(end time, cumulative m³)`` of every dump (``Verdict.load_curve``).
+    A plan short of the target is charged the one cost no continuation can beat: infinity. Any
+    finite charge for the missing volume is beaten by stopping early on some plan — the cheapest
+    honest one, the machine's fastest cycle per m³ (the lower bound), is beaten by *every* plan,
+    since the dumps a prefix leaves out took at least that long (docs/metrics.md).
+    """
+    for t_end, cumulative in load_curve:
+        if cumulative >= target * (1 - SUM_SLACK):
+            return float(t_end)
+    return math.inf
+
+
+def time_per_target(load_curve: Sequence[tuple[float, float]], target: float) -> float:
+    """The primary time metric, time to the target / the target (s/m³); ``inf`` short of the target."""
+    return time_to_target(load_curve, target) / target
+
+
+def run_order(success: bool, time_per_target_m3: float, solve_time_s: float = math.nan) -> tuple[int, float, float]:
+    """Sort key of one run (lower first): success, then time per target m³, then solve time.
+
+    The per-run form of :data:`earthbench.aggregate.RANKING_RULE` (tables rank on the same keys'
+    rates and medians). NaN (no value) sorts last.
+    """
+    def last(v: float) -> float:
+        return math.inf if v is None or math.isnan(v) else float(v)
+
+    return (0 if success else 1, last(time_per_target_m3), last(solve_time_s))
 
 
 def is_success(valid: Any, volume_ratio: Any, threshold: float) -> bool:
