@@ -40,7 +40,7 @@ from typing import Any
 
 from .errors import StoreError
 from .harness.cases import Case, CaseResult, PlannerRef
-from .store import Store, decompress, stored_steps
+from .store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 
 
@@ -145,6 +145,10 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
         env = {"hostname": e["hostname"], "cpu_model": e["cpu_model"], "cores": e["cores"], "os": e["os"],
                "python": e["python"], "packages": json.loads(e["packages"] or "{}"),
                "project_commit": e["project_commit"], "plugin_commit": e["plugin_commit"]}
+        keys = e.keys()
+        if "earthbench_version" in keys:  # schema 3: the build of the code and the plugin's distribution
+            env["earthbench_version"] = e["earthbench_version"]
+            env["plugin"] = json.loads(e["plugin"]) if e["plugin"] else None
     metrics = json.loads(row["metrics"]) if row["metrics"] else None
     res = CaseResult(
         key=case.key, scenario_id=row["scenario_id"], reason=row["reason"], solve_time_s=row["solve_time_s"],
@@ -153,6 +157,7 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
         error=row["error"] or "", log_tail=row["log_tail"] or "", exit_status=row["exit_status"],
         cores=tuple(int(c) for c in (row["cores"] or "").split(",") if c.strip()), started_at=row["started_at"] or "",
         finished_at=row["finished_at"] or "", environment=env, steps=stored_steps(row),
+        machine_load={c: row[c] for c in LOAD_COLUMNS if c in row.keys()},
     )
     return case, res
 

@@ -23,9 +23,12 @@ pandas. Tables:
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
-version-1 store opened for writing gains the ``steps`` column (version 2); read-only, its runs
-read as open-loop runs.
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A store of
+an older schema opened for writing is migrated step by step (:data:`MIGRATIONS`, one
+transaction each): version 2 added the ``steps`` column, version 3 the machine's load around
+each case (``load_before``, ``load_after``, ``steal_share``) and the build of the code
+(``environments.earthbench_version``, ``environments.plugin``: the plugin's distribution, version
+and source commit as JSON). Read-only, an older store reads with those values missing.
 """
 
 from __future__ import annotations
@@ -49,11 +52,14 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
 #: Metrics kept as real columns of ``runs`` (all metrics are also in the ``metrics`` JSON).
+#: The machine's load around a case (:mod:`earthbench.harness.load`), columns of ``runs`` since version 3.
+LOAD_COLUMNS = ("load_before", "load_after", "steal_share")
+
 METRIC_COLUMNS = (
     "valid", "volume_ratio", "loaded_volume", "makespan_s", "time_per_m3", "time_per_m3_ratio",
     "digs", "mean_bucket_fill", "travel_m",
@@ -64,7 +70,7 @@ CREATE TABLE environments (
     id INTEGER PRIMARY KEY,
     hash TEXT NOT NULL UNIQUE,
     hostname TEXT, cpu_model TEXT, cores INTEGER, os TEXT, python TEXT,
-    packages TEXT, project_commit TEXT, plugin_commit TEXT
+    packages TEXT, project_commit TEXT, plugin_commit TEXT, earthbench_version TEXT, plugin TEXT
 );
 CREATE TABLE planner_configs (
     id INTEGER PRIMARY KEY,
@@ -103,10 +109,33 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
+    load_before REAL, load_after REAL, steal_share REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
+
+
+def _add_columns(db: sqlite3.Connection, table: str, columns: dict[str, str]) -> None:
+    have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+    for name, kind in columns.items():
+        if name not in have:
+            db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {kind}")
+
+
+def migrate_1_to_2(db: sqlite3.Connection) -> None:
+    """Version 2: the closed-loop steps of a run; nothing else changed."""
+    _add_columns(db, "runs", {"steps": "TEXT"})
+
+
+def migrate_2_to_3(db: sqlite3.Connection) -> None:
+    """Version 3: the machine's load around each case and the build of the code that ran it (issue 35)."""
+    _add_columns(db, "runs", {"load_before": "REAL", "load_after": "REAL", "steal_share": "REAL"})
+    _add_columns(db, "environments", {"earthbench_version": "TEXT", "plugin": "TEXT"})
+
+
+#: version → the step that brings a store from it to the next version.
+MIGRATIONS = {1: migrate_1_to_2, 2: migrate_2_to_3}
 
 
 def _compress(text: str) -> bytes:
@@ -214,12 +243,12 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version == 1:  # version 2 added the closed-loop steps of a run; nothing else changed
+            while version < SCHEMA_VERSION:
                 with self.db:
                     self.db.execute("BEGIN IMMEDIATE")
-                    if "steps" not in {r[1] for r in self.db.execute("PRAGMA table_info(runs)")}:
-                        self.db.execute("ALTER TABLE runs ADD COLUMN steps TEXT")
-                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                    MIGRATIONS[version](self.db)
+                    version += 1
+                    self.db.execute(f"PRAGMA user_version = {version}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
@@ -309,6 +338,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -359,10 +389,11 @@ class Store:
             return None
         h = hashlib.sha256(_json(env).encode()).hexdigest()
         self.db.execute(
-            "INSERT OR IGNORE INTO environments (hash, hostname, cpu_model, cores, os, python, packages, project_commit, plugin_commit)"
-            " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT OR IGNORE INTO environments (hash, hostname, cpu_model, cores, os, python, packages, project_commit,"
+            " plugin_commit, earthbench_version, plugin) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (h, env.get("hostname"), env.get("cpu_model"), env.get("cores"), env.get("os"), env.get("python"),
-             _json(env.get("packages", {})), env.get("project_commit"), env.get("plugin_commit")),
+             _json(env.get("packages", {})), env.get("project_commit"), env.get("plugin_commit"), env.get("earthbench_version"),
+             _json(env["plugin"]) if env.get("plugin") else None),
         )
         return self.db.execute("SELECT id FROM environments WHERE hash=?", (h,)).fetchone()[0]
 
@@ -467,21 +498,29 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     of the case's stdout/stderr), ``exit_status``,
     ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
-    ``project_commit``, ``plugin_commit``. Metrics are NaN for runs without a plan (timeout,
-    memory, error, crashed); ``time_per_m3`` is ``inf`` when a plan loaded nothing.
+    ``project_commit`` (the commit the installed earthbench was built from, ``+dirty`` when its
+    tree had changes), ``plugin_commit``, ``earthbench_version``, ``plugin`` (JSON text: the planner's
+    distribution, version and source commit), and the machine's load around the case: ``load_before``,
+    ``load_after``, ``steal_share`` (missing in stores written before schema version 3). Metrics are
+    NaN for runs without a plan (timeout, memory, error, crashed); ``time_per_m3`` and
+    ``time_per_target_m3`` are ``inf`` when a plan loaded nothing or fell short of the target.
     """
     import pandas as pd
 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
+        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")} | {
+            "e." + r[1] for r in store.db.execute("PRAGMA table_info(environments)")}
+        newer = ", ".join((f"r.{c}" if c in have else f"NULL AS {c}") for c in LOAD_COLUMNS) + ", " + ", ".join(
+            (f"e.{c}" if f"e.{c}" in have else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))
         rows = store.db.execute(
             """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit
+                      e.project_commit, e.plugin_commit, """ + newer + """
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
                ORDER BY r.id"""
@@ -493,7 +532,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
-            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit"]
+            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit", *LOAD_COLUMNS,
+            "earthbench_version", "plugin"]
     metric_names: list[str] = []
     records = []
     for r in rows:

@@ -57,6 +57,7 @@ from ..errors import EarthbenchError
 from ..world import Budget
 from .cases import Case, CaseResult, utc_now
 from .child import BOOTSTRAP
+from . import load
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
 from ..sensing import observe
@@ -161,6 +162,7 @@ def run_case(
             return run_case(case, slot, stop=stop, startup_s=startup_s)
     cores = tuple(cores)
     started_at = utc_now()
+    load_before = load.snapshot()
     tmp = _case_dir()
     try:
         case_file = os.path.join(tmp, "case.json")
@@ -206,7 +208,7 @@ def run_case(
             log_tail = f.read().decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return _result(case, out, cores, started_at, log_tail)
+    return _result(case, out, cores, started_at, log_tail, load.around(load_before, load.snapshot()))
 
 
 @dataclass
@@ -612,7 +614,8 @@ def _mentions_memory(text: str) -> bool:
     return any(w in tail for w in _MEMORY_WORDS)
 
 
-def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
+def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str,
+            machine_load: dict[str, Any] | None = None) -> CaseResult:
     budget = case.scenario.budget
     times: dict[str, Any] = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
     loop = o.loop
@@ -624,7 +627,7 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         startup_s=(o.t_ready - o.t_spawn) if o.t_ready is not None else None,
         environment=environment(case.planner.source),
         detail=dict(o.done.get("detail") or {}) if o.done else {},
-        steps=tuple(loop.steps) if loop is not None else None,
+        steps=tuple(loop.steps) if loop is not None else None, machine_load=machine_load or {},
     )
     if o.cancelled and o.done is None:
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)
