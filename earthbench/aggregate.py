@@ -20,6 +20,8 @@ its CSVs alike:
   infinite for a run short of the target, counted in ``short_of_target``; with ``_q1`` / ``_q3``)
   and ``time_per_target_m3_ratio`` (to the scenario's lower bound), and over runs that loaded
   something (the others are counted in ``loaded_nothing``) ``time_per_m3``.
+* ``target_share_mean``: the mean over valid runs of the share of the target loaded, capped at 1
+  (:func:`earthbench.scoring.target_share`): the tie-break among runs short of the target.
 * ``solve_cpu_median`` (the ranked solve-time figure: CPU seconds of the case's process tree, with
   interval) and ``solve_time_median`` (wall, with interval) / ``_p90``: over every run with a
   measured time, failures included (a timeout's solve time is the time it was given).
@@ -46,6 +48,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .scoring import target_share
 from .stats import ALPHA, mcnemar_p, median_ci, min_separating_n, paired_differences, rate_ci, wilcoxon_p
 
 REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
@@ -59,7 +62,8 @@ PRIMARY = "time_per_target_m3"
 RANK_ALPHA = ALPHA
 RANKING_RULE = (
     "ranked by success rate (higher first), then median time per target m³ over valid runs (lower first; a run "
-    "short of the target counts as infinite), then median solve CPU time (lower first); a planner shares the rank "
+    "short of the target counts as infinite), then the mean share of the target loaded (capped at 1; higher first), then "
+    "median solve CPU time (lower first); a planner shares the rank "
     "of the first planner of the group above it (shown as 1=) unless a paired test on their shared scenarios "
     f"separates the two at α = {RANK_ALPHA:g} (exact McNemar on "
     "success, or Wilcoxon signed-rank on time per target m³ where both are valid); ranks cover the latest version of each planner "
@@ -68,7 +72,7 @@ RANKING_RULE = (
 SUMMARY_COLUMNS = [
     "rank", "rank_label", "ranked", "latest", *TABLE, *GROUP[2:], "config_label", "runs", "of", "scenarios", "successes", "success_rate",
     "success_rate_lo", "success_rate_hi", "valid_runs", "volume_ratio_mean", "volume_ratio_sd", "overshoot_m3_mean",
-    "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
+    "target_share_mean", "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
     "time_per_target_m3_q3", "time_per_target_m3_ratio_median", "time_per_target_m3_ratio_lo",
     "time_per_target_m3_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
     "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "short_of_target",
@@ -153,6 +157,7 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
         "volume_ratio_mean": float(vr.mean()) if len(vr) else math.nan,
         "volume_ratio_sd": float(vr.std(ddof=1)) if len(vr) > 1 else math.nan,
         "overshoot_m3_mean": float(over.mean()) if len(over) else math.nan,
+        "target_share_mean": float(np.mean([target_share(v) for v in vr])) if len(vr) else math.nan,
         "time_per_target_m3_median": tpt_med, "time_per_target_m3_lo": tpt_lo, "time_per_target_m3_hi": tpt_hi,
         "time_per_target_m3_q1": float(tq1), "time_per_target_m3_q3": float(tq3),
         "time_per_target_m3_ratio_median": r_med, "time_per_target_m3_ratio_lo": r_lo, "time_per_target_m3_ratio_hi": r_hi,
@@ -283,9 +288,10 @@ def rank(summary: pd.DataFrame, vectors: Sequence[tuple[pd.Series, pd.Series]] |
     s["ranked"] = (s["latest"].astype(bool) | all_versions) & (s["valid_runs"] > 0)
     s["_unranked"] = ~s["ranked"]
     s["_neg_success"] = -s["success_rate"].fillna(0.0)
+    s["_neg_share"] = -s["target_share_mean"].fillna(0.0)
     s["_scope"] = s["scope"].map({sc: i for i, sc in enumerate(SCOPES)})
     s = s.sort_values(["suite", "track", "_scope", "group", "_unranked", "_neg_success", "time_per_target_m3_median",
-                       "solve_cpu_median", "solve_time_median", "planner", "planner_version", "config_hash"],
+                       "_neg_share", "solve_cpu_median", "solve_time_median", "planner", "planner_version", "config_hash"],
                       na_position="last", kind="mergesort").reset_index(drop=True)
     ranks: list[float] = [math.nan] * len(s)
     labels: list[str] = ["–"] * len(s)

@@ -74,8 +74,9 @@ def config_labels(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
             labels = {h: label(str(planner), {k: v for k, v in c.items() if k in varying}, None) for h, c in configs.items()}
         else:
             labels = {h: label(str(planner), c, defaults) for h, c in configs.items()}
-        # two configurations must never share a label: add the hash where they would
+        # two different configurations must never share a label: add the hash where they would (equal
+        # settings under two hashes are two versions of the planner, which the version tells apart)
         for h, text in labels.items():
-            twins = [g for g, t in labels.items() if t == text]
+            twins = {json.dumps(configs[g], sort_keys=True) for g, t in labels.items() if t == text}
             out[(str(planner), h)] = text if len(twins) == 1 else f"{text}#{h[:8]}"
     return out

@@ -1,8 +1,8 @@
 """The scoring rule, defined once: judge a plan, compute every registered metric, decide success.
 
 Three rules live here and nowhere else: :func:`is_success`, :func:`time_to_target` (with
-:func:`time_per_target`, the primary time metric) and :func:`run_order` (how two runs of one
-scenario compare: the order rankings and paired tests follow). Each is *prefix-monotone*: no
+:func:`time_per_target`, the primary time metric) and :func:`run_order` with
+:func:`target_share` (how two runs of one scenario compare: the order rankings follow). Each is *prefix-monotone*: no
 prefix of a valid plan is a success where the plan is not, reaches the target earlier, or comes
 first in :func:`run_order` (docs/metrics.md, "Why loading less never pays").
 
@@ -49,16 +49,27 @@ def time_per_target(load_curve: Sequence[tuple[float, float]], target: float) ->
     return time_to_target(load_curve, target) / target
 
 
-def run_order(success: bool, time_per_target_m3: float, solve_time_s: float = math.nan) -> tuple[int, float, float]:
-    """Sort key of one run (lower first): success, then time per target m³, then solve time.
+def target_share(volume_ratio: Any) -> float:
+    """The share of the target a run loaded, capped at 1 (loading past the target earns nothing); 0 when unknown."""
+    try:
+        r = float(volume_ratio)
+    except (TypeError, ValueError):
+        return 0.0
+    return 0.0 if math.isnan(r) else min(max(r, 0.0), 1.0)
+
+
+def run_order(success: bool, time_per_target_m3: float, volume_ratio: float = math.nan,
+              solve_cpu_s: float = math.nan) -> tuple[int, float, float, float]:
+    """Sort key of one run (lower first): success, time per target m³, the share of the target loaded
+    (:func:`target_share`, higher first: among runs short of the target, more is better), solve CPU time.
 
     The per-run form of :data:`earthbench.aggregate.RANKING_RULE` (tables rank on the same keys'
-    rates and medians). NaN (no value) sorts last.
+    rates, medians and means). Every key before the solve time is prefix-monotone; NaN sorts last.
     """
     def last(v: float) -> float:
         return math.inf if v is None or math.isnan(v) else float(v)
 
-    return (0 if success else 1, last(time_per_target_m3), last(solve_time_s))
+    return (0 if success else 1, last(time_per_target_m3), -target_share(volume_ratio), last(solve_cpu_s))
 
 
 def is_success(valid: Any, volume_ratio: Any, threshold: float) -> bool:

@@ -55,7 +55,7 @@ def test_no_prefix_scores_or_ranks_better(ds, target, threshold, cut, solve):
     s_full, s_prefix = is_success(True, loaded / target, threshold), is_success(True, loaded_p / target, threshold)
     assert t_prefix >= t_full
     assert s_full or not s_prefix
-    assert run_order(s_prefix, t_prefix, solve) >= run_order(s_full, t_full, solve)
+    assert run_order(s_prefix, t_prefix, loaded_p / target, solve) >= run_order(s_full, t_full, loaded / target, solve)
     if loaded >= target and not (prefix and prefix[-1][1] >= target):
         assert math.isinf(t_prefix)  # a prefix short of the target never scores
 
@@ -96,7 +96,7 @@ def time_ordered_prefixes(plan: Plan):
 
 def _check_prefixes(sc, plan) -> int:
     m = evaluate(sc, plan, judge(sc, plan), DEFAULT_SUCCESS_THRESHOLD)
-    full = run_order(m["success"], m["time_per_target_m3"])
+    full = run_order(m["success"], m["time_per_target_m3"], m["volume_ratio"])
     checked = 0
     for p in time_ordered_prefixes(plan):
         v = judge(sc, p)
@@ -106,7 +106,7 @@ def _check_prefixes(sc, plan) -> int:
         if m["valid"]:
             assert mp["time_per_target_m3"] >= m["time_per_target_m3"], (sc.id, len(p.actions))
             assert m["success"] or not mp["success"], (sc.id, len(p.actions))
-            assert run_order(mp["success"], mp["time_per_target_m3"]) >= full, (sc.id, len(p.actions))
+            assert run_order(mp["success"], mp["time_per_target_m3"], mp["volume_ratio"]) >= full, (sc.id, len(p.actions))
         checked += 1
     return checked
 
