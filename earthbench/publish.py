@@ -477,13 +477,16 @@ def history_figure(rows: pd.DataFrame, title: str):
             ("success_rate", "success_rate_lo", "success_rate_hi", 100.0, "success rate, %"),
             ("time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", 1.0, "time per target m³, s (median)"))):
         y = rows[col].to_numpy(dtype=float) * scale
-        err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
-        ax.errorbar(x, y, yerr=np.nan_to_num(np.abs(err)), fmt="o-", capsize=3)
+        with np.errstate(invalid="ignore"):
+            err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
+        y = np.where(np.isfinite(y), y, np.nan)  # a median short of the target (∞) is not drawn
+        err = np.where(np.isfinite(err), np.abs(err), 0.0)  # nor an interval without an end (none at small n, or ∞)
+        ax.errorbar(x, y, yerr=err, fmt="o-", capsize=3)
         ax.set_xticks(x, [mpl_text(t) for t in labels], fontsize=8)
         ax.set_xlabel("version")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-    fig.suptitle(mpl_text(title) + " — by version, 95 % bootstrap intervals", fontsize=10)
+    fig.suptitle(mpl_text(title) + " — by version, 95 % intervals (exact for rates, order statistics for medians)", fontsize=10)
     return fig
 
 
@@ -538,7 +541,7 @@ def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
 
 class Renderer:
     """Figure jobs drawn in parallel worker processes (fork on Linux) while the caller goes on, e.g.
-    computing the tables' bootstrap intervals; in this process when there is one core."""
+    computing the tables' intervals and paired tests; in this process when there is one core."""
 
     def __init__(self, workers: int | None = None):
         import multiprocessing as mp
@@ -922,7 +925,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     renderer.add(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
         viewer = viewer_section(store, runs, replays)
-        # the tables (bootstrap intervals, paired tests) while the workers draw
+        # the tables (intervals, paired tests) while the workers draw
         summary = aggregate(runs, members=members, scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
