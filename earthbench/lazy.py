@@ -8,6 +8,7 @@ modules' names (``earthbench``, ``earthbench.harness``) load each module on firs
 from __future__ import annotations
 
 import importlib
+import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -23,5 +24,23 @@ def lazy_getattr(package: str, exports: Mapping[str, str], namespace: dict[str, 
         value = getattr(importlib.import_module(f".{module}", package), name)
         namespace[name] = value
         return value
+
+    return __getattr__
+
+
+def moved_getattr(module: str, moved: Mapping[str, str], fallback: Callable[[str], Any] | None = None) -> Callable[[str], Any]:
+    """The module ``__getattr__`` of ``module`` for names that moved: ``moved`` maps an old name
+    to the module that now defines it. Plugins written against the old place keep importing
+    (docs/plugins.md, the API promise), with a :class:`DeprecationWarning` that names the new
+    place; names not in ``moved`` go to ``fallback`` (or raise ``AttributeError``)."""
+
+    def __getattr__(name: str) -> Any:
+        target = moved.get(name)
+        if target is None:
+            if fallback is not None:
+                return fallback(name)
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        warnings.warn(f"{module}.{name} moved to {target}.{name}; import it from there", DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module(target), name)
 
     return __getattr__

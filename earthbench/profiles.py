@@ -77,9 +77,3 @@ def profile(costs: pd.DataFrame, taus: Iterable[float] | None = None) -> pd.Data
             col = np.sort(vals[:, j])
             rho[:, j] = np.searchsorted(col, tau, side="right") / n
     return pd.DataFrame(rho, index=pd.Index(tau, name="tau"), columns=costs.columns)
-
-
-def profile_from_runs(runs: pd.DataFrame, cost: str, solver: str = "solver", problem: str = "scenario_digest",
-                      solved: str = "success", taus: Iterable[float] | None = None) -> pd.DataFrame:
-    """:func:`profile` of :func:`cost_matrix` in one call."""
-    return profile(cost_matrix(runs, cost, solver, problem, solved), taus)

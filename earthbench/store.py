@@ -23,12 +23,13 @@ pandas. Tables:
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. A store of
-an older schema opened for writing is migrated step by step (:data:`MIGRATIONS`, one
-transaction each): version 2 added the ``steps`` column, version 3 the machine's load around
-each case (``load_before``, ``load_after``, ``steal_share``) and the build of the code
-(``environments.earthbench_version``, ``environments.plugin``: the plugin's distribution, version
-and source commit as JSON). Read-only, an older store reads with those values missing.
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
+store from an older schema opened for writing is brought up to date by the named steps of
+:data:`MIGRATIONS` (version 2 added the ``steps`` column; version 3 the machine's load around
+each case — ``load_before``, ``load_after``, ``steal_share`` — and the build of the code,
+``environments.earthbench_version`` and ``environments.plugin``: the plugin's distribution,
+version and source commit as JSON); read-only, it is read as it is (a version-1 store's runs
+read as open-loop runs; a store before version 3 has no load or build columns).
 """
 
 from __future__ import annotations
@@ -52,7 +53,19 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .harness.cases import Case, CaseResult
 
-SCHEMA_VERSION = 3
+#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
+#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
+#: its own named step (never edits an old one); a new store is created at the latest version
+#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
+#: add a column the table already has is skipped, so a step is safe to re-run.
+MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
+    ("3: the machine's load around each case and the build of the code that ran it (issue 35)", (
+        "ALTER TABLE runs ADD COLUMN load_before REAL", "ALTER TABLE runs ADD COLUMN load_after REAL",
+        "ALTER TABLE runs ADD COLUMN steal_share REAL", "ALTER TABLE environments ADD COLUMN earthbench_version TEXT",
+        "ALTER TABLE environments ADD COLUMN plugin TEXT")),
+)
+SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
@@ -114,28 +127,6 @@ CREATE TABLE runs (
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
-
-
-def _add_columns(db: sqlite3.Connection, table: str, columns: dict[str, str]) -> None:
-    have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
-    for name, kind in columns.items():
-        if name not in have:
-            db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {kind}")
-
-
-def migrate_1_to_2(db: sqlite3.Connection) -> None:
-    """Version 2: the closed-loop steps of a run; nothing else changed."""
-    _add_columns(db, "runs", {"steps": "TEXT"})
-
-
-def migrate_2_to_3(db: sqlite3.Connection) -> None:
-    """Version 3: the machine's load around each case and the build of the code that ran it (issue 35)."""
-    _add_columns(db, "runs", {"load_before": "REAL", "load_after": "REAL", "steal_share": "REAL"})
-    _add_columns(db, "environments", {"earthbench_version": "TEXT", "plugin": "TEXT"})
-
-
-#: version → the step that brings a store from it to the next version.
-MIGRATIONS = {1: migrate_1_to_2, 2: migrate_2_to_3}
 
 
 def _compress(text: str) -> bytes:
@@ -243,12 +234,21 @@ class Store:
             )
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
-            while version < SCHEMA_VERSION:
-                with self.db:
-                    self.db.execute("BEGIN IMMEDIATE")
-                    MIGRATIONS[version](self.db)
-                    version += 1
-                    self.db.execute(f"PRAGMA user_version = {version}")
+            if version < SCHEMA_VERSION:
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
+        with self.db:
+            self.db.execute("BEGIN IMMEDIATE")
+            for _, statements in MIGRATIONS[version - 1:]:
+                for stmt in statements:
+                    words = stmt.split()
+                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
+                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
+                            continue
+                    self.db.execute(stmt)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""

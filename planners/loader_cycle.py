@@ -43,8 +43,7 @@ from earthbench.motion import dense_poses
 from earthbench.plan import Charge, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import charge_cut
-from earthbench.referee.loader import cell_heights, loader_base_level, step_excess, wheel_step_excess
-from earthbench.referee.replay import bodies_touch, off_map_excess, reach_of
+from earthbench.rules import bodies_touch, cell_heights, loader_base_level, off_map_excess, reach_of, step_excess, wheel_step_excess
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario
 
 MARGIN = 0.995

@@ -1,5 +1,5 @@
 """CPU per stl-tamp plan in one process, with the referee's time per target m³ and how the
-solves ended (README's stl-tamp section, docs/DESIGN.md §11).
+solves ended (planners/stl_tamp/NOTES.md).
 
     python scripts/stl_tamp_cpu.py SEEDS TARGET [key=value ...]   # e.g. 0-9 7 max_iter=150
     python scripts/stl_tamp_cpu.py 0-9 7 --ipopt-local '{"perturb_dec_fact": 0.6}' --ipopt-global '{"mu_init": 0.1}'

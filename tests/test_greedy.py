@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from earthbench import judge
 from earthbench.cut import apply_cut, path_cells
 from earthbench.motion import ABS_TOL
-from earthbench.referee.backhoe import undermining_excess
+from earthbench.rules import undermining_excess
 from earthbench.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy

@@ -157,3 +157,37 @@ def test_no_file_imports_a_plugin_folder_by_its_generic_name():
     found = {(str(path.relative_to(ROOT.parent)), module) for path in files
              for module, _ in _all_imports(path, in_functions=True) if module.split(".")[0] in FOLDER_PACKAGES}
     assert found == set()
+
+
+def test_planners_call_the_public_rules_and_only_the_referee_calls_the_judge():
+    """A planner plans within the rules with :mod:`earthbench.rules` (as with ``cut`` and
+    ``motion``); the judge (:mod:`earthbench.referee`) is for the harness and the tools, and the
+    rules never reach back up into it (docs/DESIGN.md §2)."""
+    planners = sorted((ROOT.parent / "planners").rglob("*.py"))
+    assert len(planners) > 10
+    found = {(str(path.relative_to(ROOT.parent)), module) for path in planners
+             for module, _ in _all_imports(path, in_functions=True) if module.startswith("earthbench.referee")}
+    assert found == set()
+    graph = _core_graph(in_functions=True)
+    assert not {m for m in graph["earthbench.rules"] if m.startswith("earthbench.referee")}
+    assert "earthbench.rules" in graph["earthbench.referee.backhoe"] and "earthbench.rules" in graph["earthbench.referee.loader"]
+
+
+def test_a_rule_imported_from_its_old_place_in_the_referee_still_works_with_a_warning():
+    import warnings
+
+    import earthbench.rules
+    from earthbench.referee import backhoe, loader, replay
+
+    for module, name in ((backhoe, "track_level_and_tilt"), (loader, "wheel_step_excess"), (replay, "bodies_touch")):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert getattr(module, name) is getattr(earthbench.rules, name)
+        assert [w.category for w in caught] == [DeprecationWarning]
+        assert "earthbench.rules" in str(caught[0].message)
+    try:
+        backhoe.no_such_rule  # noqa: B018
+    except AttributeError as e:
+        assert "no_such_rule" in str(e)
+    else:
+        raise AssertionError("an unknown name must raise AttributeError")

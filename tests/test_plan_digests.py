@@ -8,7 +8,7 @@ says in its commit which plans moved and why — the published leaderboards then
 Where the golden file holds a list, each entry is the digest of the same code on another CPU
 model: the wheel-loader planners' plans on some ``pile`` scenarios differ between the AMD EPYC
 and the Intel Xeon these were run on (stl-tamp's do not: it rounds what it hands IPOPT, see
-docs/DESIGN.md §11). A list is a known irreproducibility of that planner, not a tolerance: a
+planners/stl_tamp/NOTES.md). A list is a known irreproducibility of that planner, not a tolerance: a
 refactor still has to give one of the recorded plans, and ``write_golden`` records only the
 machine it runs on.
 """

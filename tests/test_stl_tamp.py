@@ -196,7 +196,7 @@ def test_min_distance_is_continuous():
 
 def test_config_is_a_frozen_dataclass_with_paper_defaults_but_the_documented_horizon():
     """The paper's area (S_l = 5 buckets, V_max = 1 m³); the local horizon is the documented
-    departure (m_l = 4, n = 8; docs/DESIGN.md §11), and ``separate`` keeps the paper's 5 and 10."""
+    departure (m_l = 4, n = 8; planners/stl_tamp/NOTES.md), and ``separate`` keeps the paper's 5 and 10."""
     from earthbench_planners.separate.planner import Config as SeparateConfig
 
     c = Config()

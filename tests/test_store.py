@@ -9,7 +9,7 @@ import pytest
 
 from earthbench.errors import StoreError
 from earthbench.harness import Case, CaseResult, PlannerRef
-from earthbench.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.store import MIGRATIONS, SCHEMA_VERSION, Store, load_runs
 from earthbench.suite import parse_suite
 
 SUITE = """
@@ -132,3 +132,40 @@ def test_cancelled_results_are_never_stored(tmp_path, suite):
         with pytest.raises(ValueError):
             store.record(c, result_of(c, reason="cancelled"))
         assert store.finished_keys() == set()
+
+
+def _columns(path) -> dict[str, list[str]]:
+    con = sqlite3.connect(path)
+    tables = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+    out = {t: sorted(r[1] for r in con.execute(f"PRAGMA table_info({t})")) for t in tables}
+    con.close()
+    return out
+
+
+def test_a_store_of_every_older_schema_version_is_brought_up_to_the_fresh_schema(tmp_path):
+    """Each migration step undone in reverse gives the store of that older version; opened for
+    writing, each catches up to exactly the tables and columns of a fresh store."""
+    fresh = tmp_path / "fresh.db"
+    Store(fresh).close()
+    want = _columns(fresh)
+    for version in range(1, SCHEMA_VERSION):
+        old = tmp_path / f"v{version}.db"
+        old.write_bytes(fresh.read_bytes())
+        con = sqlite3.connect(old)
+        for _, statements in reversed(MIGRATIONS[version - 1:]):
+            for stmt in statements:
+                w = stmt.split()
+                if w[:2] == ["ALTER", "TABLE"] and w[3:5] == ["ADD", "COLUMN"]:
+                    con.execute(f"ALTER TABLE {w[2]} DROP COLUMN {w[5]}")
+                elif w[:2] == ["CREATE", "TABLE"]:
+                    con.execute(f"DROP TABLE {w[2].split('(')[0]}")
+        con.execute(f"PRAGMA user_version = {version}")
+        con.commit()
+        con.close()
+        assert _columns(old) != want
+        with Store(old, read_only=True):  # read-only: read as it is, never altered
+            pass
+        assert sqlite3.connect(old).execute("PRAGMA user_version").fetchone()[0] == version
+        Store(old).close()
+        assert _columns(old) == want, f"a version-{version} store does not catch up to a fresh one"
+        assert sqlite3.connect(old).execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION

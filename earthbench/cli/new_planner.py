@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {root}/ ({dist}: planner {args.name!r}, class {module}.planner.{cls})")
     print("next:")
     print(f"  pip install -e {root}")
-    print(f"  pytest {root}/tests")
+    print(f"  pip install pytest && python -m pytest {root}/tests")
     print(f"  earthbench run smoke --planner {args.name}")
     return 0
 
@@ -103,7 +103,7 @@ The `{name}` planner for earthbench, started with
 
 ```sh
 pip install -e .                               # registers the planner (entry point earthbench.planners)
-pytest tests                                   # the referee accepts its plans
+pip install pytest && python -m pytest tests  # the referee accepts its plans
 earthbench run smoke --planner {name}          # run it on the smoke suite; results go to earthbench.db
 earthbench runs --planner {name}               # what was stored
 ```

@@ -6,7 +6,7 @@ picklable :class:`CaseResult`, so any executor can ship it: the local executor r
 this machine; a distributed executor calls the same function on a worker and streams the
 results back to the client, which alone writes the store.
 
-What ``run_case`` enforces (the trust model is in the README, "What a plugin can influence"):
+What ``run_case`` enforces (the trust model is in docs/running.md, "What a plugin can influence"):
 
 * a fresh interpreter per case in its own session, under a warden process (see
   :mod:`.child`) that is a child subreaper, so every descendant of the case, in any session,

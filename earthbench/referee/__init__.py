@@ -12,6 +12,8 @@ re-deriving them:
   every rule samples densely), minimum dig and dump durations, dump reach, the tolerances
   ``ABS_TOL`` and ``RATE_TOL``;
 - :mod:`earthbench.cut` — the cut model (``apply_cut``, ``charge_cut``);
+- :mod:`earthbench.rules` — the predicates the rules are made of, which planners call too
+  (footprints touching, the excavator's stand and undermining line, the loader's step);
 - :mod:`earthbench.referee.replay` — the rules all machines share: speed, yaw rate, heading,
   keep-out zones and the map's edge along the footprint's swept path, and clearance between
   machines checked along both swept paths at once;

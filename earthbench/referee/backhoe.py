@@ -5,55 +5,15 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
+from ..lazy import moved_getattr
 from ..cut import cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
-from ..world import ExcavatorSpec, Heightmap, Pose, Scenario
+from ..rules import track_level_and_tilt as _track_level_and_tilt
+from ..rules import undermining_excess as _undermining_excess
+from ..world import ExcavatorSpec, Pose
 from .replay import DigRecord, Replay
-
-
-def ground_under(scenario: Scenario, z: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """Heights ``[k, 3]`` (x, y, z) of points every cell (≥ 0.1 m) under the rectangle
-    ``corners[4, 2]``; points off the map stand on the open ground's level."""
-    terrain: Heightmap = scenario.terrain
-    h = max(terrain.resolution, 0.1)
-    a, b, _, d = corners
-    u, v = b - a, d - a
-    nu, nv = max(int(math.ceil(np.hypot(*u) / h)), 1), max(int(math.ceil(np.hypot(*v) / h)), 1)
-    fu, fv = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
-    pts = a + fu.reshape(-1, 1) * u + fv.reshape(-1, 1) * v
-    i = np.floor((pts[:, 0] - terrain.origin[0]) / terrain.resolution).astype(int)
-    j = np.floor((pts[:, 1] - terrain.origin[1]) / terrain.resolution).astype(int)
-    ny, nx = z.shape
-    ok = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
-    zz = np.full(len(pts), scenario.outside_level)
-    zz[ok] = z[j[ok], i[ok]]
-    return np.column_stack([pts, zz])
-
-
-def track_level_and_tilt(scenario: Scenario, z: np.ndarray, spec: ExcavatorSpec, base: Pose) -> tuple[float, float]:
-    """The lowest ground under the tracks, and the tilt (rad) of the plane fitted to it."""
-    g = ground_under(scenario, z, spec.outline(base.x, base.y, base.yaw)[0])
-    A = np.column_stack([g[:, 0] - base.x, g[:, 1] - base.y, np.ones(len(g))])
-    (gx, gy, _), *_ = np.linalg.lstsq(A, g[:, 2], rcond=None)
-    return float(g[:, 2].min()), math.atan(math.hypot(gx, gy))
-
-
-def undermining_excess(
-    terrain: Heightmap, z: np.ndarray, spec: ExcavatorSpec, base: Pose, track_level: float, jj: np.ndarray, ii: np.ndarray
-) -> float:
-    """How far (m) the cells ``(jj, ii)`` lie below the undermining line: ``track_level`` minus
-    ``undermine_slope`` × each cell centre's horizontal distance from the tracks (≤ 0: safe)."""
-    if jj.size == 0:
-        return -math.inf
-    x = terrain.origin[0] + (ii + 0.5) * terrain.resolution - base.x
-    y = terrain.origin[1] + (jj + 0.5) * terrain.resolution - base.y
-    c, s = math.cos(base.yaw), math.sin(base.yaw)
-    along, across = np.abs(x * c + y * s), np.abs(-x * s + y * c)
-    d = np.hypot(np.maximum(along - spec.track_length / 2, 0.0), np.maximum(across - spec.track_width / 2, 0.0))
-    return float(np.max(track_level - spec.undermine_slope * d - z[jj, ii]))
 
 
 def dig(r: Replay, n: int, a: Dig) -> None:
@@ -106,7 +66,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     excess = -math.inf
     if level < level_under - ABS_TOL:
         cut = r.z[jj, ii] < before
-        excess = undermining_excess(r.terrain, r.z, spec, base, level_under, jj[cut], ii[cut])
+        excess = _undermining_excess(r.terrain, r.z, spec, base, level_under, jj[cut], ii[cut])
     if excess > ABS_TOL:
         r.flag(
             n,
@@ -125,7 +85,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
 def _station(r: Replay, n: int, spec: ExcavatorSpec, base: Pose) -> tuple[float, float]:
     """Track level and tilt where the excavator stands to work, judged once as it arrives."""
     if r.station is None or r.station[0] != base:
-        level, tilt = track_level_and_tilt(r.sc, r.z, spec, base)
+        level, tilt = _track_level_and_tilt(r.sc, r.z, spec, base)
         r.station = (base, level, tilt)
         if tilt > spec.max_tilt + ABS_TOL:
             r.flag(
@@ -139,12 +99,9 @@ def _station(r: Replay, n: int, spec: ExcavatorSpec, base: Pose) -> tuple[float,
 
 def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     truck_spec = r.sc.machines.truck
-    truck = r.timelines["truck"]
-    if truck.moving_during(a.t_start, a.t_end):
-        r.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+    tpos = r.truck_for_dump(n, a.t_start, a.t_end)
     base = r.timelines[a.machine].pose(a.t_start)
     _station(r, n, spec, base)
-    tpos = truck.pose(a.t_start)
     off = dump_reach_excess(base, (tpos.x, tpos.y), spec, truck_spec)
     if off > ABS_TOL:
         dist = math.hypot(tpos.x - base.x, tpos.y - base.y)
@@ -152,9 +109,9 @@ def dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
     need = min_dump_time(base, r.turn, (tpos.x, tpos.y), spec)
     if a.t_end - a.t_start < need - ABS_TOL:
         r.flag(n, "duration", need - (a.t_end - a.t_start), f"dump lasts {a.t_end - a.t_start:.3f} s; the swing and dump need {need:.3f} s")
-    take = min(r.bucket, max(r.truck_capacity - r.loaded, 0.0))
-    r.loaded += take
-    r.bucket -= take
-    r.dumps += 1
-    r.load_curve.append((a.t_end, r.loaded))
+    r.empty_bucket(a.t_end)
     r.turn = math.atan2(tpos.y - base.y, tpos.x - base.x) - base.yaw
+
+
+# moved to earthbench.rules (0.2): the old names keep working for a release, with a warning
+__getattr__ = moved_getattr(__name__, dict.fromkeys(("ground_under", "track_level_and_tilt", "undermining_excess"), "earthbench.rules"))

@@ -21,9 +21,13 @@ from ..cut import Cut, cut_along, cut_heights, lowered, path_cells
 from ..motion import ABS_TOL, RATE_TOL, arcs, dense_poses, poses_at, sample_yaws, wrap
 from ..plan import Charge, Move, Plan
 from ..soil import cut_levels, hard_top, slump_box, slump_cells
-from ..world import ExcavatorSpec, LoaderSpec, Pose, Scenario, TruckSpec
+from ..lazy import moved_getattr
+from ..rules import Spec
+from ..rules import bodies_touch as _bodies_touch
+from ..rules import off_map_excess as _off_map_excess
+from ..rules import reach_of as _reach_of
+from ..world import Pose, Scenario, TruckSpec
 
-Spec = ExcavatorSpec | TruckSpec | LoaderSpec
 
 #: Every rule the referee checks, with the sentence a report shows for it.
 RULES: dict[str, str] = {
@@ -137,50 +141,8 @@ class Verdict:
         return f"invalid ({len(self.violations)} violations: {', '.join(rules)})"
 
 
-def reach_of(corners: np.ndarray) -> float:
-    """Farthest footprint corner from the pose (corners of the footprint at the origin)."""
-    return float(np.max(np.hypot(corners[..., 0], corners[..., 1])))
-
-
 def _polygons(corners: np.ndarray) -> np.ndarray:
     return shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
-
-
-def rectangles_touch(a: np.ndarray, b: np.ndarray, margin: float = 0.0) -> np.ndarray:
-    """Whether the rectangles ``a[k, 4, 2]`` and ``b[k, 4, 2]`` come closer than ``margin`` along
-    one of their four edge normals on all of them (separating axes: with ``margin`` 0, whether
-    they overlap or touch)."""
-    apart = np.zeros(len(a), dtype=bool)
-    for r in (a, b):
-        for e in (1, 3):
-            axis = r[:, e] - r[:, 0]  # the rectangle's two edge directions are its normals too
-            axis = axis / np.hypot(axis[:, :1], axis[:, 1:])
-            pa = np.einsum("kij,kj->ki", a, axis)
-            pb = np.einsum("kij,kj->ki", b, axis)
-            apart |= (pa.max(axis=1) + margin < pb.min(axis=1)) | (pb.max(axis=1) + margin < pa.min(axis=1))
-    return ~apart
-
-
-def bodies_touch(a: Spec, poses_a: np.ndarray, b: Spec, poses_b: np.ndarray, margin: float = 0.0) -> np.ndarray:
-    """Whether the bodies of machine ``a`` at ``poses_a[k, 3]`` (x, y, yaw) and ``b`` at
-    ``poses_b[k, 3]`` (or one pose for all) touch: the footprint part of the clearance rule.
-    The referee samples motion at half a cell, so a planner keeps a ``margin`` of that much."""
-    pa = np.asarray(poses_a, dtype=float).reshape(-1, 3)
-    pb = np.broadcast_to(np.asarray(poses_b, dtype=float).reshape(-1, 3), pa.shape)
-    out = np.zeros(len(pa), dtype=bool)
-    near = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]) < reach_of(a.body(0.0, 0.0, 0.0)) + reach_of(b.body(0.0, 0.0, 0.0)) + margin
-    if near.any():
-        out[near] = rectangles_touch(a.body(*pa[near].T), b.body(*pb[near].T), margin)
-    return out
-
-
-def off_map_excess(scenario: Scenario, spec: Spec, poses: np.ndarray) -> np.ndarray:
-    """How far (m) the outline at each of ``poses[k, 3]`` reaches beyond the map (≤ 0: on it)."""
-    p = np.asarray(poses, dtype=float).reshape(-1, 3)
-    corners = spec.outline(p[:, 0], p[:, 1], p[:, 2])
-    xmin, xmax, ymin, ymax = scenario.terrain.extent
-    cx, cy = corners[..., 0], corners[..., 1]
-    return np.maximum.reduce([xmin - cx, cx - xmax, ymin - cy, cy - ymax]).max(axis=1)
 
 
 class Timeline:
@@ -300,6 +262,22 @@ class Replay:
 
     def flag(self, n: int | None, rule: str, magnitude: float, message: str) -> None:
         self.violations.append(Violation(n, rule, float(magnitude), message))
+
+    def truck_for_dump(self, n: int, t_start: float, t_end: float) -> Pose:
+        """Where the truck stands for a dump from ``t_start`` to ``t_end``; a truck that moves
+        meanwhile breaks ``truck_moving`` (both machines' dump rule)."""
+        truck = self.timelines["truck"]
+        if truck.moving_during(t_start, t_end):
+            self.flag(n, "truck_moving", 1.0, "the truck moves while the bucket is emptied")
+        return truck.pose(t_start)
+
+    def empty_bucket(self, t_end: float) -> None:
+        """A dump ending at ``t_end`` moves the bucket's load into the truck, up to its capacity."""
+        take = min(self.bucket, max(self.truck_capacity - self.loaded, 0.0))
+        self.loaded += take
+        self.bucket -= take
+        self.dumps += 1
+        self.load_curve.append((t_end, self.loaded))
 
     def verdict(self) -> Verdict:
         return Verdict(
@@ -437,7 +415,7 @@ class Replay:
         if not self.keep_outs and self.sc.outside_open:
             return
         spec = self.specs[machine]
-        reach = reach_of(spec.outline(0.0, 0.0, 0.0))
+        reach = _reach_of(spec.outline(0.0, 0.0, 0.0))
         only = None
         if len(path) > 1:  # arcs whose outline stays clear of the map's edge and every zone
             a = arcs(path) if arc is None else arc
@@ -451,7 +429,7 @@ class Replay:
             only = (room[:-1] + room[1:] - travel) / 2 <= reach + ABS_TOL
         dense = dense_poses(path, self.spacing, reach, only=only, arc=None if len(path) < 2 else a)
         if not self.sc.outside_open:
-            out = off_map_excess(self.sc, spec, dense[:, 1:4])
+            out = _off_map_excess(self.sc, spec, dense[:, 1:4])
             k = int(np.argmax(out))
             if out[k] > ABS_TOL:
                 self.flag(
@@ -494,7 +472,7 @@ class Replay:
         me, truck = self.timelines[machine], self.timelines["truck"]
         spec, tspec = self.specs[machine], self.specs["truck"]
         assert not isinstance(spec, TruckSpec)  # the excavator or the loader, each with its clearance to the truck
-        reach_a, reach_b = reach_of(spec.body(0.0, 0.0, 0.0)), reach_of(tspec.body(0.0, 0.0, 0.0))
+        reach_a, reach_b = _reach_of(spec.body(0.0, 0.0, 0.0)), _reach_of(tspec.body(0.0, 0.0, 0.0))
         step = max(self.spacing, 0.025)
         times = np.unique(np.concatenate([me.path[:, 0], truck.path[:, 0]]))
         pa, pb = me.poses(times), truck.poses(times)
@@ -523,7 +501,7 @@ class Replay:
                 f"{machine} and truck {d[k]:.3f} m apart at t={times[k]:.3f} s; clearance {clearance} m",
             )
             return
-        touch = bodies_touch(spec, pa, tspec, pb)
+        touch = _bodies_touch(spec, pa, tspec, pb)
         if touch.any():
             t = times[int(np.argmax(touch))]
             self.flag(self._active(t), "collision", 1.0, f"{machine}'s and the truck's footprints touch at t={t:.3f} s")
@@ -533,3 +511,7 @@ class Replay:
             n for n, a in enumerate(self.plan.actions) if isinstance(a, (Move, Charge)) and a.t_start - ABS_TOL <= t <= a.t_end + ABS_TOL
         ]
         return who[0] if who else None
+
+
+# moved to earthbench.rules (0.2): the old names keep working for a release, with a warning
+__getattr__ = moved_getattr(__name__, dict.fromkeys(("bodies_touch", "off_map_excess", "reach_of", "rectangles_touch"), "earthbench.rules"))

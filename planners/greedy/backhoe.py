@@ -36,7 +36,7 @@ from earthbench.cut import apply_cut, cut_along, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
-from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
+from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short

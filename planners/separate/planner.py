@@ -27,7 +27,7 @@ The rule (Fig. 5b), per local area:
   ``paper-extensive`` it also needs fewer areas (rbf30 seed 0, 7 m³: 7 instead of 11).
 - The task vector fixed in the NLP: the contacts ``(p_x, p_y)``, the drag headings ψ and η.
   η is 1 except where the model's full cut would overfill the bucket (Eq. (21),
-  V_i ≤ V_max): there η = V_max / (model volume of a full cut) (docs/DESIGN.md §11: η acts as a depth
+  V_i ≤ V_max): there η = V_max / (model volume of a full cut) (planners/stl_tamp/NOTES.md: η acts as a depth
   fraction), and 0 for a dig the rule finds (next to) empty. These are computed, not optimised.
 - Motions and times (base and truck paths, joint angles, phase and step durations) are the
   NLP's; the terminal cost pulls the base toward the next area's base. A failed solve falls

@@ -69,7 +69,7 @@ from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
-from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
+from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate

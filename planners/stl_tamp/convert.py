@@ -39,10 +39,9 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at, wrap
+from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at
 from earthbench.plan import Dig, Dump, Move
-from earthbench.referee.backhoe import track_level_and_tilt, undermining_excess
-from earthbench.referee.replay import bodies_touch, reach_of
+from earthbench.rules import bodies_touch, reach_of, track_level_and_tilt, undermining_excess
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
@@ -194,7 +193,7 @@ class Converter:
     def clear(self, exc: Path | Pose, truck: Path | Pose) -> bool:
         """Whether the excavator and the truck keep the referee's clearance rule along both paths:
         centres at least the clearance apart and footprints apart by half a cell (the referee's
-        sampling step, :func:`earthbench.referee.replay.bodies_touch`), on the arcs it drives."""
+        sampling step, :func:`earthbench.rules.bodies_touch`), on the arcs it drives."""
         es, ts = self.exc_spec, self.truck_spec
         step = max(self.sc.terrain.resolution / 2, 0.025)
         d, pe, pt = _sampled(exc, truck, step, reach_of(es.body(0.0, 0.0, 0.0)), reach_of(ts.body(0.0, 0.0, 0.0)))
@@ -467,8 +466,3 @@ class Converter:
         st.loaded += take
         st.digs += 1
         return take
-
-
-def wrap_to(angle: float, ref: float) -> float:
-    """``angle`` shifted by multiples of 2π to lie within π of ``ref``."""
-    return ref + wrap(angle - ref)

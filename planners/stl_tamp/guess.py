@@ -1,6 +1,6 @@
 """Initial guesses for :class:`~earthbench_planners.stl_tamp.model.PhaseNLP` from inverse kinematics.
 
-docs/DESIGN.md §11: from a constant guess IPOPT runs into its iteration limit; a guess that already
+planners/stl_tamp/NOTES.md: from a constant guess IPOPT runs into its iteration limit; a guess that already
 drives the base to its dig poses, swings the arm to spread-out contact points by inverse
 kinematics and back to the truck converges. The guess here is *dynamically consistent*: base
 and truck turn in place and then drive straight (both exact under the model's mid-step Euler

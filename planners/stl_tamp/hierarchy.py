@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from shapely.geometry import Polygon
 
-from earthbench.referee.backhoe import track_level_and_tilt
+from earthbench.rules import track_level_and_tilt
 from earthbench.world import Pose, Scenario
 from .surface import RbfSurface
 
@@ -233,7 +233,7 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
     """The stand nearest the nominal one (``base_offset`` from the area's centre toward the
     truck's side) on which the referee's tilt rule lets the excavator work, facing the area;
     None when every stand in reach is too steep. The referee judges the tilt where the machine
-    stands (:func:`earthbench.referee.backhoe.track_level_and_tilt`), so a plan from a steep
+    stands (:func:`earthbench.rules.track_level_and_tilt`), so a plan from a steep
     stand would be invalid whatever the NLP does there."""
     es = scenario.machines.excavator
     ux, uy = toward
@@ -292,7 +292,7 @@ def shared_truck_stand(bases: list[tuple[float, float]], trucks: list[tuple[floa
     """Where the global guess parks the truck: it stays put after phase 0 (``Shape.hold_truck``),
     so it must be in dump reach of every base the guess visits and clear of each. The candidates
     are the areas' own stands and their mean; the one with the least total shortfall (first on a
-    tie). docs/DESIGN.md §11: from the first area's stand alone, later bases stood up to 11 m
+    tie). planners/stl_tamp/NOTES.md: from the first area's stand alone, later bases stood up to 11 m
     away (a violation of 73 m² at the start), and IPOPT spent its first ~60 iterations there."""
     mean = (sum(t[0] for t in trucks) / len(trucks), sum(t[1] for t in trucks) / len(trucks))
 

@@ -24,7 +24,7 @@ Terrain, Eq. (1)/(27)–(28): ``f_{i+1} = f_i − η_i w_i · sp(f_i − h_i)`` 
 ``h_i = max(floor, f_i(P_i) − d)``, both max and the positive part ``sp`` smoothed. The
 positive part is our calibration to the referee's cut, which only lowers cells (the paper's
 ``h − f`` would fill a hollow). Volume, Eq. (20): Gauss–Legendre quadrature over the
-rectangle widened by ``widen`` on every side (docs/DESIGN.md §11: a sigmoid of steepness k leaks about
+rectangle widened by ``widen`` on every side (planners/stl_tamp/NOTES.md: a sigmoid of steepness k leaks about
 ``3/k`` of the box; the widened box catches what the sigmoid removes).
 
 Specifications, Eq. (4)–(8), (17)–(24), with the smooth robustness of :mod:`earthbench_planners.stl_tamp.stl`;
@@ -39,7 +39,7 @@ Derivatives (SX): each terrain evaluation enters the graph as its second-order T
 at the point itself, with symbolic coefficients; after CasADi has differentiated the graph, the
 coefficients become the RBF's value, gradient and Hessian there — the same derivatives, but
 each a single contraction over the lattice weights instead of one per Hessian colour
-(docs/DESIGN.md §11). The built functions are stored by :mod:`.nlp_cache` and loaded by later
+(planners/stl_tamp/NOTES.md). The built functions are stored by :mod:`.nlp_cache` and loaded by later
 processes.
 """
 

@@ -1,7 +1,7 @@
 """A disk cache of built NLPs: one file per NLP content, shared by every case process.
 
 Each case runs in a fresh process, and building the CasADi graphs and derivatives of one NLP
-costs seconds (docs/DESIGN.md §11). The build depends only on the NLP's content, so its result
+costs seconds (planners/stl_tamp/NOTES.md). The build depends only on the NLP's content, so its result
 (CasADi's serialization of the built functions, written and read as a file stream, which keeps
 the memory low) is stored once per machine under a key that hashes everything it depends on,
 and loaded by every later process.

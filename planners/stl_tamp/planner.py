@@ -47,7 +47,7 @@ class TargetTooLargeError(EarthbenchError, ValueError):
 class LocalNLPConfig:
     """The local NLP's settings that ``stl-tamp`` and ``separate`` share (one model, two planners).
     The defaults are the paper's (m_l = 5, n = 10), which ``separate`` keeps; ``stl-tamp``'s
-    :class:`Config` sets a smaller horizon (docs/DESIGN.md §11)."""
+    :class:`Config` sets a smaller horizon (planners/stl_tamp/NOTES.md)."""
 
     m_local: int = 5
     n_steps: int = 10
@@ -69,12 +69,12 @@ class Config(LocalNLPConfig):
     """Settings; defaults are the paper's values where it gives them (section V), but for two.
 
     Paper: S_l = 5 bucket areas with V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m.
-    Departures (0.9.0, docs/DESIGN.md §11): m_l = 4 digs per local area (paper: 5), the fewest
+    Departures (0.9.0, planners/stl_tamp/NOTES.md): m_l = 4 digs per local area (paper: 5), the fewest
     0.28 m³ buckets that hold an area's V_max of 1.0 m³, and n = 8 motion steps per phase
     (paper: 10), 3 of them before the contact. On the 40 scenarios of ``paper-extensive`` the
     plans were as fast (time per target m³ 28.7 against 28.8, faster on 20 of 40) at two thirds
     of the CPU. Not given in the paper (our choices): the weights α, the ε constants, the sigmoid
-    steepness k = 20 with the quadrature box widened by 3/k (docs/DESIGN.md §11 calibration), the
+    steepness k = 20 with the quadrature box widened by 3/k (planners/stl_tamp/NOTES.md calibration), the
     STL sharpness β.
     """
 
@@ -122,10 +122,10 @@ class Config(LocalNLPConfig):
     block_phases: int = 8  # 24 × 12 m / 16 m³, seed 0: 6 phases 20.3 CPU s, 33.4 s/m³; 8 phases 17.1 CPU s, 30.5 s/m³
     # iteration caps only: no CPU- or wall-time cap, so machine load never changes a plan.
     # 250 (0.8.0; 150 until 0.7.0, when 14 % of the local solves on paper-extensive at 7 m³ ended
-    # capped and a capped solve's retry restarted IPOPT from μ = 1: docs/DESIGN.md §11)
+    # capped and a capped solve's retry restarted IPOPT from μ = 1: planners/stl_tamp/NOTES.md)
     max_iter: int = 250
     global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
-    # IPOPT's barrier update and stop (docs/DESIGN.md §11): a monotone μ from 1.0 solved on to tol,
+    # IPOPT's barrier update and stop (planners/stl_tamp/NOTES.md): a monotone μ from 1.0 solved on to tol,
     # without the acceptable-level stop, ends most local solves Solve_Succeeded and gave the better
     # plans (0.6.2: adaptive μ from 0.1, stopped at the acceptable level 1e-2 after 3 iterates;
     # a monotone μ from 0.1 declared a feasible local problem of the tests infeasible)
@@ -283,7 +283,7 @@ class StlTampPlanner(Planner):
 
     def _ipopt_options(self, local: bool = True) -> dict[str, Any]:
         """IPOPT's settings; the local solves' barrier subproblems end at ``barrier_tol_factor``·μ
-        (the global solve keeps IPOPT's 10: docs/DESIGN.md §11)."""
+        (the global solve keeps IPOPT's 10: planners/stl_tamp/NOTES.md)."""
         c = self.config
         out = {"mu_strategy": c.mu_strategy, "mu_init": c.mu_init, "tol": c.ipopt_tol, "acceptable_tol": c.acceptable_tol,
                "acceptable_iter": c.acceptable_iter}

@@ -8,11 +8,13 @@ whose ``info`` lacks the counts, or holds anything but non-negative integers the
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from earthbench.plan import Plan
-from earthbench.referee import Verdict
 from earthbench.world import Scenario
+
+if TYPE_CHECKING:  # a metric reads the verdict it is given; it never calls the judge
+    from earthbench import Verdict
 
 KINDS = ("succeeded", "acceptable", "capped", "fallback", "total")
 
