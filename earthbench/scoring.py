@@ -44,6 +44,29 @@ def time_to_target(load_curve: Sequence[tuple[float, float]], target: float) -> 
     return math.inf
 
 
+#: The metrics :func:`restate` brings to the current rule.
+TARGET_TIME_METRICS = ("time_to_target_s", "time_per_target_m3", "time_per_target_m3_ratio")
+
+
+def restate(metrics: dict[str, Any]) -> dict[str, Any]:
+    """Stored metrics under today's rule where their own figures decide it (the same dict, changed in place).
+
+    Before issue 35 a run short of the target had a finite time to it (the time to what it loaded,
+    divided by that); under :func:`time_to_target` it has none. The loaded and target volumes in
+    the metrics decide which runs those are, so a store written before needs no re-judging for the
+    tables, ``compare`` or an audit to apply the rule (``earthbench rescore`` rewrites it for good).
+    """
+    try:
+        short = float(metrics["loaded_volume"]) < float(metrics["target_volume"]) * (1 - SUM_SLACK)
+    except (KeyError, TypeError, ValueError):
+        return metrics
+    if short:
+        for k in TARGET_TIME_METRICS:
+            if k in metrics and metrics[k] is not None:
+                metrics[k] = math.inf
+    return metrics
+
+
 def time_per_target(load_curve: Sequence[tuple[float, float]], target: float) -> float:
     """The primary time metric, time to the target / the target (s/m³); ``inf`` short of the target."""
     return time_to_target(load_curve, target) / target

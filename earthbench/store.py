@@ -45,7 +45,7 @@ from urllib.parse import quote
 from typing import TYPE_CHECKING, Any, Protocol, overload
 
 from .errors import StoreError
-from .scoring import is_success
+from .scoring import is_success, restate
 from .world import Scenario
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -539,7 +539,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     for r in rows:
         d = {k: r[k] for k in head}
         d["success"] = bool(r["success"])
-        metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+        metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
         if view is not None:
             ver, members = view
             m = members.get(r["scenario_digest"])

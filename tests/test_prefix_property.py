@@ -182,3 +182,27 @@ def test_lower_bound_is_a_bound_on_real_plans(greedy_plans):
     for sc, plan in greedy_plans:
         m = evaluate(sc, plan, judge(sc, plan))
         assert m["time_per_target_m3_ratio"] >= 1.0 or not np.isfinite(m["time_per_target_m3_ratio"])
+
+
+def test_a_store_written_under_the_old_rule_reads_under_the_new(wrapper_store, tmp_path):
+    """Runs stored with the old finite time for a plan short of the target are read (tables, compare, audit) with ∞."""
+    import json
+    import shutil
+    import sqlite3
+
+    from earthbench.verify import audit
+
+    old = tmp_path / "old.db"
+    shutil.copy(wrapper_store, old)
+    with sqlite3.connect(old) as con:
+        for rid, text in con.execute("SELECT id, metrics FROM runs WHERE planner='h-truncated-greedy'").fetchall():
+            m = json.loads(text)
+            m.update(time_per_target_m3=m["makespan_s"] / m["loaded_volume"], time_to_target_s=m["makespan_s"])
+            con.execute("UPDATE runs SET metrics=? WHERE id=?", (json.dumps(m), rid))
+    runs = load_runs(old)
+    assert np.isinf(runs.loc[runs.planner == "h-truncated-greedy", "time_per_target_m3"]).all()
+    assert np.isfinite(runs.loc[runs.planner == "greedy", "time_per_target_m3"]).all()
+    from earthbench.store import Store
+
+    with Store(old, read_only=True) as store:
+        assert not audit(store).problems()

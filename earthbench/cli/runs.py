@@ -10,7 +10,7 @@ import sys
 from typing import Any
 
 from ..harness import REASONS
-from ..scoring import is_success
+from ..scoring import is_success, restate
 from ..store import Store
 from .run import default_db
 
@@ -56,7 +56,7 @@ def labels_of(store: Store) -> dict[tuple[str, str], str]:
 def _values(r: Any, threshold: float | None, labels: dict[tuple[str, str], str] | None = None) -> dict[str, Any]:
     """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, the configuration's
     label, and with a suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`)."""
-    metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+    metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
     d = {c: r[c] if c in r.keys() else metrics.get(c) for c in COLUMNS}
     d["configuration"] = (labels or {}).get((r["planner"], r["config_hash"]), r["planner"])
     if threshold is not None:
