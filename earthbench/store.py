@@ -18,8 +18,10 @@ pandas. Tables:
   run, and its scenarios' ids and digests: how a suite finds its runs, including those stored
   while running another suite with the same scenarios (``standard`` includes ``paper-switch``).
 * ``planner_configs`` — (name, version, config hash) → the full configuration as JSON.
-* ``environments`` — CPU model, cores, OS, Python and package versions, git commits of the
-  project and of the planner's plugin, hostname; deduplicated by a hash of their content.
+* ``environments`` — CPU model, cores, OS, Python and package versions, the build of earthbench
+  (version and the commit it was built from, :mod:`earthbench.provenance`) and of the planner's
+  plugin (its distribution and source commit, or a plugin file's SHA-256), hostname;
+  deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
