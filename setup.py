@@ -1,4 +1,4 @@
-"""A build step that writes the commit the package is built from into it (``earthbench/_build_info.py``).
+"""A build step that writes the commit the package is built from into it (``earthbench/build_info.py``).
 
 Everything else about the build is in pyproject.toml. The stamp of every run reads the module
 (:mod:`earthbench.provenance`), so a non-editable install names the code it holds, not whatever
@@ -26,7 +26,7 @@ def _git(*args: str) -> str | None:
 
 
 class BuildPyWithCommit(build_py):
-    """``build_py`` plus the generated ``_build_info.py`` in the build tree (never in the checkout)."""
+    """``build_py`` plus the generated ``build_info.py`` in the build tree (never in the checkout)."""
 
     def run(self) -> None:
         super().run()
@@ -34,7 +34,7 @@ class BuildPyWithCommit(build_py):
             return  # an editable install runs the checkout itself: provenance reads the checkout then
         commit = _git("rev-parse", "HEAD")
         dirty = bool(_git("status", "--porcelain", "--untracked-files=no")) if commit else None
-        target = Path(self.build_lib) / "earthbench" / "_build_info.py"
+        target = Path(self.build_lib) / "earthbench" / "build_info.py"
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_text(
             '"""Generated at build time by setup.py: the commit this copy of earthbench was built from."""\n\n'

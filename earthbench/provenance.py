@@ -4,7 +4,7 @@ The stamp of every run names the code, never a working directory's git (issue 35
 HEAD at run time named code that was not installed):
 
 * :func:`build` — earthbench's version and the commit it was built from, written into the package
-  at build time (``earthbench/_build_info.py``, by ``setup.py``'s build step) with a dirty flag.
+  at build time (``earthbench/build_info.py``, by ``setup.py``'s build step) with a dirty flag.
   An editable install runs its checkout, so there the checkout's own commit (and whether its
   tracked files differ) is the code's;
 * :func:`plugin` — a planner's distribution name, version and, where pip recorded one
@@ -50,11 +50,11 @@ def _checkout_commit(directory: Path) -> tuple[str | None, bool | None]:
 def build() -> dict[str, Any]:
     """``version``, ``commit`` (None: unknown), ``dirty`` and ``how`` (``built``, ``editable`` or ``source``)."""
     try:
-        from . import _build_info  # type: ignore[attr-defined]
+        from . import build_info  # type: ignore[attr-defined]  # generated at build time, absent in a checkout
     except ImportError:
-        _build_info = None
-    if _build_info is not None:
-        return {"version": __version__, "commit": _build_info.COMMIT, "dirty": _build_info.DIRTY, "how": "built"}
+        build_info = None
+    if build_info is not None:
+        return {"version": __version__, "commit": build_info.COMMIT, "dirty": build_info.DIRTY, "how": "built"}
     editable = bool(_direct_url("earthbench").get("dir_info", {}).get("editable"))
     commit, dirty = _checkout_commit(Path(__file__).resolve().parent)
     return {"version": __version__, "commit": commit, "dirty": dirty, "how": "editable" if editable else "source"}

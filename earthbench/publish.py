@@ -174,11 +174,10 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                 ("Volume ratio (mean ± SD)", vr, r["volume_ratio_mean"]),
                 ("Overshoot m³ (mean)", _f(r["overshoot_m3_mean"], ".2f"), r["overshoot_m3_mean"]),
                 ("Time per target m³, s (median)",
-                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
-                 r["time_per_target_m3_median"]),
+                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"])
+                 + (f"; {r['short_of_target']} short" if r["short_of_target"] else ""), r["time_per_target_m3_median"]),
                 ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
                                           r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
-                ("Short of target", str(r["short_of_target"]), r["short_of_target"]),
                 ("Time per m³, s (median)", _f(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
                 ("Solve CPU s (median)", ci_text(r["solve_cpu_median"], r["solve_cpu_lo"], r["solve_cpu_hi"], ".2f"),
                  r["solve_cpu_median"]),
@@ -192,8 +191,10 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
 
 
 def _config_cell(r: Any, closed: frozenset[str]) -> str:
+    """The configuration's settings off the defaults (its label without the planner's name, which has its own column) and hash."""
     label = str(r.get("config_label") or r["planner"])
-    text = f"{label} #{str(r['config_hash'])[:8]}"
+    settings = label[len(str(r["planner"])):] if label.startswith(str(r["planner"])) else label
+    text = (f"{settings} " if settings and not settings.startswith("#") else "") + str(r["config_hash"])[:8]
     return text + (" closed-loop" if str(r["config_hash"]) in closed and "closed_loop" not in label else "")
 
 
@@ -977,8 +978,8 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         "any paired test to separate two planners. Columns: runs "
         "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
         "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
-        "the dump that reached the target, divided by the target; ∞ for a run short of it, counted in Short of "
-        "target) over valid runs, with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
+        "the dump that reached the target, divided by the target; ∞ for a run short of it, and \"N short\" counts "
+        "those) over valid runs, with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
         "solve CPU time (ranked) and wall time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
         "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).",
         "",

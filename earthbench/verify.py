@@ -36,7 +36,6 @@ from typing import Any
 from .errors import EarthbenchError, StoreError
 from .harness.steps import step_metrics
 from .store import METRIC_COLUMNS, Store, decompress, stored_steps
-from .scoring import restate
 from .suite import suite_digest
 from .world import Scenario
 
@@ -129,6 +128,8 @@ def differences(row: Any, judged: Judgement) -> list[str]:
     except ValueError:
         stored = "unreadable"
     if isinstance(stored, dict):
+        from .scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
+
         restate(stored)  # a store written under the rule before issue 35 is not a tampered one
     fresh = judged.metrics
     if not isinstance(stored, dict) or fresh is None:

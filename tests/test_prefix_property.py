@@ -124,8 +124,9 @@ def test_no_prefix_of_a_built_in_plan_ranks_better(suite, planners, seeds):
 
 
 @pytest.mark.slow
-def test_no_prefix_of_separate_ranks_better():
-    assert sum(_check_prefixes(sc, plan) for sc, plan in _plans("quick", ["separate"])) > 0
+@pytest.mark.parametrize("planner", ["separate", "stl-tamp"])
+def test_no_prefix_of_the_optimising_planners_ranks_better(planner):
+    assert sum(_check_prefixes(sc, plan) for sc, plan in _plans("quick", [planner])) > 0
 
 
 # -- the hostile wrapper, ranked and compared --------------------------------------------------------------------
