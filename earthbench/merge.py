@@ -9,6 +9,8 @@ written; a new output is not even created) when:
 * a suite name has more than one digest across the output and the inputs (the suite file
   changed between machines), or a run is labelled with a suite digest that its store does
   not know — those rows would be published under the wrong suite;
+* a suite name is a registered suite's but its digest is not (:mod:`earthbench.identity`):
+  a different world under a known name (``as_variant`` stores it as ``NAME~variant-D``);
 * :func:`earthbench.verify.audit` finds a run that does not hold: its plan re-judged against
   its stored scenario document gives other referee figures (unless ``rescore``, which merges
   the re-judged figures instead), it claims a verdict without a plan, its scenario document
@@ -38,6 +40,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from . import identity
 from .errors import StoreError
 from .harness.cases import Case, CaseResult, PlannerRef
 from .store import LOAD_COLUMNS, Store, decompress, stored_steps
@@ -65,6 +68,12 @@ class _SuiteRecord:
     success_threshold: float
     description: str
     scenarios: tuple[_SuiteScenario, ...] = field(default=())
+    sealed_from: str | None = None
+    public_digest: str | None = None
+    commitment: str | None = None
+
+    def version(self, where: str) -> identity.Version:
+        return identity.Version(self.name, self.digest, where, self.sealed_from, self.public_digest, self.commitment)
 
 
 @dataclass
@@ -85,21 +94,40 @@ def _suites(store: Store) -> list[_SuiteRecord]:
             _SuiteScenario(m["scenario_id"], m["scenario_digest"], {"family": m["family"], "seed": m["seed"]})
             for m in store.db.execute("SELECT * FROM suite_scenarios WHERE suite_id=? ORDER BY scenario_id", (s["id"],))
         )
-        out.append(_SuiteRecord(s["name"], s["digest"], s["track"], s["threshold"], s["description"] or "", members))
+        keys = s.keys()
+        seal = tuple(s[k] if k in keys else None for k in ("sealed_from", "public_digest", "commitment"))
+        out.append(_SuiteRecord(s["name"], s["digest"], s["track"], s["threshold"], s["description"] or "", members, *seal))
     return out
+
+
+def _renames(inputs: Sequence[Store]) -> dict[tuple[str, str], str]:
+    """(name, digest) → the variant name ``as_variant`` stores it under, for every known name with another world."""
+    out = {}
+    for st in inputs:
+        for s in _suites(st):
+            new = identity.renamed(s.version(str(st.path)))
+            if new != s.name:
+                out[(s.name, s.digest)] = new
+    return out
+
+
+def _relabel(suites: Sequence[_SuiteRecord], renames: dict[tuple[str, str], str]) -> list[_SuiteRecord]:
+    return [replace(s, name=renames.get((s.name, s.digest), s.name)) for s in suites]
 
 
 def _keys(store: Store) -> list[tuple[str, str, str, str]]:
     return [tuple(r) for r in store.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")]  # type: ignore[misc]
 
 
-def check(out: Store | None, inputs: Sequence[Store]) -> list[str]:
-    """Every reason the merge must be refused (empty when it may go ahead)."""
+def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, str], str] | None = None) -> list[str]:
+    """Every reason the merge must be refused (empty when it may go ahead); ``renames``: the
+    variant names ``as_variant`` gives (:func:`_renames`)."""
     problems: list[str] = []
     digests: dict[str, dict[str, list[str]]] = {}
     stores = ([out] if out is not None else []) + list(inputs)
     for st in stores:
-        for s in _suites(st):
+        for s in _relabel(_suites(st), renames or {}):
+            problems += identity.problems([s.version(str(st.path))])
             digests.setdefault(s.name, {}).setdefault(s.digest, []).append(str(st.path))
         known = {(s.name, s.digest) for s in _suites(st)}
         bad = st.db.execute("SELECT suite, suite_digest, COUNT(*) FROM runs GROUP BY suite, suite_digest").fetchall()
@@ -126,7 +154,8 @@ def check(out: Store | None, inputs: Sequence[Store]) -> list[str]:
     return problems
 
 
-def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[Case, CaseResult]:
+def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
+                     renames: dict[tuple[str, str], str] | None = None) -> tuple[Case, CaseResult]:
     digest = row["scenario_digest"]
     if digest not in scenarios:
         sc = src.scenario(digest)
@@ -138,7 +167,8 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any]) -> tuple[C
     cfg = src.db.execute("SELECT config, source FROM planner_configs WHERE id=?", (row["planner_config_id"],)).fetchone()
     ref = PlannerRef(name=row["planner"], version=row["planner_version"], source=(cfg["source"] if cfg else "") or "",
                      config=json.loads(cfg["config"]) if cfg else {}, config_hash=row["config_hash"])
-    case = Case(row["suite"], row["suite_digest"], row["threshold"], sc, ref)
+    suite = (renames or {}).get((row["suite"], row["suite_digest"]), row["suite"])
+    case = Case(suite, row["suite_digest"], row["threshold"], sc, ref)
     env: dict[str, Any] = {}
     e = src.db.execute("SELECT * FROM environments WHERE id=?", (row["environment_id"],)).fetchone() if row["environment_id"] else None
     if e is not None:
@@ -186,7 +216,7 @@ def _new_store(path: Path) -> Iterator[Store]:
 
 
 def _copy(src: Store, rows: Sequence[Any], out: Store, judgements: dict[int, Judgement] | None = None,
-          scenarios: dict[str, Any] | None = None) -> int:
+          scenarios: dict[str, Any] | None = None, renames: dict[tuple[str, str], str] | None = None) -> int:
     """Copy ``rows`` of ``src`` into ``out`` through :meth:`Store.record`; a run in ``judgements`` takes the re-judged figures.
 
     ``scenarios``: the stored scenarios already read (and checked) by digest.
@@ -195,7 +225,7 @@ def _copy(src: Store, rows: Sequence[Any], out: Store, judgements: dict[int, Jud
     out.copy_scenarios(src, dict.fromkeys(r["scenario_digest"] for r in rows))
     n = 0
     for row in rows:
-        case, res = _case_and_result(src, row, scenarios)
+        case, res = _case_and_result(src, row, scenarios, renames)
         j = (judgements or {}).get(row["id"])
         if j is not None:
             res = replace(res, reason=j.reason, metrics=j.metrics, violations=j.violations, error=j.error)
@@ -214,11 +244,13 @@ def _register(out: Store, suites: Sequence[_SuiteRecord]) -> int:
     return new
 
 
-def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool = False) -> MergeReport:
+def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool = False, as_variant: bool = False) -> MergeReport:
     """Merge the stores ``in_paths`` into ``out_path`` (created if missing); see the module doc.
 
     Every incoming run is re-judged first; with ``rescore``, runs whose stored figures differ
     are merged with the re-judged ones (counted in ``rescored``) instead of refusing the merge.
+    With ``as_variant``, an input's suite under a registered name with another digest is
+    stored as ``NAME~variant-D`` (:func:`earthbench.identity.variant_name`) instead of refused.
     """
     if not in_paths:
         raise MergeError("name at least one input database")
@@ -236,7 +268,8 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
         try:
             if existing is not None:
                 existing.check_writable()
-            problems = check(existing, inputs)
+            renames = _renames(inputs) if as_variant else {}
+            problems = check(existing, inputs, renames)
             audits = [audit(src) for src in inputs]
             for a in audits:
                 problems += a.problems(rescore=rescore)
@@ -255,10 +288,10 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
 
             def fill(out: Store) -> None:
                 for src, a in zip(inputs, audits):
-                    report.suites += _register(out, _suites(src))
+                    report.suites += _register(out, _relabel(_suites(src), renames))
                     rows = src.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
                     changed = {f.run_id: a.judgements[f.run_id] for f in a.differ if f.run_id in a.judgements}
-                    n = _copy(src, rows, out, changed, a.scenarios)
+                    n = _copy(src, rows, out, changed, a.scenarios, renames)
                     report.per_input[str(src.path)] = n
                     report.runs += n
 

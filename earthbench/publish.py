@@ -63,6 +63,7 @@ from .profiles import cost_matrix, profile
 
 from .plotting import mpl_text, planner_colours, pyplot
 from .scaling import SCALE_CAPTION, cost_growth_figure, scale_section
+from .generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
 from .store import Store, load_runs, suite_members
 from .verify import latest_spot_checks, machine_label
 
@@ -875,6 +876,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     result = Published(out)
     captions: list[tuple[dict[str, Any], str, Path]] = []
     with Store(db, create=False) as store:
+        suites = with_sealed_draws(store, suites)  # a suite's sealed draws are published beside it
         runs = published_runs(store, suites)
         members = suite_members(store, runs["suite"].unique())
         seed_note = ""
@@ -934,6 +936,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         summary = aggregate(runs, members=members, scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
+        gaps = gap_table(runs, members)  # sealed draws against the public suite (earthbench.generalisation)
         closed = (
             frozenset(runs.loc[runs["config"].map(_closed_loop).astype(bool), "config_hash"].astype(str))
             if "config" in runs
@@ -961,7 +964,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     runs_csv = runs.drop(columns=[c for c in ("packages",) if c in runs])
     spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
     spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
-    (out / "README.md").write_text(markdown_page(sections, generated))
+    (out / "README.md").write_text(markdown_page(sections, generated) + gap_markdown(gaps))
+    result.files += write_gaps(gaps, out)
     (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
     return result

@@ -111,18 +111,25 @@ def scan(truth: Scenario, sensing: Sensing, pose: Pose, step: int = 0) -> Height
     return Heightmap(terrain.origin, terrain.resolution * k, np.round(out, 9))
 
 
+#: The id every observation carries: a machine on site is not told which benchmark scenario it
+#: stands in (docs/sealed-evaluation.md). The truth keeps its id for the store and the board.
+ANONYMOUS_ID = "site"
+
+
 def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0) -> Scenario:
     """The planner's view of ``truth``: its terrain replaced by the scan of its ``sensing``
     section taken from ``pose`` (default: the working machine's initial pose), its soil by the
-    material's nominal values (:func:`earthbench.soil.nominal`), and no ``sensing`` section or
-    ``meta`` (which may name the generator and seed that made the truth).
+    material's nominal values (:func:`earthbench.soil.nominal`), and no ``sensing`` section.
 
-    A scenario with neither section is returned as it is. ``step`` is mixed into the noise's
-    seed: a closed loop passes its step count so that each scan is reproducible and new.
+    Every view is anonymous, on the exact track too: its id is :data:`ANONYMOUS_ID` and its
+    ``meta`` is empty (the id and ``meta`` name the suite, family, generator and seed that made
+    the truth; with them, a planner could regenerate the hidden world). ``step`` is mixed into
+    the noise's seed: a closed loop passes its step count so that each scan is reproducible and new.
     """
+    changes: dict = {"id": ANONYMOUS_ID, "meta": {}}
     if truth.soil is None and truth.sensing is None:
-        return truth
-    changes: dict = {"meta": {}, "sensing": None}
+        return dataclasses.replace(truth, **changes)
+    changes["sensing"] = None
     if truth.soil is not None:
         changes["soil"] = nominal(truth.soil.material)
     if truth.sensing is not None:

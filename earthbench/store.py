@@ -24,14 +24,19 @@ pandas. Tables:
   deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
+Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
+was drawn from (``sealed_from``), that suite's digest (``public_digest``) and the draw's
+``commitment``; its scenarios and runs carry ``sealed = 1``. Nothing of the key is stored.
+
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
 store from an older schema opened for writing is brought up to date by the named steps of
-:data:`MIGRATIONS` (version 2 added the ``steps`` column; version 3 the machine's load around
-each case — ``load_before``, ``load_after``, ``steal_share`` — and the build of the code,
-``environments.earthbench_version`` and ``environments.plugin``: the plugin's distribution,
-version and source commit as JSON); read-only, it is read as it is (a version-1 store's runs
-read as open-loop runs; a store before version 3 has no load or build columns).
+:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
+the machine's load around each case — ``load_before``, ``load_after``, ``steal_share`` — and the
+build of the code, ``environments.earthbench_version`` and ``environments.plugin``: the plugin's
+distribution, version and source commit as JSON); read-only, it is read as it is (a version-1
+store's runs read as open-loop runs, a store before version 3 as public runs, one before version
+4 without load or build).
 """
 
 from __future__ import annotations
@@ -62,7 +67,14 @@ if TYPE_CHECKING:  # pragma: no cover
 #: add a column the table already has is skipped, so a step is safe to re-run.
 MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
-    ("3: the machine's load around each case and the build of the code that ran it (issue 35)", (
+    ("3: sealed draws (earthbench.seal): a suite version's public origin and commitment, a sealed mark on scenarios and runs", (
+        "ALTER TABLE suites ADD COLUMN sealed_from TEXT",
+        "ALTER TABLE suites ADD COLUMN public_digest TEXT",
+        "ALTER TABLE suites ADD COLUMN commitment TEXT",
+        "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
+    )),
+    ("4: the machine's load around each case and the build of the code that ran it (issue 35)", (
         "ALTER TABLE runs ADD COLUMN load_before REAL", "ALTER TABLE runs ADD COLUMN load_after REAL",
         "ALTER TABLE runs ADD COLUMN steal_share REAL", "ALTER TABLE environments ADD COLUMN earthbench_version TEXT",
         "ALTER TABLE environments ADD COLUMN plugin TEXT")),
@@ -96,12 +108,12 @@ CREATE TABLE planner_configs (
 CREATE TABLE scenarios (
     digest TEXT PRIMARY KEY,
     id TEXT NOT NULL, track TEXT NOT NULL, target_volume REAL NOT NULL,
-    doc BLOB NOT NULL
+    doc BLOB NOT NULL, sealed INTEGER NOT NULL DEFAULT 0
 );
 CREATE TABLE suites (
     id INTEGER PRIMARY KEY,
     name TEXT NOT NULL, digest TEXT NOT NULL, track TEXT NOT NULL, threshold REAL NOT NULL,
-    description TEXT, registered_at TEXT,
+    description TEXT, registered_at TEXT, sealed_from TEXT, public_digest TEXT, commitment TEXT,
     UNIQUE (name, digest)
 );
 CREATE TABLE suite_scenarios (
@@ -124,11 +136,16 @@ CREATE TABLE runs (
     time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
+    sealed INTEGER NOT NULL DEFAULT 0,
     load_before REAL, load_after REAL, steal_share REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
 """
+
+
+def _columns(db: sqlite3.Connection, table: str) -> set[str]:
+    return {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
 
 
 def _compress(text: str) -> bytes:
@@ -283,9 +300,11 @@ class Store:
         try:
             with self.db:
                 self.db.execute("BEGIN IMMEDIATE")
+                seal = sealed_origin(suite)
                 cur = self.db.execute(
-                    "INSERT INTO suites (name, digest, track, threshold, description, registered_at) VALUES (?, ?, ?, ?, ?, ?)",
-                    (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now()),
+                    "INSERT INTO suites (name, digest, track, threshold, description, registered_at, sealed_from, public_digest,"
+                    " commitment) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (suite.name, suite.digest, suite.track, suite.success_threshold, suite.description, _now(), *seal),
                 )
                 sid = cur.lastrowid
                 assert sid is not None  # an INSERT always sets it
@@ -340,6 +359,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    "sealed": int(bool(sc.meta.get("sealed"))),
                     **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                 }
                 cols = ", ".join(row)
@@ -359,21 +379,22 @@ class Store:
 
         For merging: the caller has checked that each document reproduces its digest.
         """
-        rows = [r for d in digests
-                if (r := src.db.execute("SELECT digest, id, track, target_volume, doc FROM scenarios WHERE digest=?", (d,)).fetchone())]
+        sealed = "sealed" if "sealed" in _columns(src.db, "scenarios") else "0"
+        rows = [r for d in digests if (r := src.db.execute(
+                f"SELECT digest, id, track, target_volume, doc, {sealed} FROM scenarios WHERE digest=?", (d,)).fetchone())]
         try:
             with self.db:
                 self.db.execute("BEGIN IMMEDIATE")
-                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
-                                    [tuple(r) for r in rows])
+                self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc, sealed)"
+                                    " VALUES (?, ?, ?, ?, ?, ?)", [tuple(r) for r in rows])
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 
     def _scenario(self, sc: Scenario) -> None:
         if not self.db.execute("SELECT 1 FROM scenarios WHERE digest=?", (sc.digest,)).fetchone():
             self.db.execute(
-                "INSERT INTO scenarios (digest, id, track, target_volume, doc) VALUES (?, ?, ?, ?, ?)",
-                (sc.digest, sc.id, sc.track, sc.task.target_volume, _compress(sc.to_json())),
+                "INSERT INTO scenarios (digest, id, track, target_volume, doc, sealed) VALUES (?, ?, ?, ?, ?, ?)",
+                (sc.digest, sc.id, sc.track, sc.task.target_volume, _compress(sc.to_json()), int(bool(sc.meta.get("sealed")))),
             )
 
     def _planner_config(self, case: Case) -> int:
@@ -464,6 +485,17 @@ class Store:
         return Scenario.from_json(decompress(row[0]))
 
 
+def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
+    """(public suite name, its digest, commitment) of a sealed suite version; Nones for a public one.
+
+    Reads a loaded :class:`~earthbench.suite.Suite` (its ``sealing`` key) or a stored version
+    (:mod:`earthbench.merge`'s records: ``sealed_from``, ``public_digest``, ``commitment``)."""
+    key = getattr(suite, "sealing", None)
+    if key is not None:
+        return key.suite, key.suite_digest, key.commitment
+    return getattr(suite, "sealed_from", None), getattr(suite, "public_digest", None), getattr(suite, "commitment", None)
+
+
 def stored_steps(row: Any) -> tuple[tuple[int, float], ...] | None:
     """A ``runs`` row's closed-loop steps ``((actions, compute seconds), …)``, None for an open-loop run."""
     text = row["steps"] if "steps" in row.keys() else None
@@ -501,28 +533,29 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
     ``project_commit`` (the commit the installed earthbench was built from, ``+dirty`` when its
-    tree had changes), ``plugin_commit``, ``earthbench_version``, ``plugin`` (JSON text: the planner's
-    distribution, version and source commit), and the machine's load around the case: ``load_before``,
-    ``load_after``, ``steal_share`` (missing in stores written before schema version 3). Metrics are
-    NaN for runs without a plan (timeout, memory, error, crashed); ``time_per_m3`` and
-    ``time_per_target_m3`` are ``inf`` when a plan loaded nothing or fell short of the target.
+    tree had changes), ``plugin_commit``, ``sealed`` (a run of a sealed draw, :mod:`earthbench.seal`),
+    ``earthbench_version``, ``plugin`` (JSON text: the planner's distribution, version and source
+    commit), and the machine's load around the case: ``load_before``, ``load_after``, ``steal_share``
+    (missing in stores written before schema version 4). Metrics are NaN for runs without a plan
+    (timeout, memory, error, crashed); ``time_per_m3`` and ``time_per_target_m3`` are ``inf`` when a
+    plan loaded nothing or fell short of the target.
     """
     import pandas as pd
 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
-        have = {r[1] for r in store.db.execute("PRAGMA table_info(runs)")} | {
-            "e." + r[1] for r in store.db.execute("PRAGMA table_info(environments)")}
-        newer = ", ".join((f"r.{c}" if c in have else f"NULL AS {c}") for c in LOAD_COLUMNS) + ", " + ", ".join(
-            (f"e.{c}" if f"e.{c}" in have else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))
+        sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
+        have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
+        newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
+                           *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
         rows = store.db.execute(
-            """SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
+            f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit, """ + newer + """
+                      e.project_commit, e.plugin_commit, {sealed}, {newer}
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
                ORDER BY r.id"""
@@ -534,7 +567,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
-            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit", *LOAD_COLUMNS,
+            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit", "sealed", *LOAD_COLUMNS,
             "earthbench_version", "plugin"]
     metric_names: list[str] = []
     records = []
@@ -560,6 +593,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         d["violation_rules"] = ",".join(sorted({v["rule"] for v in json.loads(r["violations"] or "[]")}))
         for k in tail[1:]:
             d[k] = r[k]
+        d["sealed"] = bool(r["sealed"])
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)
     return df.infer_objects()

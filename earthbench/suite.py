@@ -57,7 +57,7 @@ import math
 import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cache, cached_property
 from importlib import resources
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -65,6 +65,7 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
+from .seal import TRANSFORMS, SealKey, SiteTransform, sealed_name
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -104,14 +105,15 @@ class Family:
     soil: dict[str, Any] | None = field(default=None, hash=False)
     sensing: dict[str, Any] | None = field(default=None, hash=False)
 
-    def realism(self, seed: int) -> dict[str, Any]:
+    def realism(self, seed: int, scan_seed: int | None = None) -> dict[str, Any]:
         """The scenario sections of the realistic track for ``seed``: the soil drawn from its
-        material with that seed (:func:`earthbench.soil.draw`), the sensing seeded with it."""
+        material with that seed (:func:`earthbench.soil.draw`), the sensing seeded with it
+        (or with ``scan_seed``: a sealed draw seeds the two apart)."""
         out: dict[str, Any] = {}
         if self.soil is not None:
             out["soil"] = draw(self.soil, seed, f"family {self.name!r} soil")
         if self.sensing is not None:
-            out["sensing"] = Sensing(**{"seed": seed, **self.sensing})
+            out["sensing"] = Sensing(**{"seed": seed if scan_seed is None else scan_seed, **self.sensing})
         return out
 
 
@@ -128,10 +130,32 @@ class Suite:
     planners: tuple[str, ...] | None = None
     config: dict[str, dict[str, Any]] = field(default_factory=dict)
     path: str = ""
+    #: The key of a sealed draw of this suite (:mod:`earthbench.seal`); None for the public suite.
+    sealing: SealKey | None = field(default=None, repr=False)
+
+    def sealed(self, key: SealKey, *, drawn: Iterable[Scenario] = ()) -> Suite:
+        """This suite drawn with ``key`` (:mod:`earthbench.seal`), named by the key's commitment.
+
+        ``drawn``: the same key's scenarios already generated (under any name), relabelled
+        rather than generated again.
+        """
+        out = dataclasses.replace(self, name=sealed_name(self.name, key.commitment), sealing=key,
+                                  description=f"{self.name} drawn with a sealed key (commitment {key.commitment[:12]}…)")
+        drawn = tuple(drawn)
+        if drawn:
+            out.__dict__["scenarios"] = tuple(
+                sc.replace(id=out.name + sc.id[sc.id.index("/"):], meta={**sc.meta, "suite": out.name}) for sc in drawn
+            )
+        return out
 
     @cached_property
     def scenarios(self) -> tuple[Scenario, ...]:
-        """Every scenario of the suite, in file order (family, then target, then seed)."""
+        """Every scenario of the suite, in file order (family, then target, then seed).
+
+        A sealed suite (``sealing``) calls the same generators with seeds, soil, scan and a
+        site transform drawn from its key (:mod:`earthbench.seal`); its scenarios keep the
+        public seed in ``meta["seed"]`` so ``--seeds`` selects the same draws.
+        """
         from .registry import TERRAINS
 
         out: list[Scenario] = []
@@ -145,7 +169,7 @@ class Suite:
                         raise SuiteError(f"{self._where}: scenario id {sid!r} occurs twice; give the families distinct names")
                     seen.add(sid)
                     try:
-                        sc = gen(seed, target, **fam.params)
+                        sc = self._generate(gen, fam, seed, target)
                     except EarthbenchError as exc:
                         raise SuiteError(f"{self._where}: family {fam.name!r}, seed {seed}, target {target:g}: {exc}") from exc
                     if not isinstance(sc, Scenario):
@@ -155,8 +179,25 @@ class Suite:
                             f"{self._where}: family {fam.name!r} makes {sc.track!r} scenarios but the suite's track is {self.track!r}"
                         )
                     meta = {**sc.meta, "suite": self.name, "family": fam.name, "seed": seed, "target": target}
-                    out.append(sc.replace(id=sid, budget=self.budget, meta=meta, **fam.realism(seed)))
+                    if self.sealing is None:
+                        out.append(sc.replace(id=sid, budget=self.budget, meta=meta, **fam.realism(seed)))
+                    else:
+                        out.append(sc.replace(id=sid, budget=self.budget, meta={**meta, "sealed": True}))
         return tuple(out)
+
+    def _generate(self, gen: Any, fam: Family, seed: int, target: float) -> Scenario:
+        """One scenario from its generator: public (the seed as given) or sealed (every random
+        choice drawn from the key and the public id, then the site moved)."""
+        key = self.sealing
+        if key is None:
+            return gen(seed, target, **fam.params)
+        public_id = f"{key.suite}/{fam.name}/s{seed}/v{target:g}"
+        sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
+        if not isinstance(sc, Scenario):
+            return sc  # refused by the caller, as for a public suite
+        sc = sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
+        allowed = tuple(getattr(gen, "seal_transforms", TRANSFORMS))
+        return SiteTransform.draw(key.derive(public_id, "transform"), allowed, sc.terrain.resolution).apply(sc)
 
     @cached_property
     def digest(self) -> str:
@@ -195,6 +236,20 @@ def known_suites() -> dict[str, Path]:
             if item.name.endswith(".toml") and item.is_file():
                 found.setdefault(item.name[: -len(".toml")], Path(str(item)))
     return found
+
+
+@cache
+def registered_suite(name: str) -> Suite:
+    """The registered suite ``name``, loaded and generated once per process (for the checks that
+    compare stored suites with it: :mod:`earthbench.identity`, ``verify --key``). Not for
+    running: a run may change its copy's planner settings."""
+    return load_suite(name)
+
+
+def public_suite(key: SealKey) -> Suite:
+    """The public suite a sealed key was drawn from: the registered suite of its name, else the
+    suite file the key was made from."""
+    return registered_suite(key.suite) if key.suite in known_suites() or not key.path else load_suite(key.path)
 
 
 def load_suite(name_or_path: str | Path) -> Suite:

@@ -451,3 +451,79 @@ def latest_spot_checks(store: Store) -> list[SpotCheck]:
                              tuple(json.loads(r["stored_machines"])), r["checked_at"], tuple(ctx.get("cpu_ratios", ())),
                              tuple(ctx.get("load_stored", ())), tuple(ctx.get("load_here", ())), ctx.get("steal")))
     return out
+
+
+# -- suite identity and sealed draws ----------------------------------------------------------
+
+
+def suite_versions(store: Store) -> list[Any]:
+    """Every suite version ``store`` lists, as :mod:`earthbench.identity` reads it."""
+    from .identity import Version
+
+    out = []
+    for s in store.db.execute("SELECT * FROM suites ORDER BY id"):
+        keys = s.keys()
+        out.append(Version(s["name"], s["digest"], str(store.path),
+                           *(s[k] if k in keys else None for k in ("sealed_from", "public_digest", "commitment"))))
+    return out
+
+
+def identity_problems(store: Store) -> list[str]:
+    """Every suite version of ``store`` stored under a name that is not its own (:mod:`earthbench.identity`)."""
+    from .identity import problems
+
+    return problems(suite_versions(store))
+
+
+@dataclass
+class SealCheck:
+    """What a revealed key says about a store's sealed draw (:func:`check_seal`)."""
+
+    suite: str                                               #: the sealed suite's name
+    problems: list[str] = field(default_factory=list)       #: reasons the draw does not hold
+    scenarios: int = 0                                       #: sealed scenarios regenerated and matched
+    run_rows: list[Any] = field(default_factory=list)        #: the stored runs of the draw, to re-judge
+
+
+def check_seal(store: Store, key: Any) -> SealCheck:
+    """Check a sealed draw of ``store`` against its revealed ``key`` (a :class:`~earthbench.seal.SealKey`):
+    the key reproduces its commitment from the registered public suite (every sealed scenario
+    regenerated), the store lists that draw under that commitment, and every stored scenario
+    of the draw is the regenerated one. Re-judging the draw's runs is :func:`audit`'s
+    (on ``run_rows``); this is the cost sealing adds to verifying a store.
+    """
+    from .seal import SealError, open_sealed
+    from .suite import public_suite
+
+    out = SealCheck(key.name)
+    try:
+        sealed = open_sealed(public_suite(key), key)
+    except (SealError, EarthbenchError) as exc:
+        out.problems.append(f"key for {key.name}: {exc}")
+        return out
+    ver = store.db.execute("SELECT * FROM suites WHERE name=?", (sealed.name,)).fetchall()
+    if not ver:
+        out.problems.append(f"{store.path} holds no suite {sealed.name!r}: this key draws another store's board")
+        return out
+    regenerated = {sc.id: sc.digest for sc in sealed.scenarios}
+    for v in ver:
+        keys = v.keys()
+        if v["digest"] != sealed.digest:
+            out.problems.append(f"suite {sealed.name!r} is stored with digest {v['digest'][:12]}…, but the revealed key draws "
+                                f"{sealed.digest[:12]}…")
+        if "commitment" in keys and v["commitment"] != key.commitment:
+            out.problems.append(f"suite {sealed.name!r} is stored with commitment {str(v['commitment'])[:12]}…, not the key's "
+                                f"{key.commitment[:12]}…")
+        for m in store.db.execute("SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (v["id"],)):
+            if regenerated.get(m[0]) != m[1]:
+                out.problems.append(f"scenario {m[0]} is stored with digest {m[1][:12]}…, the key regenerates "
+                                    f"{str(regenerated.get(m[0], 'nothing'))[:12]}…")
+            else:
+                out.scenarios += 1
+    digests = set(regenerated.values())
+    for r in store.db.execute("SELECT * FROM runs WHERE suite=? ORDER BY id", (sealed.name,)):
+        if r["scenario_digest"] in digests:
+            out.run_rows.append(r)
+        else:
+            out.problems.append(f"run {r['id']} ({_label(r)}) is labelled {sealed.name} but its scenario is not one the key draws")
+    return out

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from earthbench import Plan, Scenario, judge
 from earthbench.errors import ScenarioError, SuiteError
 from earthbench.scoring import score
-from earthbench.sensing import observe, visible_cells
+from earthbench.sensing import ANONYMOUS_ID, observe, visible_cells
 from earthbench.soil import MATERIALS, draw, nominal, reach_cells, slump, slump_cells
 from earthbench.suite import load_suite, parse_suite
 from earthbench.world import Heightmap, Pose, Sensing, Soil
@@ -40,11 +40,13 @@ def test_without_soil_the_verdict_is_byte_for_byte_the_golden_one(name, suite):
     assert text == (GOLDEN / f"verdict_{name}.json").read_text()
 
 
-def test_a_scenario_without_the_sections_keeps_its_json_and_is_its_own_observation():
+def test_a_scenario_without_the_sections_keeps_its_json_and_is_its_own_observation_but_for_its_name():
     sc = load_suite("smoke").scenarios[0]
     doc = json.loads(sc.to_json())
     assert "soil" not in doc and "sensing" not in doc
-    assert observe(sc) is sc
+    view = observe(sc)
+    assert view.digest == sc.digest and view.terrain is sc.terrain
+    assert (view.id, view.meta) == (ANONYMOUS_ID, {})  # the exact track's planner sees the truth, not its name
     assert Scenario.from_json(sc.to_json()).digest == sc.digest
 
 

@@ -23,6 +23,7 @@ COMMANDS = [
     "validate",
     "show",
     "suites",
+    "seal",
     "run",
     "runs",
     "rescore",

@@ -5,7 +5,9 @@ digest is recomputed); the merge is refused, writing nothing, when any run's sto
 or metrics differ from the re-judged ones (``--rescore`` merges the re-judged figures instead
 and says how many changed), when a run has a verdict but no plan, when a scenario or suite
 does not reproduce its digest, when a run is in two stores (same scenario digest, planner,
-version and config hash) or when a suite name has different digests in different stores.
+version and config hash), when a suite name has different digests in different stores, or
+when a registered suite's name (built in or installed) holds another digest: a different world
+under a known name, which ``--as-variant`` stores as ``NAME~variant-D`` instead.
 Runs without a plan (timeout, memory, crashed, error) are merged with the harness's reason,
 which cannot be re-checked. Solve times come from the machine that ran each case. An
 ``earthbench export`` bundle is a store like any other. OUT.db is created if missing.
@@ -24,13 +26,15 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="+", metavar="IN.db", help="databases or export bundles to merge")
     p.add_argument("--rescore", action="store_true",
                    help="merge runs whose stored figures differ with the re-judged figures instead of refusing")
+    p.add_argument("--as-variant", action="store_true",
+                   help="store a registered suite name holding another world as NAME~variant-DIGEST instead of refusing it")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     from ..merge import merge
 
-    report = merge(args.out, args.inputs, rescore=args.rescore)
+    report = merge(args.out, args.inputs, rescore=args.rescore, as_variant=args.as_variant)
     for line in report.changes[:20]:
         print(f"re-scored {line}", file=sys.stderr)
     if len(report.changes) > 20:

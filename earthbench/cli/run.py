@@ -55,6 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="cases at once (default and maximum: floor(cores / budget cores))")
     p.add_argument("--rerun", action="store_true", help="run cases again even if they are stored, replacing their rows")
     p.add_argument("--seeds", metavar="A-B", help="only scenarios whose seed is in this range, e.g. 0-4 or 3")
+    p.add_argument("--sealed", metavar="KEYFILE",
+                   help="run the suite's sealed draw of this key (`earthbench seal` made it; docs/sealed-evaluation.md)")
     p.add_argument("--quiet", action="store_true", help="no progress output, only the summary")
     p.add_argument("--require-success", action="store_true",
                    help="exit with status 1 unless at least one case succeeded (default: unless one has a valid plan)")
@@ -135,6 +137,10 @@ def _sigterm(signum: int, frame: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     suite = load_suite(args.suite)
+    if args.sealed:
+        from ..seal import SealKey, open_sealed
+
+        suite = open_sealed(suite, SealKey.read(args.sealed))
     if args.config:
         if not args.planner:
             raise EarthbenchError("--config needs --planner NAME: the settings are checked against that planner's Config")

@@ -93,6 +93,9 @@ THREAD_VARS = (
 #: greedy's 96 × 48 m plan fault 25x as many pages and run 0.2-0.4 s slower than under the
 #: local executor. A planner's speed must not depend on the executor that started it.
 ALLOCATOR_VARS = ("MALLOC_", "GLIBC_TUNABLES")
+#: Variables of the harness's environment a case is not given: where the results store is (it
+#: holds the truth of every scenario, sealed ones too; docs/sealed-evaluation.md).
+HIDDEN_VARS = ("EARTHBENCH_DB",)
 _DIR_PREFIX = "earthbench-case-"
 
 
@@ -101,7 +104,7 @@ class HarnessError(EarthbenchError):
 
 
 def _child_env(cores: int, tag: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(ALLOCATOR_VARS)}
+    env = {k: v for k, v in os.environ.items() if not k.startswith(ALLOCATOR_VARS) and k not in HIDDEN_VARS}
     env[CASE_TAG] = tag
     for var in THREAD_VARS:
         env[var] = str(cores)

@@ -1,0 +1,147 @@
+"""The generalisation gap: how a planner does on sealed draws of a suite against the public suite.
+
+A planner tuned on the public seeds should do about as well on draws nobody saw before
+(docs/sealed-evaluation.md); one that recognises public scenarios (or was tuned to them
+alone) does worse. For every planner configuration with runs on both the public suite and
+at least one sealed draw of it (``SUITE~sealed-C``, :mod:`earthbench.seal`; every draw pooled),
+:func:`gap_table` gives, per metric, the public and sealed figures with their 95 % bootstrap
+intervals and the gap sealed − public with its own interval (a two-sample percentile
+bootstrap). A planner is **flagged** on a metric when its sealed figures fall outside the
+public figure's interval: the sealed interval and the public one do not overlap. (A sealed
+point estimate alone leaves an honest planner's interval about one time in six on a median of
+30 runs: two samples of one planner differ by chance; disjoint intervals do not, at about
+the 1 % level.)
+
+Metrics (each as the leaderboard computes it): ``success_rate`` (per scenario, a scenario
+without a run counts as failed), ``time_per_target_m3`` (median over valid runs) and
+``volume_ratio`` (mean over valid runs).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .seal import public_name
+from .stats import CONFIDENCE, N_RESAMPLES, SEED, STATISTICS, bootstrap_ci
+
+KEY = ["planner", "planner_version", "config_hash"]
+#: metric → (statistic, what the sample is)
+METRICS = {"success_rate": "mean", "time_per_target_m3": "median", "volume_ratio": "mean"}
+COLUMNS = [*KEY, "public_suite", "draws", "metric", "public", "public_lo", "public_hi", "public_n",
+           "sealed", "sealed_lo", "sealed_hi", "sealed_n", "gap", "gap_lo", "gap_hi", "flagged"]
+
+
+def _sample(runs: pd.DataFrame, metric: str, of: int) -> np.ndarray:
+    """The values a metric is a statistic of: per-scenario successes padded to ``of`` scenarios,
+    or the finite values of the valid runs."""
+    if metric == "success_rate":
+        per = runs.groupby("scenario_digest")["success"].max().astype(float).to_numpy()
+        return np.concatenate([per, np.zeros(max(of - len(per), 0))])
+    ok = runs[runs["reason"] == "ok"]
+    x = pd.to_numeric(ok[metric], errors="coerce").to_numpy(dtype=float) if metric in ok else np.array([])
+    return x[np.isfinite(x)]
+
+
+def _stat(x: np.ndarray, statistic: str) -> float:
+    return float(STATISTICS[statistic](x)) if len(x) else math.nan
+
+
+def gap_ci(public: np.ndarray, sealed: np.ndarray, statistic: str) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of ``statistic(sealed) − statistic(public)`` (two independent samples)."""
+    from scipy.stats import bootstrap
+
+    if len(public) < 2 or len(sealed) < 2:
+        return math.nan, math.nan
+    if np.all(public == public[0]) and np.all(sealed == sealed[0]):
+        d = float(sealed[0] - public[0])
+        return d, d
+    f = STATISTICS[statistic]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = bootstrap((public, sealed), lambda a, b, axis=-1: f(b, axis=axis) - f(a, axis=axis), vectorized=True, axis=-1,
+                        confidence_level=CONFIDENCE, n_resamples=N_RESAMPLES, method="percentile",
+                        random_state=np.random.default_rng(SEED))
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def gap_table(runs: pd.DataFrame, members: pd.DataFrame) -> pd.DataFrame:
+    """One row per (public suite, planner configuration, metric) with runs on the suite and a sealed draw of it.
+
+    ``runs``: :func:`earthbench.store.load_runs` rows of the public suites and their sealed
+    draws; ``members``: :func:`earthbench.store.suite_members` of the same suites (the
+    denominators of the success rate).
+    """
+    if runs.empty:
+        return pd.DataFrame(columns=COLUMNS)
+    origin = runs["suite"].map(lambda s: public_name(str(s)) or s)
+    sizes = members.groupby("suite")["scenario_digest"].nunique().to_dict() if not members.empty else {}
+    rows: list[dict[str, Any]] = []
+    for (public, *key), g in runs.assign(_origin=origin).groupby(["_origin", *KEY], sort=True):
+        pub = g[g["suite"] == public]
+        sea = g[g["suite"] != public]
+        if pub.empty or sea.empty:
+            continue
+        draws = sorted(sea["suite"].unique())
+        of_pub = int(sizes.get(public, pub["scenario_digest"].nunique()))
+        of_sea = sum(int(sizes.get(d, sea.loc[sea["suite"] == d, "scenario_digest"].nunique())) for d in draws)
+        for metric, statistic in METRICS.items():
+            a = _sample(pub, metric, of_pub)
+            b = np.concatenate([_sample(sea[sea["suite"] == d], metric, int(sizes.get(d, 0))) for d in draws]) \
+                if metric == "success_rate" else _sample(sea, metric, of_sea)
+            p, s = _stat(a, statistic), _stat(b, statistic)
+            p_lo, p_hi = bootstrap_ci(a, statistic) if len(a) else (math.nan, math.nan)
+            s_lo, s_hi = bootstrap_ci(b, statistic) if len(b) else (math.nan, math.nan)
+            g_lo, g_hi = gap_ci(a, b, statistic)
+            flagged = bool(all(map(math.isfinite, (p_lo, p_hi, s_lo, s_hi))) and (s_hi < p_lo or s_lo > p_hi))
+            rows.append({**dict(zip(KEY, key)), "public_suite": public, "draws": len(draws), "metric": metric,
+                         "public": p, "public_lo": p_lo, "public_hi": p_hi, "public_n": len(a),
+                         "sealed": s, "sealed_lo": s_lo, "sealed_hi": s_hi, "sealed_n": len(b),
+                         "gap": s - p, "gap_lo": g_lo, "gap_hi": g_hi, "flagged": flagged})
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def _f(v: Any, scale: float = 1.0) -> str:
+    return "–" if v is None or not math.isfinite(float(v)) else f"{float(v) * scale:.3g}"
+
+
+def markdown(table: pd.DataFrame) -> str:
+    """The gap table as Markdown, one section per public suite ('' when there is nothing to compare)."""
+    if table.empty:
+        return ""
+    out = ["## Generalisation gap: sealed draws against the public suite", "",
+           "Each planner's figures on the public suite and on the sealed draws of it (docs/sealed-evaluation.md), "
+           "95 % bootstrap intervals in brackets; gap = sealed − public. **flagged**: the sealed interval lies "
+           "outside the public one (they do not overlap). Success rates in %.", ""]
+    for public, t in table.groupby("public_suite", sort=True):
+        out += [f"### {public} ({int(t['draws'].max())} sealed draw(s))", "",
+                "| planner | metric | public | sealed | gap | |", "|---|---|---|---|---|---|"]
+        for _, r in t.iterrows():
+            k = 100.0 if r["metric"] == "success_rate" else 1.0
+            out.append(f"| {r['planner']} {r['planner_version']} | {r['metric']} | {_f(r['public'], k)} "
+                       f"[{_f(r['public_lo'], k)}–{_f(r['public_hi'], k)}] | {_f(r['sealed'], k)} "
+                       f"[{_f(r['sealed_lo'], k)}–{_f(r['sealed_hi'], k)}] | {_f(r['gap'], k)} "
+                       f"[{_f(r['gap_lo'], k)}–{_f(r['gap_hi'], k)}] | {'**flagged**' if r['flagged'] else ''} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def with_sealed_draws(store: Any, suites: Any) -> list[str] | None:
+    """``suites`` and every sealed draw of them that ``store`` lists (None stays None: every suite)."""
+    if not suites:
+        return None
+    names = [r[0] for r in store.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+    return list(dict.fromkeys([*suites, *(n for n in names if public_name(n) in suites)]))
+
+
+def write(table: pd.DataFrame, out: Any) -> list[Any]:
+    """``generalisation.csv`` in ``out`` when there is a gap to show; the files written."""
+    if table.empty:
+        return []
+    path = out / "generalisation.csv"
+    table.to_csv(path, index=False)
+    return [path]
