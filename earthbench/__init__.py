@@ -43,7 +43,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .sensing import observe
     from .world import Budget, ExcavatorSpec, Heightmap, LoaderSpec, Machines, Pose, Scenario, Sensing, Site, Soil, Task, TruckSpec
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",

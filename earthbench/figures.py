@@ -186,6 +186,22 @@ def terrain_before_after(scenario: Scenario, plan: Plan, verdict: Verdict) -> Fi
     return fig
 
 
+def animation_writer(out: str, fps: int = 8) -> Any:
+    """The writer for an animation file ``out`` (``.gif``: Pillow; ``.mp4``: ffmpeg), or a clear error before any work."""
+    from matplotlib import animation
+
+    from .errors import EarthbenchError
+
+    ext = out.rsplit(".", 1)[-1].lower()
+    if ext == "gif":
+        return animation.PillowWriter(fps=fps)
+    if ext == "mp4":
+        if not animation.FFMpegWriter.isAvailable():
+            raise EarthbenchError("--animate out.mp4 needs ffmpeg on PATH (apt-get install ffmpeg); out.gif needs nothing more")
+        return animation.FFMpegWriter(fps=fps)
+    raise EarthbenchError(f"--animate {out!r}: the animation must end in .gif or .mp4")
+
+
 def animate(scenario: Scenario, plan: Plan, out: str, frames: int = 80, fps: int = 8) -> int:
     """Write the plan replayed as ``out`` (``.gif``: Pillow; ``.mp4``: ffmpeg) and return the frame count.
 
@@ -194,18 +210,7 @@ def animate(scenario: Scenario, plan: Plan, out: str, frames: int = 80, fps: int
     """
     from matplotlib import animation
 
-    from .errors import EarthbenchError
-
-    ext = out.rsplit(".", 1)[-1].lower()
-    writer: animation.AbstractMovieWriter
-    if ext == "gif":
-        writer = animation.PillowWriter(fps=fps)
-    elif ext == "mp4":
-        if not animation.FFMpegWriter.isAvailable():
-            raise EarthbenchError("--animate out.mp4 needs ffmpeg on PATH (apt-get install ffmpeg); out.gif needs nothing more")
-        writer = animation.FFMpegWriter(fps=fps)
-    else:
-        raise EarthbenchError(f"--animate {out!r}: the animation must end in .gif or .mp4")
+    writer = animation_writer(out, fps)
     verdict, steps = replay(scenario, plan)
     span = max(plan.makespan, 1e-9)
     times = sorted(set(np.linspace(0.0, span, frames).round(6)) | {round(plan.actions[s.action].t_end, 6) for s in steps

@@ -44,3 +44,18 @@ def moved_getattr(module: str, moved: Mapping[str, str], fallback: Callable[[str
         return getattr(importlib.import_module(target), name)
 
     return __getattr__
+
+
+def moved_module(old: str, new: str) -> Callable[[str], Any]:
+    """The ``__getattr__`` of a module that moved as a whole to ``new``: it warns once, when the old
+    module is imported, and forwards every name (the API promise, as :func:`moved_getattr`)."""
+    warnings.warn(f"the module {old} moved to {new}; import from there", DeprecationWarning, stacklevel=3)
+
+    def __getattr__(name: str) -> Any:
+        try:
+            return getattr(importlib.import_module(new), name)
+        except AttributeError:
+            raise AttributeError(f"module {old!r} (now {new!r}) has no attribute {name!r}") from None
+
+    return __getattr__
+

@@ -85,6 +85,7 @@ class MergeReport:
     rescored: int = 0                                          #: re-judged, differed, merged with the new figures
     unjudged: Counter = field(default_factory=Counter)         #: runs without a plan, by reason (not re-checkable)
     changes: list[str] = field(default_factory=list)           #: with rescore: each re-scored run and what differed
+    duplicates: int = 0                                        #: with skip_duplicates: identical runs left out
 
 
 def _suites(store: Store) -> list[_SuiteRecord]:
@@ -115,13 +116,14 @@ def _relabel(suites: Sequence[_SuiteRecord], renames: dict[tuple[str, str], str]
     return [replace(s, name=renames.get((s.name, s.digest), s.name)) for s in suites]
 
 
-def _keys(store: Store) -> list[tuple[str, str, str, str]]:
-    return [tuple(r) for r in store.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")]  # type: ignore[misc]
-
-
-def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, str], str] | None = None) -> list[str]:
+def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, str], str] | None = None,
+          skip: set[tuple[str, int]] | None = None) -> list[str]:
     """Every reason the merge must be refused (empty when it may go ahead); ``renames``: the
-    variant names ``as_variant`` gives (:func:`_renames`)."""
+    variant names ``as_variant`` gives (:func:`_renames`).
+
+    With ``skip`` (a set, filled here), a run already in an earlier store (or in ``out``) with
+    the same plan and outcome is not a problem: its (store path, run id) is added to ``skip``.
+    """
     problems: list[str] = []
     digests: dict[str, dict[str, list[str]]] = {}
     stores = ([out] if out is not None else []) + list(inputs)
@@ -141,17 +143,39 @@ def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, s
             where = "; ".join(f"{d[:12]}… in {', '.join(sorted(set(p)))}" for d, p in by_digest.items())
             problems.append(f"suite {name!r} has different digests ({where}): the suite changed between runs; "
                             "publish each version from its own store, or rerun one side")
-    seen: dict[tuple[str, str, str, str], str] = {}
+    seen: dict[tuple[str, str, str, str], tuple[Store, int]] = {}
     dups: list[str] = []
     for st in stores:
-        for k in _keys(st):
-            if k in seen:
-                dups.append(f"{k[1]} {k[2]} [{k[3][:8]}] on scenario {k[0][:12]}… is in both {seen[k]} and {st.path}")
+        for row in st.db.execute("SELECT id, scenario_digest, planner, planner_version, config_hash FROM runs ORDER BY id"):
+            k = (row[1], row[2], row[3], row[4])
+            if k not in seen:
+                seen[k] = (st, row[0])
+                continue
+            first, first_id = seen[k]
+            if skip is not None and st is not out and _same_run(first, first_id, st, row[0]):
+                skip.add((str(st.path), row[0]))
             else:
-                seen[k] = str(st.path)
+                dups.append(f"{k[1]} {k[2]} [{k[3][:8]}] on scenario {k[0][:12]}… is in both {first.path} and {st.path}"
+                            + (" with a different plan or outcome" if skip is not None else ""))
     if dups:
-        problems.append(f"{len(dups)} duplicate run(s), e.g.: " + "; ".join(dups[:5]))
+        problems.append(f"{len(dups)} duplicate run(s), e.g.: " + "; ".join(dups[:5])
+                        + ("" if skip is not None else
+                           " (runs identical in both, as a deterministic baseline's, merge once with --skip-duplicates)"))
     return problems
+
+
+def _same_run(a: Store, a_id: int, b: Store, b_id: int) -> bool:
+    """Two stored runs of one case that the referee cannot tell apart: the same plan (so the same
+    re-judged figures, which the audit checks against each one's stored figures) or, without a
+    plan, the same termination reason."""
+    ra = a.db.execute("SELECT reason, plan FROM runs WHERE id=?", (a_id,)).fetchone()
+    rb = b.db.execute("SELECT reason, plan FROM runs WHERE id=?", (b_id,)).fetchone()
+    if ra[1] is None or rb[1] is None:
+        return ra[1] is None and rb[1] is None and ra[0] == rb[0]
+    try:
+        return bool(ra[0] == rb[0] and json.loads(decompress(ra[1])) == json.loads(decompress(rb[1])))
+    except ValueError:
+        return False
 
 
 def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
@@ -244,13 +268,17 @@ def _register(out: Store, suites: Sequence[_SuiteRecord]) -> int:
     return new
 
 
-def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool = False, as_variant: bool = False) -> MergeReport:
+def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool = False, as_variant: bool = False,
+          skip_duplicates: bool = False) -> MergeReport:
     """Merge the stores ``in_paths`` into ``out_path`` (created if missing); see the module doc.
 
     Every incoming run is re-judged first; with ``rescore``, runs whose stored figures differ
     are merged with the re-judged ones (counted in ``rescored``) instead of refusing the merge.
     With ``as_variant``, an input's suite under a registered name with another digest is
     stored as ``NAME~variant-D`` (:func:`earthbench.identity.variant_name`) instead of refused.
+    With ``skip_duplicates``, a run that is already in the output or an earlier input with the
+    same plan and outcome (two machines' runs of a deterministic baseline) is left out, counted
+    in ``duplicates``; a duplicate that differs still refuses the merge.
     """
     if not in_paths:
         raise MergeError("name at least one input database")
@@ -269,7 +297,8 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
             if existing is not None:
                 existing.check_writable()
             renames = _renames(inputs) if as_variant else {}
-            problems = check(existing, inputs, renames)
+            skip: set[tuple[str, int]] | None = set() if skip_duplicates else None
+            problems = check(existing, inputs, renames, skip)
             audits = [audit(src) for src in inputs]
             for a in audits:
                 problems += a.problems(rescore=rescore)
@@ -289,7 +318,9 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
             def fill(out: Store) -> None:
                 for src, a in zip(inputs, audits):
                     report.suites += _register(out, _relabel(_suites(src), renames))
-                    rows = src.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
+                    rows = [r for r in src.db.execute("SELECT * FROM runs ORDER BY id")
+                            if (str(src.path), r["id"]) not in (skip or ())]
+                    report.duplicates += sum(1 for s in (skip or ()) if s[0] == str(src.path))
                     changed = {f.run_id: a.judgements[f.run_id] for f in a.differ if f.run_id in a.judgements}
                     n = _copy(src, rows, out, changed, a.scenarios, renames)
                     report.per_input[str(src.path)] = n

@@ -170,6 +170,8 @@ class Plan:
             raise PlanFormatError(f"plan is not valid JSON: {exc}") from None
         except RecursionError:
             raise PlanFormatError("plan JSON is nested too deeply") from None
+        except PlanFormatError:
+            raise
         except ValueError as exc:  # e.g. an integer too long to convert
             raise PlanFormatError(f"plan is not valid JSON: {exc}") from None
 
@@ -192,7 +194,10 @@ def _number(d: dict, key: str, where: str, *, positive: bool = False, nonneg: bo
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise PlanFormatError(f"{where}: field {key!r} must be a number, got {v!r}")
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:  # an integer beyond the largest float (a 401-digit time)
+        raise PlanFormatError(f"{where}: field {key!r} must be finite, got an integer of {len(str(abs(v)))} digits") from None
     if not math.isfinite(v):
         raise PlanFormatError(f"{where}: field {key!r} must be finite, got {v}")
     if positive and v <= 0:

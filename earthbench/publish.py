@@ -77,6 +77,7 @@ class Published:
 
     out: Path
     files: list[Path] = field(default_factory=list)
+    removed: list[Path] = field(default_factory=list)  #: figures of an earlier board in ``figures/``, deleted
     runs: pd.DataFrame | None = None
     summary: pd.DataFrame | None = None
 
@@ -522,7 +523,7 @@ def terrain_figure(scenario_json: str, plan_json: str, title: str):
     from .referee import judge
     from .world import Scenario
 
-    scenario = Scenario.from_json(scenario_json)
+    scenario = Scenario.from_text(scenario_json)
     plan = Plan.from_json(plan_json)
     verdict = judge(scenario, plan)
     fig = terrain_before_after(scenario, plan, verdict)
@@ -689,6 +690,8 @@ th[aria-sort=ascending]::after{content:" ▲"}th[aria-sort=descending]::after{co
 tbody tr:nth-child(even){background:#fafafa}
 .stamp{font-family:ui-monospace,monospace;font-size:.8rem;background:#f7f7f7;padding:.5rem;white-space:pre-wrap}
 .rule{font-style:italic}
+nav.contents{font-size:.9rem;margin:.4rem 0 1rem}.replays{font-size:.85rem}
+details.stamp-box summary{font-size:.85rem;color:#555;cursor:pointer}
 figure{margin:1rem 0}figure img{max-width:min(100%,1000px);border:1px solid #eee}
 details{margin:1rem 0}.wrap{overflow-x:auto}details .wrap{max-height:30rem;overflow:auto}
 """
@@ -771,9 +774,10 @@ def html_more_tables(sec: dict[str, Any]) -> str:
     if sec.get("breakdowns"):
         parts.append(f"<h3>Breakdowns</h3><p class=\"rule\">{e(_BREAKDOWN_NOTE)}.</p>")
         for heading, rows in sec["breakdowns"]:
-            parts.append(f"<h4>{e(heading)}</h4>" + html_table(rows))
+            parts.append(f"<h4>{e(heading)}</h4>" + html_table(fold_zero_failures(rows)))
     if sec.get("history"):
-        parts.append(f"<h3>History</h3><p class=\"rule\">{e(_HISTORY_NOTE.replace('`', ''))}.</p>" + html_table(sec["history"]))
+        parts.append(f"<h3>History</h3><p class=\"rule\">{e(_HISTORY_NOTE.replace('`', ''))}.</p>"
+                     + html_table(fold_zero_failures(sec["history"])))
     return "\n".join(parts)
 
 
@@ -790,6 +794,39 @@ def filter_bar(sec: dict[str, Any]) -> str:
             opts = "".join(f'<option value="{e(v)}">{e(v)}</option>' for v in sorted(vs))
             parts.append(f'<label>{e(k.capitalize())} <select data-key="{e(k)}"><option value="">all</option>{opts}</select></label>')
     return f'<div class="filters">Filter: {"".join(parts)}</div>' if parts else ""
+
+
+def fold_zero_failures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The failure-count columns that are 0 in every row, folded into one column (the page's tables stay narrow)."""
+    if not rows:
+        return rows
+    names = [c[0] for c in rows[0]["cells"]]
+    zero = [n for n in FAILURE_COLUMNS if n in names and all(str(dict((c[0], c[1]) for c in r["cells"])[n]) == "0" for r in rows)]
+    if len(zero) < 2:
+        return rows
+    head = " · ".join(zero)
+    out = []
+    for r in rows:
+        cells = [c for c in r["cells"] if c[0] not in zero]
+        out.append({**r, "cells": [*cells, (head, "0", 0)]})
+    return out
+
+
+def _anchor(sec: dict[str, Any]) -> str:
+    return "s-" + slug(f"{sec['suite']}-{sec['track']}")
+
+
+def replay_links(runs: list[dict[str, Any]]) -> str:
+    """Links from a table to the replays of its runs that the page embeds (the viewer is at the page's end)."""
+    if not runs:
+        return ""
+    e = html.escape
+    by_solver: dict[str, list[str]] = {}
+    for r in runs:
+        by_solver.setdefault(str(r["solver"]), []).append(
+            f'<a href="#replay" class="rp-link" data-run="{int(r["id"])}">run {int(r["id"])}</a> ({e(str(r["what"]))})')
+    return ('<p class="replays">Replay a run: '
+            + "; ".join(f"{e(solver)}: {', '.join(links)}" for solver, links in by_solver.items()) + "</p>")
 
 
 def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") -> str:
@@ -809,20 +846,25 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
         "<title>earthbench leaderboard</title>",
         f"<style>{_CSS}{REPLAY_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
-        f"<p>Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. "
+        f'<p class="intro">Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. '
         f"{e(INTERVAL_NOTE)}. {UNSEPARABLE} on a Rank heading: too few scenarios for any paired test to separate two planners. "
-        'Invalid plans are counted, never ranked. Tables: <a href="summary.csv">summary.csv</a>; every run: '
-        '<a href="runs.csv">runs.csv</a>.' + (' Replays: <a href="#replay">below</a>.' if viewer else "") + "</p>",
+        "Invalid plans are counted, never ranked. "
+        'Tables: <a href="summary.csv">summary.csv</a>; every run: <a href="runs.csv">runs.csv</a>.</p>',
     ]
+    if len(sections) > 1 or (sections and viewer):
+        links = [f'<a href="#{e(_anchor(s))}">{e(s["suite"])} ({e(s["track"])})</a>' for s in sections]
+        parts.append('<nav class="contents">' + " · ".join(links + (['<a href="#replay">replays</a>'] if viewer else [])) + "</nav>")
     if not sections:
         parts.append("<p>No runs in the store.</p>")
     for s in sections:
-        anchor = "s-" + slug(f"{s['suite']}-{s['track']}")
-        parts.append(f'<section id="{e(anchor)}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
-        parts.append(f'<p class="rule">Ranking: {e(RANKING_RULE)}.</p>')
-        parts.append(f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div>')
+        # the ranking first; what it rests on (stamp, rule's fine print) folded under it
+        parts.append(f'<section id="{e(_anchor(s))}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(filter_bar(s))
-        parts.append(html_table(s["rows"]))
+        parts.append(html_table(fold_zero_failures(s["rows"])))
+        parts.append(replay_links(s.get("replay_runs", [])))
+        parts.append(f'<details class="stamp-box"><summary>How this table is ranked, and what it rests on: suite digest, '
+                     f'machines, spot checks</summary><p class="rule">Ranking: {e(RANKING_RULE)}.</p>'
+                     f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div></details>')
         parts.append(html_more_tables(s))
         if s.get("scale_rows"):
             parts.append(html_table(s["scale_rows"], caption="scale: cost against target volume (median [IQR] over seeds)"))
@@ -868,7 +910,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     ``replays``: how many runs the page's replay viewer embeds (0: none);
     ``all_versions``: rank every stored version, not only each planner's latest.
     """
-    from .replay import viewer_section
+    from .replay import pick_runs, viewer_section
 
     out = Path(out)
     fig_dir = out / "figures"
@@ -932,6 +974,12 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     renderer.add(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
         viewer = viewer_section(store, runs, replays)
+        picked = set(pick_runs(runs, replays)["id"].astype(int)) if viewer else set()
+        for sec in sections:
+            mine = runs[(runs["suite"] == sec["suite"]) & (runs["track"] == sec["track"]) & runs["id"].astype(int).isin(picked)]
+            sec["replay_runs"] = [{"id": int(r["id"]), "solver": r["solver"],
+                                   "what": "success" if bool(r["success"]) else ("valid" if r["reason"] == "ok" else str(r["reason"]))}
+                                  for _, r in mine.sort_values(["solver", "id"]).iterrows()]
         # the tables (intervals, paired tests) while the workers draw
         summary = aggregate(runs, members=members, scopes=SCOPES,
                             all_versions=all_versions)
@@ -968,6 +1016,11 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     result.files += write_gaps(gaps, out)
     (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
+    written = {f.resolve() for f in result.files}
+    for old in fig_dir.glob("*"):  # figures of an earlier board (another suite, planner or version) would mislead
+        if old.suffix in (".png", ".svg") and old.is_file() and old.resolve() not in written:
+            old.unlink()
+            result.removed.append(old)
     return result
 
 

@@ -152,7 +152,8 @@ def load_plugin_file(path: str | Path) -> list[str]:
         raise PluginError(f"{p} is not an importable Python file")
     module = importlib.util.module_from_spec(spec)
     sys.modules[mod_name] = module
-    before = set(PLANNERS.names())
+    before = {n: PLANNERS.get(n) for n in PLANNERS.names()}
+    origins = {n: PLANNERS.origin(n) for n in before}
     try:
         spec.loader.exec_module(module)
     except SystemExit as exc:  # a plugin must not end the process that loads it
@@ -163,12 +164,32 @@ def load_plugin_file(path: str | Path) -> list[str]:
     except Exception as exc:
         del sys.modules[mod_name]
         raise PluginError(f"plugin file {p} failed to import: {type(exc).__name__}: {exc}") from exc
-    found = set(PLANNERS.names()) - before
+
+    def ours(origin: str) -> bool:  # registered by this same file (loaded again): it may replace itself
+        return origin == str(p) or origin.startswith(mod_name + ".")
+
+    found = set(PLANNERS.names()) - set(before)
+    for n, old in before.items():  # a decorator in the file replaced a planner registered elsewhere
+        if PLANNERS.get(n) is not old:
+            if not ours(origins[n]):
+                PLANNERS.register(n, old, origin=origins[n], replace=True)
+                raise PluginError(_shadow_message(p, n, origins[n]))
+            found.add(n)
     for obj in vars(module).values():
         if inspect.isclass(obj) and obj.__module__ == mod_name and issubclass(obj, Planner) and obj.name:
-            if _check_planner(obj) is None and obj.name not in PLANNERS:
-                PLANNERS.register(obj.name, obj, origin=str(p))
-            found.add(obj.name)
+            problem = _check_planner(obj)
+            if problem:
+                raise PluginError(f"plugin file {p}: planner {obj.name!r} cannot run: {problem}")
+            if obj.name in before and not ours(origins[obj.name]):
+                raise PluginError(_shadow_message(p, obj.name, origins[obj.name]))
+            if obj.name not in found:  # not registered by a decorator in the file
+                PLANNERS.register(obj.name, obj, origin=str(p), replace=True)
+                found.add(obj.name)
     if not found:
         raise PluginError(f"plugin file {p} defines no Planner subclass with a 'name'")
     return sorted(found)
+
+
+def _shadow_message(path: Path, name: str, origin: str) -> str:
+    return (f"plugin file {path} defines planner {name!r}, but a planner of that name is already registered ({origin}); "
+            f"give the file's planner another name: runs are stored by name and version, so the two would be mixed up")

@@ -610,6 +610,12 @@ SCRIPT = r"""
     });
     tr.cells[0].appendChild(b);
   });
+  // the links under each ranking table ("Replay a run"): open that run in the viewer
+  document.querySelectorAll('a.rp-link').forEach(function (a) {
+    var n = byRun[a.getAttribute('data-run')];
+    if (n === undefined) { a.removeAttribute('href'); return; }
+    a.addEventListener('click', function () { sel.value = String(n); togglePlay(false); load(n); });
+  });
   window.earthbenchReplay = {load: load, setTime: setTime, state: function () {
     return cur ? {run: cur.doc.run, t: cur.t, applied: cur.applied, makespan: cur.doc.makespan} : null; }};
   window.earthbenchReplayReady = load(0);

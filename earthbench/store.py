@@ -482,7 +482,7 @@ class Store:
         row = self.db.execute("SELECT doc FROM scenarios WHERE digest=?", (digest,)).fetchone()
         if row is None:
             raise StoreError(f"scenario {digest[:12]}… is not in {str(self.path)!r}")
-        return Scenario.from_json(decompress(row[0]))
+        return Scenario.from_text(decompress(row[0]))
 
 
 def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:

@@ -172,6 +172,9 @@ class Suite:
                         sc = self._generate(gen, fam, seed, target)
                     except EarthbenchError as exc:
                         raise SuiteError(f"{self._where}: family {fam.name!r}, seed {seed}, target {target:g}: {exc}") from exc
+                    except MemoryError:
+                        raise SuiteError(f"{self._where}: family {fam.name!r}, seed {seed}, target {target:g}: generator "
+                                         f"{fam.generator!r} ran out of memory; are its parameters too large?") from None
                     if not isinstance(sc, Scenario):
                         raise SuiteError(f"{self._where}: generator {fam.generator!r} returned {type(sc).__name__}, not a Scenario")
                     if sc.track != self.track:
@@ -259,7 +262,14 @@ def load_suite(name_or_path: str | Path) -> Suite:
     if text.endswith(".toml") or p.is_file() or "/" in text:
         if not p.is_file():
             raise SuiteError(f"suite file {text!r} not found")
-        return parse_suite(_read(p), path=str(p), default_name=p.stem)
+        body = _read(p)
+        suite = parse_suite(body, path=str(p), default_name=p.stem)
+        known = known_suites().get(suite.name)
+        if known is not None and known.resolve() != p.resolve() and _read(known) != body:
+            # a store and a board know a suite by its name: the two would hide each other's runs
+            raise SuiteError(f"suite file {text!r} is named {suite.name!r}, like the registered suite of that name "
+                             f"({known}), but differs from it; give it a name of its own (its 'name' key, or the file's name)")
+        return suite
     suites = known_suites()
     if text not in suites:
         raise UnknownNameError("suite", text, suites)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
-from .errors import EarthbenchError, StoreError
+from .errors import EarthbenchError, StoreError, UnknownNameError
 from .harness.steps import step_metrics
 from .store import METRIC_COLUMNS, Store, decompress, stored_steps
 from .suite import suite_digest
@@ -218,7 +218,7 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
             out[d] = f"its scenario {d[:12]}… is not stored"
             continue
         try:
-            sc = Scenario.from_json(decompress(row[0]))
+            sc = Scenario.from_text(decompress(row[0]))
         except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
             out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
             continue
@@ -334,7 +334,10 @@ def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
     from .harness import PlannerRef
 
-    ref = PlannerRef.resolve(row["planner"], config)
+    try:
+        ref = PlannerRef.resolve(row["planner"], config)
+    except UnknownNameError as exc:
+        raise VerifyError(f"{exc}; a planner from a file is loaded with --plugin FILE.py") from None
     if ref.version != row["planner_version"]:
         raise VerifyError(f"planner {row['planner']!r} {ref.version} is installed, but the runs to re-time are of version "
                           f"{row['planner_version']}; install that version to re-time them")

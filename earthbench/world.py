@@ -17,6 +17,7 @@ import functools
 import hashlib
 import json
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -583,21 +584,54 @@ class Scenario:
             raise
         except KeyError as exc:
             raise ScenarioError(f"malformed scenario document: the field {exc} is missing") from None
+        except OverflowError:  # an integer beyond the largest float somewhere in the document
+            raise ScenarioError("malformed scenario document: a number is too large for a float") from None
         except (TypeError, ValueError) as exc:
             raise ScenarioError(f"malformed scenario document: {type(exc).__name__}: {exc}") from None
 
     @classmethod
     def from_json(cls, source: str | Path) -> Scenario:
-        """A scenario from JSON text (a ``str``) or from a file (a :class:`~pathlib.Path`)."""
+        """A scenario from JSON text (a ``str``) or from a file (a :class:`~pathlib.Path`).
+
+        A ``str`` that is not JSON but names an existing file is read as that file, as
+        earthbench 0.1 did, with a :class:`DeprecationWarning`: pass a ``Path`` (or call
+        :meth:`load`). Documents from a store are parsed with :meth:`from_text`, which never
+        reads a file.
+        """
         if isinstance(source, Path):
-            source = read_document(source, "scenario", ScenarioError)
+            return cls.load(source)
+        if isinstance(source, str) and not source.lstrip().startswith("{") and _is_file(source):
+            warnings.warn(
+                f"Scenario.from_json({source!r}): a str is JSON text; read a file with Scenario.load({source!r}) "
+                f"or Scenario.from_json(pathlib.Path({source!r})). Reading it as a file ends in a later release.",
+                DeprecationWarning, stacklevel=2,
+            )
+            return cls.load(source)
+        return cls.from_text(source)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Scenario:
+        """A scenario from a JSON file."""
+        return cls.from_text(read_document(Path(path), "scenario", ScenarioError))
+
+    @classmethod
+    def from_text(cls, text: str) -> Scenario:
+        """A scenario from JSON text only (never a file name: documents from a store are untrusted)."""
         try:
-            doc = json.loads(source)
+            doc = json.loads(text)
         except RecursionError:
             raise ScenarioError("scenario JSON is nested too deeply") from None
         except ValueError as exc:
             raise ScenarioError(f"scenario is not valid JSON: {exc}") from None
         return cls.from_dict(doc)
+
+
+
+def _is_file(text: str) -> bool:
+    try:
+        return len(text) < 4096 and Path(text).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 #: Numeric fields of a scenario document that may be 0 (every other spec or budget number must be > 0).
@@ -634,6 +668,8 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind == "int" and not isinstance(value, int)):
             want = "an integer" if kind == "int" else "a number"
             raise ScenarioError(f"scenario field {where} must be {want}, got {type(value).__name__} {value!r:.40}")
+        if isinstance(value, int) and abs(value) > 2**1023:  # beyond any float: math.isfinite would overflow
+            raise ScenarioError(f"scenario field {where} must be finite, got an integer of {len(str(abs(value)))} digits")
         if not math.isfinite(value):
             raise ScenarioError(f"scenario field {where} must be finite, got {value}")
         if cls is not Pose and (value < 0 or (value == 0 and key not in _MAY_BE_ZERO)):

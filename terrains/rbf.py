@@ -27,6 +27,10 @@ from earthbench.world import Budget, Heightmap, Scenario
 
 from .common import assemble_scenario, paper_poses, rectangle, round_heights
 
+#: Elements of the largest array the mounds are summed through: 4 × earthbench.suite.MAX_CELLS
+#: (the scale suite's 96 × 48 m map with 1,920 mounds needs 5.5 million).
+BASIS_CAP = 16_000_000
+
 
 def rbf_surface(
     seed: int,
@@ -38,12 +42,16 @@ def rbf_surface(
     width: tuple[float, float] = (0.6, 1.4),
 ) -> Heightmap:
     """The heightmap alone: ``n_bases`` Gaussian mounds on a ``size`` map at ``resolution``."""
-    rng = np.random.default_rng(seed)
     lx, ly = float(size[0]), float(size[1])
+    nx, ny = int(round(lx / resolution)), int(round(ly / resolution))
+    # the mounds are summed as (ny × n)·(n × nx): bound n by the map's cells and the arrays by the cell cap
+    if not 0 <= n_bases <= nx * ny or n_bases * (nx + ny) > BASIS_CAP:
+        raise ScenarioError(f"rbf: n_bases = {n_bases} is out of range for a {nx} × {ny} cell map: at most "
+                            f"{min(nx * ny, BASIS_CAP // max(1, nx + ny)):,} (one per cell, and n_bases × (nx + ny) ≤ {BASIS_CAP:,})")
+    rng = np.random.default_rng(seed)
     centres = rng.uniform((0.0, 0.0), (lx, ly), size=(n_bases, 2))
     amps = rng.uniform(*amplitude, size=n_bases)
     widths = rng.uniform(*width, size=n_bases)
-    nx, ny = int(round(lx / resolution)), int(round(ly / resolution))
     xs = (np.arange(nx) + 0.5) * resolution
     ys = (np.arange(ny) + 0.5) * resolution
     # Each Gaussian is separable, so the sum is one matrix product: (ny × n)·(n × nx).

@@ -7,8 +7,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r"\]\(([^)\s]+)\)")
-# Pages other branches add (issues 33 and 34); the README links them already.
-PENDING = {"docs/isolation.md", "docs/sealed-evaluation.md"}
+# A page another branch adds (issue 33); the README links it already.
+PENDING = {"docs/isolation.md"}
 
 
 def _links(md: Path) -> list[str]:

@@ -89,6 +89,26 @@ def test_tables_fit_a_1400px_window_and_link_their_csvs(page):
         "summary.csv", "runs.csv"]
 
 
+def test_the_ranking_leads_the_page_and_links_to_replays(page):
+    """At 1400 × 900 the ranked table starts above the fold; the stamp is folded; all-zero failure columns are one.
+
+    (Before the filter test, which opens every details element.)"""
+    page.window(1400, 900)
+    page.js("window.scrollTo(0, 0)")
+    top = page.js("document.querySelector('table.sortable').getBoundingClientRect().top")
+    assert 0 < top < 900 - 100
+    assert page.js("document.querySelector('.stamp').closest('details').open") is False
+    heads = page.js("Array.from(document.querySelector('table.sortable').tHead.rows[0].cells).map(c => c.textContent)")
+    folded = [h for h in heads if " · " in h]
+    assert folded == ["invalid · memory · error · crashed"] and "timeout" in heads  # the fixture's failures are timeouts
+    # a link under the table opens that run in the viewer, far down the page
+    link = page.js("(() => { const a = document.querySelector('a.rp-link[href]'); a.click(); return a.getAttribute('data-run'); })()")
+    page.js("window.earthbenchReplayReady")
+    page.drain(0.5)
+    assert str(page.js("window.earthbenchReplay.state().run")) == link
+    assert page.js("location.hash") == "#replay"
+
+
 def test_filters_hide_rows(page):
     visible = "Array.from(document.querySelectorAll('table.sortable tbody tr')).filter(r => r.offsetParent !== null).length"
     total = page.js("document.querySelectorAll('table.sortable tbody tr').length")

@@ -232,10 +232,14 @@ def test_heightmap_file_errors(tmp_path):
     np.save(ok, np.zeros((4, 4)))
     with pytest.raises(ScenarioError, match="cell size"):
         load_heightmap(ok)
-    other = tmp_path / "site.tif"
-    other.write_bytes(b"II*\x00")
+    other = tmp_path / "site.las"
+    other.write_bytes(b"LASF")
     with pytest.raises(ScenarioError, match="unsupported format"):
         load_heightmap(other, resolution=0.1)
+    broken = tmp_path / "site.tif"
+    broken.write_bytes(b"II*\x00")
+    with pytest.raises(ScenarioError, match="GeoTIFF"):  # unreadable, or rasterio missing: one line either way
+        load_heightmap(broken)
     junk = tmp_path / "junk.npz"
     junk.write_bytes(b"not a zip archive")
     with pytest.raises(ScenarioError, match="cannot be read"):

@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import inspect
 import json
+import re
 import types
 import typing
 from pathlib import Path
@@ -141,3 +142,9 @@ def add_plugin_arg(p: argparse.ArgumentParser) -> None:
 def load_plugins(args: argparse.Namespace) -> None:
     for path in getattr(args, "plugin", []) or []:
         load_plugin_file(path)
+
+
+def plain(doc: str | None) -> str:
+    """A module docstring as help text: reStructuredText roles and double backquotes become `code`."""
+    text = re.sub(r":(?:func|class|mod|meth|data|attr|exc):`~?([^`]+)`", r"`\1`", doc or "")
+    return text.replace("``", "`")

@@ -17,6 +17,8 @@ on any of them.
 from __future__ import annotations
 
 import argparse
+
+from ._common import plain
 import sys
 
 from .run import default_db
@@ -24,7 +26,7 @@ from .run import default_db
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("compare", help="paired comparison of two planners/versions (Wilcoxon signed-rank per metric)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("db_a", nargs="?", default=default_db(), metavar="DB_A", help="results database of side A")
     p.add_argument("db_b", nargs="?", metavar="DB_B", help="results database of side B (default: DB_A)")
     p.add_argument("--a", metavar="PLANNER[@VERSION][#CONFIG]", help="side A's planner configuration (or its label[@VERSION])")

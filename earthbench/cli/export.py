@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import plain
+
 from .run import default_db
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="write a submission bundle: a planner's runs on a suite, verifiable by merge",
-                       description=__doc__.replace("``", "`"), formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("out", metavar="OUT.db", help="the bundle to write (must not exist)")
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database to export from")
     p.add_argument("--suite", required=True, help="the suite whose runs to export")

@@ -10,6 +10,8 @@ and terrain before and after for one case per planner.
 from __future__ import annotations
 
 import argparse
+
+from ._common import plain
 import sys
 import time
 
@@ -18,7 +20,7 @@ from .run import default_db
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("leaderboard", help="write leaderboard tables, CSVs, an HTML page and figures from the store",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database (default: $EARTHBENCH_DB or earthbench.db)")
     p.add_argument("--out", default="leaderboard", metavar="DIR", help="output directory (default: leaderboard/)")
     p.add_argument("--suite", action="append", default=[], metavar="NAME",
@@ -46,5 +48,7 @@ def run(args: argparse.Namespace) -> int:
     runs = 0 if res.runs is None else len(res.runs)
     tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
     print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "
-          f"({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+          f"({time.perf_counter() - t0:.1f} s)"
+          + (f"; removed {len(res.removed)} figure file(s) of an earlier board from {res.out / 'figures'}/" if res.removed else ""),
+          file=sys.stderr)
     return 0

@@ -5,7 +5,9 @@ digest is recomputed); the merge is refused, writing nothing, when any run's sto
 or metrics differ from the re-judged ones (``--rescore`` merges the re-judged figures instead
 and says how many changed), when a run has a verdict but no plan, when a scenario or suite
 does not reproduce its digest, when a run is in two stores (same scenario digest, planner,
-version and config hash), when a suite name has different digests in different stores, or
+version and config hash; with ``--skip-duplicates`` only when the two differ in plan or
+outcome, and an identical one is merged once), when a suite name has different digests in
+different stores, or
 when a registered suite's name (built in or installed) holds another digest: a different world
 under a known name, which ``--as-variant`` stores as ``NAME~variant-D`` instead.
 Runs without a plan (timeout, memory, crashed, error) are merged with the harness's reason,
@@ -18,23 +20,28 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ._common import plain
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("merge", help="merge results databases, re-judging every plan",
-                       description=__doc__.replace("``", "`"), formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("out", metavar="OUT.db", help="database to merge into (created if missing)")
     p.add_argument("inputs", nargs="+", metavar="IN.db", help="databases or export bundles to merge")
     p.add_argument("--rescore", action="store_true",
                    help="merge runs whose stored figures differ with the re-judged figures instead of refusing")
     p.add_argument("--as-variant", action="store_true",
                    help="store a registered suite name holding another world as NAME~variant-DIGEST instead of refusing it")
+    p.add_argument("--skip-duplicates", action="store_true",
+                   help="merge once a run that is in several stores with the same plan and outcome (e.g. a deterministic "
+                        "baseline run on two machines; the first store's solve times are kept), instead of refusing")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     from ..merge import merge
 
-    report = merge(args.out, args.inputs, rescore=args.rescore, as_variant=args.as_variant)
+    report = merge(args.out, args.inputs, rescore=args.rescore, as_variant=args.as_variant, skip_duplicates=args.skip_duplicates)
     for line in report.changes[:20]:
         print(f"re-scored {line}", file=sys.stderr)
     if len(report.changes) > 20:
@@ -48,5 +55,7 @@ def run(args: argparse.Namespace) -> int:
         counts = ", ".join(f"{n} {r}" for r, n in sorted(report.unjudged.items()))
         print(f"{sum(report.unjudged.values())} run(s) without a plan ({counts}) merged with the reason the harness gave; "
               "it cannot be re-checked from a store")
+    if report.duplicates:
+        print(f"left out {report.duplicates} run(s) already merged from an earlier store with the same plan and outcome")
     print(f"merged {report.runs} run(s) and {report.suites} new suite version(s) into {args.out}")
     return 0

@@ -10,6 +10,8 @@ until the target is loaded. It comes with a test that checks the referee accepts
 from __future__ import annotations
 
 import argparse
+
+from ._common import plain
 import keyword
 import re
 from pathlib import Path
@@ -20,7 +22,7 @@ NAME_RE = re.compile(r"^[a-z][a-z0-9]*(?:[-_][a-z0-9]+)*$")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("new-planner", help="write a planner plugin package to start from", description=__doc__.replace("``", "`"),
+    p = sub.add_parser("new-planner", help="write a planner plugin package to start from", description=plain(__doc__),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("name", help="planner name: lower case letters, digits, '-' or '_' (e.g. my-planner)")
     p.add_argument("--dir", metavar="PATH", help="where to write the package (default: ./earthbench-NAME)")
@@ -93,6 +95,11 @@ dependencies = ["earthbench", "numpy", "shapely"]
 
 [tool.setuptools]
 packages = ["{module}"]
+
+# The package's own test settings: run from a folder whose pyproject.toml has others (the
+# earthbench clone's asks for pytest-benchmark), pytest still uses these.
+[tool.pytest.ini_options]
+testpaths = ["tests"]
 '''
 
 README = '''

@@ -9,6 +9,8 @@ the same function ``earthbench merge`` uses to verify incoming runs.
 from __future__ import annotations
 
 import argparse
+
+from ._common import plain
 import sys
 
 from ..store import Store, decompress, stored_steps
@@ -17,7 +19,7 @@ from .run import default_db
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("rescore", help="re-run the referee on stored plans", description=__doc__.replace("``", "`"),
+    p = sub.add_parser("rescore", help="re-run the referee on stored plans", description=plain(__doc__),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database")
     p.add_argument("--suite", help="only this suite")

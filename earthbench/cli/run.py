@@ -163,6 +163,11 @@ def run(args: argparse.Namespace) -> int:
         store.check_writable()
         store.register_suite(suite)
         executor = make_executor(args, suite)
+        if args.jobs is not None and isinstance(executor, LocalExecutor) and args.jobs > len(executor.slots):
+            print(f"earthbench: note: --jobs {args.jobs}: only {plural(len(executor.slots), 'case')} at once here, "
+                  f"as each case gets {suite.budget.cores} cores of its own and this machine lets earthbench use "
+                  f"{plural(len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1, 'core')}",
+                  file=sys.stderr)
         from ..progress import Progress
 
         progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: run_id(store, case))

@@ -13,7 +13,7 @@ Without ``--key`` and ``--sample``: every plan of the store is judged again.
 ``--sample N``: referee figures in a store can be re-judged from its plans; solve times, CPU
 times and memory cannot: they come from the machine that ran each case. This reruns N randomly
 chosen runs (``--seed``) under the harness here, with the same planner version and
-configuration (which must be installed), and reports per planner whether the referee figures
+configuration (which must be installed, or given with ``--plugin FILE.py``), and reports per planner whether the referee figures
 agree (identical for a deterministic planner) and the ratio of solve times here to those
 stored. The result is kept in the store (table ``spot_checks``, unless ``--no-record``) so that
 ``earthbench leaderboard`` shows it in the table's stamp.
@@ -28,10 +28,12 @@ from __future__ import annotations
 import argparse
 import statistics
 
+from ._common import add_plugin_arg, load_plugins, plain
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("verify", help="check a store's suites, sealed draws and plans; rerun a random sample here",
-                       description=__doc__.replace("``", "`"), formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("store", metavar="STORE", help="results database or export bundle")
     p.add_argument("--key", action="append", default=[], metavar="FILE",
                    help="a revealed key file of a sealed draw (`earthbench seal` wrote it; repeatable)")
@@ -41,6 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--planner", action="append", default=[], metavar="NAME", help="sample only this planner (repeatable)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="cases at once (default: cores / 2)")
     p.add_argument("--no-record", action="store_true", help="do not keep the result in the store")
+    add_plugin_arg(p)
     return p
 
 
@@ -48,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from ..seal import SealKey
     from ..store import Store
 
+    load_plugins(args)
     keys = [SealKey.read(k) for k in args.key]
     with Store(args.store, create=False, read_only=args.sample is None or args.no_record) as store:
         failed = _suites_and_plans(store, keys, rejudge_all=not keys and args.sample is None)

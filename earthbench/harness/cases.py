@@ -7,10 +7,12 @@ of the harness.
 
 from __future__ import annotations
 
+import ast
 import sys
 from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from ..errors import PluginError
@@ -70,8 +72,48 @@ def _source_of(klass: type[Planner]) -> str:
     if klass.__module__ == "__main__" or klass.__module__.startswith("earthbench_plugin_"):
         if not file:
             raise PluginError(f"planner {klass.name!r} is defined interactively; put it in a file and pass --plugin FILE.py")
+        if klass.__module__ == "__main__":
+            line = _unguarded_main_line(file)
+            if line is not None:
+                raise PluginError(
+                    f"planner {klass.name!r} is defined in the script {file}, whose line {line} starts the run outside "
+                    f"'if __name__ == \"__main__\":'. Each case process imports the script to find the planner and would "
+                    f"run that line again; put the code that runs suites under that guard"
+                )
         return str(Path(file).resolve())
     return f"{klass.__module__}:{klass.__qualname__}"
+
+
+def _unguarded_main_line(file: str) -> int | None:
+    """The line of the running script's top-level statement that led here, unless it is a ``__main__`` guard.
+
+    A case process executes the script that defines its planner; a statement outside the guard
+    would start the suite again inside every case (each then waits out its start-up cap).
+    """
+    main = sys.modules.get("__main__")
+    frame: FrameType | None = sys._getframe()
+    while frame is not None and not (frame.f_code.co_name == "<module>" and main is not None
+                                     and frame.f_globals is vars(main)):
+        frame = frame.f_back
+    if frame is None:
+        return None  # called later (a callback, an interactive session): the script's top level has run
+    try:
+        tree = ast.parse(Path(file).read_text())
+    except (OSError, SyntaxError, ValueError):
+        return None
+    line = frame.f_lineno
+    for node in tree.body:
+        if node.lineno <= line <= (node.end_lineno or node.lineno):
+            return None if _is_main_guard(node) else line
+    return None
+
+
+def _is_main_guard(node: ast.stmt) -> bool:
+    if not isinstance(node, ast.If) or not isinstance(node.test, ast.Compare) or len(node.test.comparators) != 1:
+        return False
+    sides = [node.test.left, node.test.comparators[0]]
+    return (any(isinstance(s, ast.Name) and s.id == "__name__" for s in sides)
+            and any(isinstance(s, ast.Constant) and s.value == "__main__" for s in sides))
 
 
 @dataclass(frozen=True)

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..errors import PluginError
 from ..registry import PLANNERS
 from .cases import Case, PlannerRef
 from .local import Executor, LocalExecutor
+from .sandbox import CASE_TAG
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..progress import Progress
@@ -26,6 +29,15 @@ class RunReport:
     stored: int = 0
     counts: dict[str, int] = field(default_factory=dict)
     interrupted: bool = False
+
+
+def _refuse_inside_a_case() -> None:
+    """A case process that reaches a suite run is importing a planner file that starts one at its top level."""
+    if os.environ.get(CASE_TAG):
+        raise PluginError(
+            "the planner's file started a suite run while a case process imported it; "
+            "put the code that runs suites under 'if __name__ == \"__main__\":'"
+        )
 
 
 def build_cases(
@@ -78,6 +90,7 @@ def run_cases(
     cases anywhere. Ctrl-C (KeyboardInterrupt) cancels the cases in flight (nothing of them is
     written), keeps every finished one and returns the report marked ``interrupted``.
     """
+    _refuse_inside_a_case()
     report = RunReport(planned=len(cases))
     done = set() if rerun else store.finished_keys()
     by_key: dict[tuple[str, str, str, str], Case] = {}
@@ -122,6 +135,7 @@ def run_suite(
     progress: Progress | None = None,
 ) -> RunReport:
     """The Python API of ``earthbench run``: register the suite in the store, run what is missing."""
+    _refuse_inside_a_case()
     cases, _ = build_cases(suite, planners, plugins=plugins, seeds=seeds)
     store.register_suite(suite)
     return run_cases(cases, store, executor or LocalExecutor(cores_per_case=suite.budget.cores), rerun=rerun, progress=progress)

@@ -30,12 +30,18 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from ..errors import PlanFormatError
+from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL
 from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Scenario
 from .replay import RULES, DigRecord, Replay, Verdict, Violation
 
 __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
+
+#: The cut model was documented here until 0.1.0 and moved to :mod:`earthbench.cut` (0.2.0);
+#: a plugin that imports it from here still runs, with a DeprecationWarning.
+__getattr__ = moved_getattr(__name__, dict.fromkeys(("apply_cut", "charge_cut", "cut_level", "footprint"), "earthbench.cut")
+                            | {"LOADER_DUMP_HALF_ANGLE": "earthbench.motion"})
 
 
 #: Called after each action, in the referee's time order, with the action's index, the heightmap

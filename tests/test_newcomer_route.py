@@ -1,0 +1,110 @@
+"""The README's plugin route end to end, in a fresh environment: a script, a single file, an installed package.
+
+A new virtual environment is made for the test; it sees earthbench and its dependencies through
+a ``.pth`` file adding this interpreter's site-packages (the "installs" are the test
+environment's, so the test takes seconds, not minutes), and nothing else: no ``PYTHONPATH``,
+a scratch home and working directory. In it, as a newcomer following the README would:
+
+1. a script registers a planner with ``@earthbench.register_planner`` and runs a suite from
+   Python, under its ``__main__`` guard;
+2. a single file is run with ``earthbench run smoke --plugin FILE``;
+3. ``earthbench new-planner`` writes a package, ``pip install -e`` installs it, its own test
+   passes, and ``earthbench run`` finds it by its entry point;
+
+then ``earthbench leaderboard`` ranks all three against greedy.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+import sysconfig
+import venv
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+SCRIPT = '''
+import earthbench
+from earthbench import Plan, Planner
+from earthbench.harness import run_suite
+from earthbench.store import Store
+from earthbench.suite import load_suite
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+
+
+@earthbench.register_planner
+class ScriptGreedy(GreedyPlanner):
+    name = "script-greedy"
+    version = "1"
+
+
+if __name__ == "__main__":
+    with Store("route.db") as store:
+        run_suite(load_suite("smoke"), store, planners=["script-greedy"])
+'''
+
+FILE_PLUGIN = '''
+from earthbench_planners.greedy.backhoe import GreedyPlanner
+
+
+class FileGreedy(GreedyPlanner):
+    name = "file-greedy"
+    version = "1"
+'''
+
+
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory):
+    root = tmp_path_factory.mktemp("newcomer")
+    env_dir = root / "venv"
+    venv.EnvBuilder(with_pip=False).create(env_dir)
+    python = env_dir / "bin" / "python"
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    # addsitedir, not a bare path: the test environment's own .pth files (its editable install of earthbench) must run
+    Path(site, "test-environment.pth").write_text(f"import site; site.addsitedir({sysconfig.get_paths()['purelib']!r})\n")
+    work = root / "work"
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME")}
+    env.update(HOME=str(root), PATH=f"{env_dir / 'bin'}{os.pathsep}{env['PATH']}")
+
+    def run(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+        res = subprocess.run([str(python), *args], cwd=work, env=env, capture_output=True, text=True, timeout=600)
+        if check:
+            assert res.returncode == 0, f"{args}: {res.stdout[-1500:]}\n{res.stderr[-3000:]}"
+        return res
+
+    return run, work
+
+
+def test_script_file_and_package_reach_a_ranked_table(fresh):
+    run, work = fresh
+    # 1. a script, run from Python under its guard
+    (work / "mine.py").write_text(SCRIPT)
+    run("mine.py")
+    # 2. a single file with --plugin
+    (work / "file_greedy.py").write_text(FILE_PLUGIN)
+    run("-m", "earthbench", "run", "smoke", "--planner", "file-greedy", "--plugin", "file_greedy.py", "--db", "route.db")
+    # 3. the tutorial package, installed into the fresh environment
+    run("-m", "earthbench", "new-planner", "route-demo")
+    run("-m", "pip", "install", "--quiet", "--no-deps", "-e", "earthbench-route-demo")  # its build backend from the index
+    run("-m", "pytest", "-q", "-p", "no:cacheprovider", "earthbench-route-demo/tests")
+    run("-m", "earthbench", "run", "smoke", "--db", "route.db", "--planner", "route-demo", "--planner", "greedy")
+    # the board ranks all four
+    run("-m", "earthbench", "leaderboard", "--db", "route.db", "--out", "board", "--no-terrain", "--replays", "2")
+    table = (work / "board" / "README.md").read_text()
+    main = table[table.index("| Rank |"):].split("\n\n")[0].splitlines()[2:]  # the suite's ranked table
+    assert sorted(row.split("|")[2].strip() for row in main) == ["file-greedy", "greedy", "route-demo", "script-greedy"]
+    assert all(row.split("|")[1].strip().rstrip("=").isdigit() for row in main), main  # every one ranked
+    # the package went into the fresh environment, not the test's
+    where = run("-c", "import earthbench_route_demo, sys; print(earthbench_route_demo.__file__, sys.prefix)").stdout
+    assert sys.prefix not in where
+    with sqlite3.connect(work / "route.db") as db:
+        reasons = dict(db.execute("SELECT planner, group_concat(DISTINCT reason) FROM runs GROUP BY planner").fetchall())
+    assert reasons == {"script-greedy": "ok", "file-greedy": "ok", "route-demo": "ok", "greedy": "ok"}
+
