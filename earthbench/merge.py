@@ -200,7 +200,7 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
                "python": e["python"], "packages": json.loads(e["packages"] or "{}"),
                "project_commit": e["project_commit"], "plugin_commit": e["plugin_commit"]}
         keys = e.keys()
-        if "earthbench_version" in keys:  # schema 3: the build of the code and the plugin's distribution
+        if "earthbench_version" in keys:  # schema 5: the build of the code and the plugin's distribution
             env["earthbench_version"] = e["earthbench_version"]
             env["plugin"] = json.loads(e["plugin"]) if e["plugin"] else None
     metrics = json.loads(row["metrics"]) if row["metrics"] else None
@@ -211,6 +211,8 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
         error=row["error"] or "", log_tail=row["log_tail"] or "", exit_status=row["exit_status"],
         cores=tuple(int(c) for c in (row["cores"] or "").split(",") if c.strip()), started_at=row["started_at"] or "",
         finished_at=row["finished_at"] or "", environment=env, steps=stored_steps(row),
+        isolation=(row["isolation"] if "isolation" in row.keys() else None) or "none",
+        processes=row["processes"] if "processes" in row.keys() else None,
         machine_load={c: row[c] for c in LOAD_COLUMNS if c in row.keys()},
     )
     return case, res

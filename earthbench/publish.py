@@ -250,6 +250,7 @@ class Stamp:
     spot_checks: list[str] = field(default_factory=list)     #: ``earthbench verify`` re-timings of these planners
     n_machines: int = 1
     seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``): "seed 0", "seeds 0–2"
+    isolation: str = ""  #: the fences the table's runs had (docs/isolation.md), with the count of those without
     builds: list[str] = field(default_factory=list)  #: the builds of earthbench the runs came from (:func:`build_text`)
     load: str = ""  #: the machine's load around the runs' cases
     scenarios: int = 0  #: scenarios of the suite's table (for the separation note)
@@ -270,6 +271,7 @@ class Stamp:
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
             *([f"machine load: {self.load}"] if self.load else []),
             PROVENANCE,
+            *([f"isolation: {self.isolation}"] if self.isolation else []),
             *([f"{UNSEPARABLE} {separation_note(self.scenarios, RANK_ALPHA)}"]
               if 0 < self.scenarios < min_separating_n(RANK_ALPHA) else []),
             *(["† solve-time columns mix machines: compare those figures only between rows from the same machine"] if self.mixed else []),
@@ -320,7 +322,7 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
                  max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds,
-                 builds_of(runs), load_text(runs), int(runs["scenario_digest"].nunique()) if len(runs) else 0)
+                 _isolation(runs), builds_of(runs), load_text(runs), int(runs["scenario_digest"].nunique()) if len(runs) else 0)
 
 
 def builds_of(runs: pd.DataFrame) -> list[str]:
@@ -345,12 +347,25 @@ def load_text(runs: pd.DataFrame) -> str:
         return ""
     load = pd.concat([pd.to_numeric(runs[c], errors="coerce") for c in cols]).dropna()
     if not len(load):
-        return "not recorded (runs stored before schema 3)"
+        return "not recorded (runs stored before schema 5)"
     steal = pd.to_numeric(runs["steal_share"], errors="coerce").dropna() if "steal_share" in runs else pd.Series(dtype=float)
     n_missing = int(pd.to_numeric(runs[cols[0]], errors="coerce").isna().sum())
     text = (f"1-minute load average {load.min():.2f}–{load.max():.2f} around the cases (before and after each)"
             + (f", CPU steal up to {100 * steal.max():.1f} %" if len(steal) else ""))
     return text + (f"; {n_missing} run(s) without a record" if n_missing else "")
+
+
+def _isolation(runs: pd.DataFrame) -> str:
+    """The fences of a table's runs; runs without them (``none``) are counted, as they could be gamed."""
+    if "isolation" not in runs or not len(runs):
+        return ""
+    labels = runs["isolation"].fillna("none")
+    bare = int((labels == "none").sum())
+    kinds = ", ".join(sorted(set(labels) - {"none"}))
+    if not bare:
+        return kinds
+    what = "per-process fences only: a planner there could reach past its budget (docs/isolation.md)"
+    return f"{kinds + '; ' if kinds else ''}none for {bare} of {len(runs)} runs ({what})"
 
 
 def seed_list(seeds: Sequence[int]) -> str:
@@ -649,7 +664,8 @@ RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner")
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
                ("time_per_target_m3_ratio", "× bound"), ("solve_cpu_s", "Solve CPU s"), ("solve_time_s", "Solve wall s"),
-               ("load_before", "Load before"), ("violation_rules", "Violations"), ("cpu_model", "CPU"), ("hostname", "Host")]
+               ("load_before", "Load before"), ("violation_rules", "Violations"), ("cpu_model", "CPU"), ("hostname", "Host"),
+               ("isolation", "Isolation")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_cpu_s", "solve_time_s",
                 "load_before"}
 

@@ -32,11 +32,13 @@ The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
 store from an older schema opened for writing is brought up to date by the named steps of
 :data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
-the machine's load around each case — ``load_before``, ``load_after``, ``steal_share`` — and the
-build of the code, ``environments.earthbench_version`` and ``environments.plugin``: the plugin's
-distribution, version and source commit as JSON); read-only, it is read as it is (a version-1
-store's runs read as open-loop runs, a store before version 3 as public runs, one before version
-4 without load or build).
+``isolation``, the fences a case ran in (docs/isolation.md), and ``processes``, the most
+processes it held, from its cgroup; version 5 the machine's load around each case — ``load_before``,
+``load_after``, ``steal_share`` — and the build of the code, ``environments.earthbench_version``
+and ``environments.plugin``: the plugin's distribution, version and source commit as JSON);
+read-only, it is read as it is (a version-1 store's runs read as open-loop runs, a store before
+version 3 as public runs, runs stored before version 4 as ``isolation: none``: they ran with
+per-process fences, runs before version 5 without load or build).
 """
 
 from __future__ import annotations
@@ -74,7 +76,9 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
         "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
     )),
-    ("4: the machine's load around each case and the build of the code that ran it (issue 35)", (
+    ("4: the isolation stamp and process count of a run",
+     ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
+    ("5: the machine's load around each case and the build of the code that ran it (issue 35)", (
         "ALTER TABLE runs ADD COLUMN load_before REAL", "ALTER TABLE runs ADD COLUMN load_after REAL",
         "ALTER TABLE runs ADD COLUMN steal_share REAL", "ALTER TABLE environments ADD COLUMN earthbench_version TEXT",
         "ALTER TABLE environments ADD COLUMN plugin TEXT")),
@@ -137,6 +141,7 @@ CREATE TABLE runs (
     metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
     sealed INTEGER NOT NULL DEFAULT 0,
+    isolation TEXT, processes INTEGER,
     load_before REAL, load_after REAL, steal_share REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
@@ -359,6 +364,7 @@ class Store:
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
+                    "isolation": result.isolation, "processes": result.processes,
                     "sealed": int(bool(sc.meta.get("sealed"))),
                     **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                 }
@@ -530,13 +536,15 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``volume_prediction_error``, ``makespan_prediction_error`` and any metric a plugin adds —
     then ``violation_rules`` (comma-separated rules broken), ``error``, ``log_tail`` (the end
     of the case's stdout/stderr), ``exit_status``,
-    ``cores``, ``started_at``, ``finished_at``, ``rescored_at`` and the environment:
+    ``cores``, ``started_at``, ``finished_at``, ``rescored_at``, ``isolation`` (the fences the
+    case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
+    held, from its cgroup) and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
     ``project_commit`` (the commit the installed earthbench was built from, ``+dirty`` when its
     tree had changes), ``plugin_commit``, ``sealed`` (a run of a sealed draw, :mod:`earthbench.seal`),
     ``earthbench_version``, ``plugin`` (JSON text: the planner's distribution, version and source
     commit), and the machine's load around the case: ``load_before``, ``load_after``, ``steal_share``
-    (missing in stores written before schema version 4). Metrics are NaN for runs without a plan
+    (missing in stores written before schema version 5). Metrics are NaN for runs without a plan
     (timeout, memory, error, crashed); ``time_per_m3`` and ``time_per_target_m3`` are ``inf`` when a
     plan loaded nothing or fell short of the target.
     """
@@ -546,6 +554,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     try:
         view = _suite_view(store, suite) if suite else None
         sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
+        stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
         have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
         newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
                            *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
@@ -554,7 +563,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
                       r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                      e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
+                      {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
                       e.project_commit, e.plugin_commit, {sealed}, {newer}
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
@@ -566,9 +575,9 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
             "solve_cpu_s", "startup_s", "peak_rss_mb"]
-    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at", "hostname",
-            "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit", "plugin_commit", "sealed", *LOAD_COLUMNS,
-            "earthbench_version", "plugin"]
+    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
+            "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
+            "plugin_commit", "sealed", *LOAD_COLUMNS, "earthbench_version", "plugin"]
     metric_names: list[str] = []
     records = []
     for r in rows:
@@ -593,6 +602,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         d["violation_rules"] = ",".join(sorted({v["rule"] for v in json.loads(r["violations"] or "[]")}))
         for k in tail[1:]:
             d[k] = r[k]
+        d["isolation"] = d["isolation"] or "none"  # stored before the stamp existed: per-process fences
         d["sealed"] = bool(r["sealed"])
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)

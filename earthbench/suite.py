@@ -492,7 +492,7 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         raise SuiteError(f"{where} [budget]: memory_mb must be an integer, got {budget_doc['memory_mb']!r}")
     if "max_steps" in budget_doc and not isinstance(budget_doc["max_steps"], int):
         raise SuiteError(f"{where} [budget]: max_steps must be an integer, got {budget_doc['max_steps']!r}")
-    for k in ("wall_s", "step_s"):  # 60 and 60.0 must give the same scenario digest
+    for k in ("wall_s", "step_s", "cpu_s"):  # 60 and 60.0 must give the same scenario digest
         if k in budget_doc:
             budget_doc = {**budget_doc, k: float(budget_doc[k])}
     budget = Budget(**budget_doc)

@@ -379,8 +379,10 @@ class Budget:
     """Resources a planner gets for one scenario; the harness enforces them.
 
     ``wall_s`` bounds the planner's compute, over all steps of a closed-loop run; ``step_s``
-    bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6). The two step
-    limits are left out of the JSON at their defaults, so scenarios keep their digests.
+    bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6); ``cpu_s`` bounds
+    the CPU seconds of the case's whole process tree, counted by the kernel (docs/isolation.md).
+    The step limits and ``cpu_s`` are left out of the JSON at their defaults, so scenarios keep
+    their digests.
     """
 
     wall_s: float = 300.0
@@ -388,6 +390,8 @@ class Budget:
     memory_mb: int = 4096
     step_s: float = _later(300.0)
     max_steps: int = _later(1000)
+    #: CPU seconds of the whole process tree over all calls (None: only the wall budget bounds it).
+    cpu_s: float | None = _later(None)
 
 
 def _number(value: Any, where: str, *, lo: float | None = None, hi: float | None = None,
@@ -663,6 +667,8 @@ def _checked(cls: type, doc: Any, path: str) -> Any:
             hint = f" (did you mean {path}.{close[0]}?)" if close else f"; its fields: {', '.join(fields)}"
             raise ScenarioError(f"scenario field {where} is unknown{hint}")
         kind = str(f.type)
+        if kind == "float | None" and value is not None:  # optional numbers, e.g. the budget's cpu_s
+            kind = "float"
         if kind not in ("float", "int") or cls in (Soil, Sensing):  # these check their own ranges
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind == "int" and not isinstance(value, int)):

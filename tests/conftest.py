@@ -41,6 +41,18 @@ def valid_plan() -> Plan:
 
 
 @pytest.fixture
+def isolation_off(monkeypatch):
+    """Cases of this test run with per-process fences only (``EARTHBENCH_ISOLATION=off``)."""
+    from earthbench.harness import isolation
+
+    monkeypatch.setenv(isolation.SWITCH, "off")
+    isolation.support.cache_clear()
+    yield
+    monkeypatch.delenv(isolation.SWITCH)
+    isolation.support.cache_clear()
+
+
+@pytest.fixture
 def forget_test_planners():
     """Planners a test loads must not leak into later tests' default planner lists."""
     from earthbench.registry import PLANNERS

@@ -222,13 +222,32 @@ def test_cases_cancelled_by_the_cluster_are_an_error_not_a_silent_gap(cluster, t
     assert len(stored(tmp_path / "x.db")) < len(cases)
 
 
+def _isolation_switch(value: str | None):
+    """A function setting ``EARTHBENCH_ISOLATION`` where it runs (a nanny's restarted worker inherits it)."""
+    def switch() -> None:
+        if value is None:
+            os.environ.pop("EARTHBENCH_ISOLATION", None)
+        else:
+            os.environ["EARTHBENCH_ISOLATION"] = value
+        __import__("earthbench.harness.isolation", fromlist=["support"]).support.cache_clear()
+    return switch
+
+
 def test_a_case_that_keeps_killing_its_worker_is_stored_as_crashed(cluster, tmp_path):
+    """A sandboxed case cannot see its worker (docs/isolation.md); to test how the executor
+    takes a worker's death, the cluster runs this case without isolation."""
     lc, client = cluster
-    report = run_one_case_on(client, DASK_PLANNERS, "t-kill-worker", tmp_path / "c.db")
-    assert report.counts == {"crashed": 1} and report.stored == 1
-    rows = {r["planner"]: r for r in stored(tmp_path / "c.db").values()}
-    assert rows["t-kill-worker"]["reason"] == "crashed" and "died" in rows["t-kill-worker"]["error"]
-    client.wait_for_workers(2, timeout=120)
+    for nanny in (True, False):
+        client.run(_isolation_switch("off"), nanny=nanny)
+    try:
+        report = run_one_case_on(client, DASK_PLANNERS, "t-kill-worker", tmp_path / "c.db")
+        assert report.counts == {"crashed": 1} and report.stored == 1
+        rows = {r["planner"]: r for r in stored(tmp_path / "c.db").values()}
+        assert rows["t-kill-worker"]["reason"] == "crashed" and "died" in rows["t-kill-worker"]["error"]
+        client.wait_for_workers(2, timeout=120)
+    finally:
+        for nanny in (True, False):
+            client.run(_isolation_switch(None), nanny=nanny)
 
 
 def test_a_task_that_raises_is_recorded_as_error(cluster):

@@ -7,8 +7,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r"\]\(([^)\s]+)\)")
-# A page another branch adds (issue 33); the README links it already.
-PENDING = {"docs/isolation.md"}
 
 
 def _links(md: Path) -> list[str]:
@@ -31,7 +29,7 @@ def test_relative_links_resolve():
     for md in docs:
         for link in _links(md):
             target = (md.parent / link.split("#")[0]).resolve()
-            if not target.exists() and str(target.relative_to(ROOT)) not in PENDING:
+            if not target.exists():
                 broken.append(f"{md.relative_to(ROOT)}: {link}")
     assert not broken, broken
 

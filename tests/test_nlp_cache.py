@@ -39,6 +39,7 @@ def test_round_trip_and_off(cache_dir, monkeypatch):
     assert nlp_cache.load("k") is None
     assert nlp_cache.save("k", _writer("payload ∑"))
     assert _read("k") == "payload ∑"
+    assert nlp_cache.load("k").stat().st_mode & 0o777 == 0o644  # a sandboxed case (another user) reads it
     monkeypatch.setenv(nlp_cache.ENV, "off")
     assert nlp_cache.directory() is None
     assert nlp_cache.load("k") is None and not nlp_cache.save("k", _writer("x"))

@@ -164,6 +164,10 @@ class CaseResult:
     #: A closed-loop run's planner calls: (actions executed, harness-measured compute seconds)
     #: each, in order (0 actions: the call that said done or was cut short); None when open loop.
     steps: tuple[tuple[int, float], ...] | None = None
+    #: The fences the case ran in (docs/isolation.md): ``namespaces+cgroup-v1`` …, or ``none``.
+    isolation: str = "none"
+    #: The most processes the case held at once, from its cgroup (None without one).
+    processes: int | None = None
     #: The machine's load around the case (:func:`earthbench.harness.load.around`): ``load_before``,
     #: ``load_after``, ``steal_share``; empty where it was not measured (e.g. a merged run of an older store).
     machine_load: dict[str, Any] = field(default_factory=dict)

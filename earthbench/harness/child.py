@@ -1,8 +1,12 @@
 """The inside of one case: a warden process and, under it, the planner's process.
 
-:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``. The bootstrap is plain
-Python that imports nothing of earthbench, numpy or the plugin; it becomes the case's
-*warden*:
+:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``, in a sandbox of its own
+where the machine allows it (:mod:`.isolation`). The bootstrap is plain Python that imports
+nothing of earthbench, numpy or the plugin; it becomes the case's *warden*:
+
+* in a sandbox whose root is the harness's (the harness runs as root), it drops to ``nobody``
+  before anything else; it makes itself non-dumpable, so the planner (the same user) cannot
+  open its descriptors or memory through ``/proc``;
 
 * it makes itself a child subreaper (``prctl(PR_SET_CHILD_SUBREAPER)``), so every descendant
   of the case, also one that left the session (``setsid``) or was double-forked, is
@@ -19,17 +23,20 @@ Python that imports nothing of earthbench, numpy or the plugin; it becomes the c
   every reaped descendant (``getrusage(RUSAGE_CHILDREN)``: CPU seconds and peak resident
   memory), so CPU and memory figures cover the case's own process tree and nothing else.
 
-The planner process talks to the harness over another inherited pipe, one JSON object per
-line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has read the
-scenario that the harness writes to its stdin in answer (one line of JSON), ``{"event": "done",
-"outcome": "plan" | "error" | "memory", "plan": JSON, "error": text, "detail": {...}}``. The
+The planner process reads the case's specification (planner name, source, overrides) from the
+first line of its stdin, then talks to the harness over another inherited pipe, one JSON
+object per line: ``{"event": "ready"}`` once the planner's code is imported, then, after it has
+read the scenario that the harness writes to its stdin in answer (one line,
+``{"nonce": N, "input": SCENARIO}``), ``{"event": "done", "outcome": "plan" | "error" |
+"memory", "plan": JSON, "error": text, "detail": {...}, "nonce": N}``: every reply echoes the
+nonce of the input it answers. The
 harness validates every message and owns every time: it starts the wall budget when it hands
 over the scenario and stops it when the result arrives; ``detail`` (the child's own timings) is
 kept for information only. The child never judges its own plan.
 
 A closed-loop configuration (docs/DESIGN.md §6) answers instead with ``{"event": "step",
-"plan": JSON}`` per step; the harness executes the step on the truth and writes the next
-observation as the next line of stdin, or closes stdin to end the run. When ``step()``
+"plan": JSON, "nonce": N}`` per step; the harness executes the step on the truth and writes
+the next observation (with a fresh nonce) as the next line of stdin, or closes stdin to end the run. When ``step()``
 returns None the child sends ``{"event": "done", "outcome": "steps"}``.
 """
 
@@ -83,17 +90,29 @@ def load_planner_class(source: str, name: str) -> type:
     return obj
 
 
-def main(case_file: str, fd: int) -> None:
-    """Load the planner, say ``ready``, read the scenario from stdin, plan, send the result."""
+def read_input(line: bytes) -> tuple[Any, str]:
+    """One input the harness wrote: ``{"nonce": N, "input": DOC}`` -> (DOC, N). Every reply
+    echoes the nonce of the input it answers, so a reply written before it arrived is refused."""
+    if not line:
+        raise EOFError("the harness closed the case's input")
+    env = json.loads(line)
+    return env["input"], env["nonce"]
+
+
+def main(fd: int) -> None:
+    """Read the case's specification from stdin, load the planner, say ``ready``, read the
+    scenario from stdin, plan, send the result."""
     out = os.fdopen(fd, "w", buffering=1)
+    given = {"nonce": ""}  # of the input being answered
 
     def send(msg: dict[str, Any]) -> None:
+        if given["nonce"]:
+            msg["nonce"] = given["nonce"]
         out.write(json.dumps(msg) + "\n")
         out.flush()
 
     try:
-        with open(case_file) as f:
-            doc = json.load(f)
+        doc = json.loads(sys.stdin.buffer.readline())
         from earthbench.plan import Plan
         from earthbench.world import Scenario
 
@@ -109,10 +128,10 @@ def main(case_file: str, fd: int) -> None:
     outcome, error, plan = "plan", "", None
     t0, c0 = time.perf_counter(), _cpu()
     try:
-        doc = json.loads(sys.stdin.buffer.readline())
+        doc, given["nonce"] = read_input(sys.stdin.buffer.readline())
         planner = cls(**overrides)
         if planner.closed_loop:
-            if not _steps(planner, doc, send):
+            if not _steps(planner, doc, given, send):
                 out.close()
                 return  # the harness ended the run (step cap, broken rules): nothing more to say
             outcome = "steps"
@@ -144,8 +163,9 @@ def main(case_file: str, fd: int) -> None:
     out.close()
 
 
-def _steps(planner: Any, doc: dict[str, Any], send: Any) -> bool:
-    """The closed loop: answer each observation with the next actions, one message per step.
+def _steps(planner: Any, doc: dict[str, Any], given: dict[str, str], send: Any) -> bool:
+    """The closed loop: answer each observation with the next actions, one message per step,
+    each echoing the nonce of the observation it answers.
 
     Returns True when the planner said done (returned None), False when the harness ended
     the run (it closed our stdin instead of sending the next observation).
@@ -166,7 +186,7 @@ def _steps(planner: Any, doc: dict[str, Any], send: Any) -> bool:
         line = sys.stdin.buffer.readline()
         if not line:
             return False
-        doc = json.loads(line)
+        doc, given["nonce"] = read_input(line)
 
 
 def _tb(exc: BaseException) -> str:
@@ -182,8 +202,7 @@ def _short_tb() -> str:
 
 BOOTSTRAP = r"""
 import ctypes, json, os, resource, signal, sys
-case_file, cores = sys.argv[1], sys.argv[4]
-msg_fd, report_fd, mem, harness = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[5]), int(sys.argv[6])
+msg_fd, report_fd, cores, mem, harness = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
 try:
     prctl = ctypes.CDLL(None, use_errno=True).prctl
 except (OSError, AttributeError):
@@ -191,8 +210,19 @@ except (OSError, AttributeError):
 if prctl is not None:
     prctl(36, 1)  # PR_SET_CHILD_SUBREAPER: orphans of the case come to the warden, not to init
     prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG: the harness died -> end the case
-if os.getppid() != harness:
+if harness and os.getppid() != harness:  # 0: in a PID namespace of its own (bubblewrap's init is the parent)
     os._exit(70)
+if not harness and os.getsid(0) != os.getpid():  # in a sandbox: lead a session of its own there too
+    try:
+        os.setsid()
+    except OSError:
+        pass
+if not harness and os.getuid() == 0:  # the sandbox's root is the harness's: the case runs as nobody
+    os.setgroups([])
+    os.setgid(65534)
+    os.setuid(65534)
+if prctl is not None:
+    prctl(4, 0)  # PR_SET_DUMPABLE 0: the planner cannot open this process's report pipe through /proc
 cpus = [int(c) for c in cores.split(",") if c]
 if cpus and hasattr(os, "sched_setaffinity"):  # Linux; elsewhere only the thread caps apply
     os.sched_setaffinity(0, cpus)
@@ -202,12 +232,13 @@ if planner == 0:
     os.close(report_fd)
     if prctl is not None:
         prctl(1, int(signal.SIGKILL))
+        prctl(4, 1)  # the planner's own process is an ordinary one
     if os.getppid() != warden:
         os._exit(70)
     if mem > 0:
         resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
     from earthbench.harness.child import main
-    main(case_file, msg_fd)
+    main(msg_fd)
     sys.exit(0)
 os.close(msg_fd)
 os.write(report_fd, (json.dumps({"planner": planner}) + "\n").encode())
@@ -271,4 +302,5 @@ except OSError:  # the harness is gone
     pass
 os._exit(0)
 """
-"""Run as ``python -c BOOTSTRAP CASE_FILE MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID``."""
+"""Run as ``python -c BOOTSTRAP MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID`` (pid 0: in a
+sandbox of its own); the first line of its stdin is the case's specification."""

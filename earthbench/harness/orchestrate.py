@@ -76,6 +76,16 @@ def build_cases(
     return cases, notes
 
 
+def _say_isolation(executor: Executor, progress: Progress) -> None:
+    """Once, at the start of a local run: the fences missing on this machine (each result is stamped too)."""
+    from . import isolation
+    from .local import LocalExecutor
+
+    if isinstance(executor, LocalExecutor) and not progress.quiet and not isolation.support().full:
+        progress.stream.write(isolation.describe() + "\n")
+        progress.stream.flush()
+
+
 def run_cases(
     cases: Sequence[Case],
     store: Store,
@@ -101,6 +111,7 @@ def run_cases(
     report.skipped = len(cases) - len(todo)
     if progress is not None:
         progress.total = len(todo)
+        _say_isolation(executor, progress)
         progress.start()
     results = executor.run(todo)
     try:

@@ -8,6 +8,10 @@ results back to the client, which alone writes the store.
 
 What ``run_case`` enforces (the trust model is in docs/running.md, "What a plugin can influence"):
 
+* where the machine allows it, its own namespaces and cgroup (:mod:`.isolation`,
+  docs/isolation.md): a read-only view of the Python environment and the planner's files, a
+  private tmpfs, the memory budget for the whole tree, the slot's cores as a cpuset, and the
+  CPU, peak memory and process count read from the cgroup; frozen between closed-loop steps;
 * a fresh interpreter per case in its own session, under a warden process (see
   :mod:`.child`) that is a child subreaper, so every descendant of the case, in any session,
   ends with it; CPU affinity on the slot's cores and OMP/OpenBLAS/MKL/… thread caps, so numpy's
@@ -19,8 +23,10 @@ What ``run_case`` enforces (the trust model is in docs/running.md, "What a plugi
   until the case says it is ready; the wall budget and ``solve_time_s`` run from the moment
   this process hands the scenario over until the result has arrived; ``solve_cpu_s`` is the
   kernel's CPU accounting of the case's process tree over the same span (never negative);
-* every message validated: anything malformed, out of order or larger than
-  :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what was wrong;
+* the specification and every input over the case's stdin, each input with a fresh nonce its
+  reply must echo; every message validated: anything malformed, out of order, not echoing
+  the nonce or larger than :data:`MAX_RESULT_BYTES` ends the case as ``error`` saying what
+  was wrong; the CPU budget (``cpu_s``) over the planner's calls, when the suite sets one;
 * the referee runs here, in the harness process, never inside the planner's process;
 * the planner gets :func:`earthbench.sensing.observe` of the scenario (the scan and the
   soil's nominal class), computed here; the referee judges on the truth.
@@ -37,6 +43,7 @@ import glob
 import json
 import os
 import queue
+import secrets
 import selectors
 import shutil
 import signal
@@ -53,6 +60,7 @@ from typing import Any
 
 import psutil
 
+from . import isolation
 from ..errors import EarthbenchError
 from ..world import Budget
 from .cases import Case, CaseResult, utc_now
@@ -165,16 +173,16 @@ def run_case(
             return run_case(case, slot, stop=stop, startup_s=startup_s)
     cores = tuple(cores)
     started_at = utc_now()
+    fences = isolation.support()
+    _undumpable()
     load_before = load.snapshot()
-    tmp = _case_dir()
+    tmp = _case_dir()  # the harness's own folder (the case's log); a sandboxed case never sees it
     try:
-        case_file = os.path.join(tmp, "case.json")
         try:
-            with open(case_file, "w") as f:
-                json.dump({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides}, f)
             log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
+        spec = json.dumps({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides}).encode() + b"\n"
         scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
         loop = (
             StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES)
@@ -185,33 +193,52 @@ def run_case(
         rr, rw = os.pipe()
         mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
+        env = _child_env(len(cores), tag)
+        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
+            env["TMPDIR"] = "/tmp"
+        argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
+                "0" if fences.bwrap else str(os.getpid())]
+        fence = isolation.Fence(
+            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem,
+            visible=isolation.visible_paths(case.planner.source), pass_fds=(mw, rw), env=env,
+            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
+        )
         t_spawn = time.monotonic()
         try:
-            proc = subprocess.Popen(
-                [sys.executable, "-c", BOOTSTRAP, case_file, str(mw), str(rw), ",".join(map(str, cores)), str(mem), str(os.getpid())],
-                stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, pass_fds=(mw, rw),
-                cwd=tmp, env=_child_env(len(cores), tag), start_new_session=True,
-            )
-        except BaseException:
+            try:
+                proc = fence.start()
+            except isolation.FenceError as exc:
+                raise HarnessError(f"cannot start a sandbox for a case: {exc}") from None
+            finally:
+                os.close(mw)
+                os.close(rw)
+                log.close()
+            assert proc.stdin is not None
+            try:  # the specification: the first line of the case's input (a pipe; no file anyone else can reach)
+                proc.stdin.write(spec)
+                proc.stdin.flush()
+            except OSError:
+                pass
+            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop,
+                              fence.cgroup, bool(fences.bwrap)).run()
+        finally:
             os.close(mr)
             os.close(rr)
-            raise
-        finally:
-            os.close(mw)
-            os.close(rw)
-            log.close()
-        try:
-            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop).run()
-        finally:
-            os.close(mr)
-            os.close(rr)
+            fence.close()
         with open(os.path.join(tmp, "log.txt"), "rb") as f:
             f.seek(0, os.SEEK_END)
             f.seek(max(0, f.tell() - LOG_TAIL))
             log_tail = f.read().decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    out.isolation = fence.label
     return _result(case, out, cores, started_at, log_tail, load.around(load_before, load.snapshot()))
+
+
+@functools.lru_cache(maxsize=1)
+def _undumpable() -> None:
+    """Once per process: no case may read the harness's memory or descriptors through /proc."""
+    isolation.make_undumpable()
 
 
 @dataclass
@@ -239,6 +266,14 @@ class _Outcome:
     report: dict[str, Any] | None = None
     peak_vms_mb: float = 0.0
     peak_rss_mb: float = 0.0
+    #: The kernel's figures of the case's cgroup when it has one (None: per-process fences only).
+    cgroup_cpu_s: float | None = None
+    cgroup_peak_mb: float | None = None
+    oom_kills: int = 0
+    processes: int | None = None
+    #: The case used more CPU seconds than its budget's ``cpu_s``.
+    cpu_out: bool = False
+    isolation: str = "none"
 
     @property
     def solve_time_s(self) -> float | None:
@@ -257,12 +292,18 @@ class _Outcome:
 
     @property
     def solve_cpu_s(self) -> float | None:
-        if self.t_ready is None or self.report is None:
+        if self.t_ready is None:
+            return None
+        if self.cgroup_cpu_s is not None:
+            return max(0.0, self.cgroup_cpu_s - self.cpu_ready)
+        if self.report is None:
             return None
         return max(0.0, float(self.report["cpu_s"]) - self.cpu_ready)  # tick-resolution sample vs µs accounting
 
     @property
     def maxrss_mb(self) -> float | None:
+        if self.cgroup_peak_mb is not None:
+            return self.cgroup_peak_mb
         if self.report is not None:
             return float(self.report["maxrss_kb"]) / 1024.0
         return self.peak_rss_mb or None
@@ -272,7 +313,8 @@ class _Supervisor:
     """Hands the scenario over, reads and validates the case's messages, enforces the deadlines."""
 
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
-                 budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None):
+                 budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None,
+                 cgroup: isolation.CaseCgroup | None = None, sandboxed: bool = False):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
         self.budget, self.stop = budget, stop
         self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s, loop=loop)
@@ -285,6 +327,11 @@ class _Supervisor:
         self.next_tree_sample = t_spawn + TREE_SAMPLE_S
         self.planner: psutil.Process | None = None
         self.report_buf = bytearray()
+        self.cgroup = cgroup
+        self.sandboxed = sandboxed
+        self.next_cpu_check = 0.0
+        #: The nonce of the input the case is answering (None: no answer is due).
+        self.nonce: str | None = None
         try:
             self.warden: psutil.Process | None = psutil.Process(proc.pid)
         except psutil.Error:
@@ -308,6 +355,8 @@ class _Supervisor:
                 if now >= self.next_sample:
                     self._sample(now)
                     self.next_sample = now + SAMPLE_S
+                if self._over_cpu():
+                    break
                 if not eof:
                     if sel.select(timeout=min(self.deadline - now, 0.25)):
                         eof = self._read()
@@ -320,9 +369,16 @@ class _Supervisor:
         finally:
             sel.close()
             o.t_end = time.monotonic()
+            if o.done is None:
+                self._cpu_at_end()
             if o.status is None:  # still running: past a deadline, a fault, or cancelled
                 self._end()
             self._read_report()
+            if self.cgroup is not None:
+                self.cgroup.kill()  # what the warden left (none, unless it was killed)
+                o.cgroup_peak_mb = self.cgroup.peak_bytes() / 2**20
+                o.oom_kills = self.cgroup.oom_kills()
+                o.processes = self.cgroup.pids_peak
             if self.writer is not None:
                 self.outbox.put(None)
                 self.writer.join(timeout=1.0)
@@ -375,7 +431,7 @@ class _Supervisor:
         elif event == "ready":
             o.fault = "the case said 'ready' twice"
         elif event == "done":
-            problem = _check_done(msg, o.t_ready is not None, o.loop is not None)
+            problem = _check_done(msg, o.t_ready is not None, o.loop is not None) or (self._unechoed(msg) if o.t_ready is not None else "")
             if problem:
                 o.fault = problem
             else:
@@ -393,6 +449,8 @@ class _Supervisor:
         o.t_done = time.monotonic()
         o.replied(o.t_done)
         o.done = msg
+        self.nonce = None
+        self._cpu_at_end()
         self.deadline = o.t_done + EXIT_GRACE_S
         self.outbox.put(None)
 
@@ -404,7 +462,8 @@ class _Supervisor:
         left = self.budget.wall_s - sum(o.calls)
         o.limit = "step" if o.loop is not None and self.budget.step_s < left else "wall"
         self.deadline = now + (min(self.budget.step_s, left) if o.loop is not None else left)
-        self.outbox.put(data)
+        self.nonce = secrets.token_hex(16)
+        self.outbox.put(b'{"nonce": "%s", "input": ' % self.nonce.encode() + data.rstrip(b"\n") + b"}\n")
 
     def _hand_over(self) -> None:
         """The planner's code is loaded: start the clock and give the case its scenario."""
@@ -444,17 +503,55 @@ class _Supervisor:
             )
         elif not isinstance(msg.get("plan"), str):
             o.fault = f"the case's step has a plan of type {type(msg.get('plan')).__name__}, not a JSON text"
+        elif problem := self._unechoed(msg):
+            o.fault = problem
         else:
-            problem = loop.take(msg["plan"], o.replied(now))
+            self.nonce = None
+            took = o.replied(now)
+            if self.cgroup is not None:  # no compute between steps: the case stands still while the harness works
+                self.cgroup.freeze(True, wait=False)
+            try:
+                problem = loop.take(msg["plan"], took)
+                data = loop.next_observation() if not (problem or loop.ended) else b""
+            finally:
+                if self.cgroup is not None:
+                    self.cgroup.freeze(False, wait=False)
             if problem:
                 o.fault = problem
             elif loop.ended:
                 o.done = {"event": "done", "outcome": "steps"}
                 o.t_done = now
+                self._cpu_at_end()
                 self.deadline = now + EXIT_GRACE_S
                 self.outbox.put(None)
             else:
-                self._give(loop.next_observation(), time.monotonic())
+                self._give(data, time.monotonic())
+
+    def _cpu_at_end(self) -> None:
+        """The cgroup's CPU seconds when the planner's last call ended (what its processes burn
+        while the case exits is not the planner's compute)."""
+        if self.cgroup is not None and self.o.cgroup_cpu_s is None:
+            self.o.cgroup_cpu_s = self.cgroup.cpu_s()
+
+    def _unechoed(self, msg: dict[str, Any]) -> str:
+        """Why a reply is not an answer to the input the case was last given ('' when it is)."""
+        if self.nonce is None or msg.get("nonce") != self.nonce:
+            return ("the case's reply does not echo the nonce of the input it answers "
+                    "(a reply written before its input arrived, or not by the case's bootstrap)")
+        return ""
+
+    def _over_cpu(self) -> bool:
+        """The planner's calls have used more CPU seconds than the budget's ``cpu_s``."""
+        cap, o = self.budget.cpu_s, self.o
+        if cap is None or o.t_ready is None or o.done is not None:
+            return False
+        if self.cgroup is None and time.monotonic() < self.next_cpu_check:
+            return False  # without a cgroup, reading the tree's CPU is a scan: every SAMPLE_S
+        self.next_cpu_check = time.monotonic() + SAMPLE_S
+        if self._tree_cpu() - o.cpu_ready > cap:
+            o.cpu_out = True
+            return True
+        return False
 
     # -- the process tree ----------------------------------------------------------------------
     def _tree(self) -> list[psutil.Process]:
@@ -464,7 +561,10 @@ class _Supervisor:
             return []
 
     def _planner(self) -> psutil.Process | None:
-        """The planner's process, by the pid its warden reported (no scan of the process table)."""
+        """The planner's process, by the pid its warden reported (no scan of the process table);
+        None in a sandbox of its own (that pid is its PID namespace's, not ours)."""
+        if self.sandboxed:
+            return None
         if self.planner is None:
             self._read_report_pipe()
             first = self.report_buf.split(b"\n", 1)[0]
@@ -480,6 +580,8 @@ class _Supervisor:
         The planner's process (with its reaped children) is read directly; only if its pid is
         not known is the whole tree scanned.
         """
+        if self.cgroup is not None:
+            return self.cgroup.cpu_s()
         planner = self._planner()
         total = 0.0
         for p in [planner] if planner is not None else self._tree():
@@ -492,7 +594,11 @@ class _Supervisor:
 
     def _sample(self, now: float) -> None:
         """Address space (what RLIMIT_AS caps) and resident memory, as we wait: the planner's process
-        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table)."""
+        every :data:`SAMPLE_S`, the whole tree every :data:`TREE_SAMPLE_S` (a scan of the process table).
+        With a cgroup the kernel keeps the peak itself; the process count is sampled."""
+        if self.cgroup is not None:
+            self.cgroup.sample_pids()
+            return
         if now >= self.next_tree_sample:
             procs = self._tree()
             self.next_tree_sample = now + TREE_SAMPLE_S
@@ -521,7 +627,12 @@ class _Supervisor:
         return True
 
     def _end(self) -> None:
-        """Ask the warden to end the tree; if it does not within the grace, kill every process we find."""
+        """Ask the warden to end the tree; if it does not within the grace, kill every process we find.
+        With a cgroup, the kernel's list of the case's processes is killed at once."""
+        if self.cgroup is not None:
+            self.cgroup.kill()
+            self._reaped(block=True)
+            return
         try:
             os.kill(self.proc.pid, signal.SIGTERM)
         except ProcessLookupError:
@@ -563,7 +674,8 @@ class _Supervisor:
                 if isinstance(rep.get("status"), int) and self.o.status == 0:
                     self.o.status = rep["status"]  # the planner process's own exit status
                 return
-        _sweep(self.tag)
+        if self.cgroup is None:  # with a cgroup, the kernel's list of its processes is killed instead
+            _sweep(self.tag)
 
 
 def _sweep(tag: str) -> None:
@@ -630,12 +742,20 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         startup_s=(o.t_ready - o.t_spawn) if o.t_ready is not None else None,
         environment=environment(case.planner.source),
         detail=dict(o.done.get("detail") or {}) if o.done else {},
-        steps=tuple(loop.steps) if loop is not None else None, machine_load=machine_load or {},
+        steps=tuple(loop.steps) if loop is not None else None,
+        isolation=o.isolation, processes=o.processes, machine_load=machine_load or {},
     )
     if o.cancelled and o.done is None:
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)
     if o.fault:
         return CaseResult(reason="error", error=o.fault + "; the case was ended", **times, **common)
+    if o.oom_kills:  # the whole tree's memory is the budget, whatever the planner made of a lost process
+        return CaseResult(reason="memory", error=f"the kernel ended {o.oom_kills} process(es) of the case at its memory budget "
+                          f"of {budget.memory_mb} MB (the whole process tree's; peak {o.maxrss_mb or 0:.0f} MB)", **times, **common)
+    if o.cpu_out and o.done is None:
+        over = f" over {len(loop.steps)} step(s)" if loop is not None else ""
+        return CaseResult(reason="timeout", error=f"the planner used more than its CPU budget of {budget.cpu_s:g} s{over} and was ended",
+                          **times, **common)
     if o.done is None:
         if o.timed_out:
             if o.t_ready is not None and o.limit == "step":

@@ -96,6 +96,7 @@ def save(name: str, write: Callable[[str], None]) -> bool:
             digest = _digest(f, os.fstat(f.fileno()).st_size)
             f.seek(0, os.SEEK_END)
             f.write(_TRAILER + digest.encode())
+        os.chmod(tmp, 0o644)  # readable by a sandboxed case, which runs as another user (docs/isolation.md)
         os.replace(tmp, d / f"{name}.nlp")
         return True
     except (OSError, RuntimeError):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import compileall
+from collections.abc import Iterator
 import importlib
 
 import pytest
@@ -20,3 +21,19 @@ def compiled_bytecode() -> None:
     for name in ("earthbench", "earthbench_planners", "earthbench_terrains", "earthbench_metrics"):
         for folder in importlib.import_module(name).__path__:
             assert compileall.compile_dir(folder, quiet=1), f"{folder} does not compile"
+
+
+@pytest.fixture(params=["on", "off"])
+def isolation(request, monkeypatch) -> Iterator[str]:
+    """Each bench twice in one run, side by side: cases in their namespaces and cgroup ("on",
+    skipped where the kernel does not allow it) and with per-process fences only ("off")."""
+    from earthbench.harness import isolation as iso
+
+    if request.param == "off":
+        monkeypatch.setenv(iso.SWITCH, "off")
+    iso.support.cache_clear()
+    if request.param == "on" and not iso.support().full:
+        pytest.skip(iso.describe())
+    yield iso.support().label
+    monkeypatch.undo()
+    iso.support.cache_clear()

@@ -5,7 +5,8 @@ handed out one dig cycle per step) runs one paper-extensive scenario closed loop
 baseline, open loop (the same plan in one call). What the closed loop costs beyond the open
 loop, divided by its steps, is the harness's overhead per step: executing the step on the
 truth (the referee judges the executed prefix), building and sending the observation, the
-planner process reading it — and, on the realistic suite, the scan each observation holds
+planner process reading it, freezing and thawing the case's cgroup (isolation on; the
+``isolation`` fixture runs each side by side with it off) — and, on the realistic suite, the scan each observation holds
 (``earthbench.sensing.observe``, the sensing model's own cost). Run with
 ``python -m pytest tests/bench/test_bench_closed_loop.py --benchmark-only -s``.
 """
@@ -34,7 +35,7 @@ pytestmark = pytest.mark.usefixtures("forget_test_planners")
     ("paper-extensive-realistic", "rbf30-sand-survey"),  # plus a survey scan per step (earthbench.sensing)
     ("paper-extensive-realistic", "rbf30-sand-cab"),  # plus a cab scan with occlusion per step
 ])
-def test_overhead_per_step(benchmark, suite_name, family):
+def test_overhead_per_step(benchmark, suite_name, family, isolation):
     load_plugin_file(PLUGIN)
     suite = load_suite(suite_name)
     cases, _ = build_cases(suite, ["s-digs"], plugins=[PLUGIN])
@@ -54,5 +55,5 @@ def test_overhead_per_step(benchmark, suite_name, family):
     steps = result.metrics["steps"]
     per_step = (benchmark.stats.stats.median - statistics.median(w for w, _ in base)) / steps
     benchmark.extra_info.update(steps=steps, overhead_per_step_ms=per_step * 1e3)
-    print(f"\n{case.scenario.id}: {steps} steps, closed {benchmark.stats.stats.median:.3f} s, "
+    print(f"\n[isolation {isolation}] {case.scenario.id}: {steps} steps, closed {benchmark.stats.stats.median:.3f} s, "
           f"open {statistics.median(w for w, _ in base):.3f} s, overhead {per_step * 1e3:.1f} ms per step")

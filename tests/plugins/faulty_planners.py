@@ -63,8 +63,11 @@ class SleepsWithChild(Planner):
 
     def plan(self, scenario):
         p = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"], start_new_session=True)
-        with open(os.environ["EARTHBENCH_TEST_PIDFILE"], "w") as f:
-            f.write(str(p.pid))
+        try:  # out of reach in a sandbox: the zoo then finds the case's processes by their tag
+            with open(os.environ["EARTHBENCH_TEST_PIDFILE"], "w") as f:
+                f.write(str(p.pid))
+        except OSError:
+            pass
         time.sleep(120)
         return Plan()
 

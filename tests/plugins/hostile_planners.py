@@ -1,8 +1,8 @@
 """Planners that attack the harness on purpose: forged messages, escapes, bloated results.
 
 Loaded as a plugin file, like :mod:`faulty_planners`. A planner that starts processes writes
-their pids, one per line, to ``$EARTHBENCH_TEST_PIDDIR/<name>.pids`` so the zoo can check that
-none outlives its case.
+their pids, one per line, to ``$EARTHBENCH_TEST_PIDDIR/<name>.pids`` where it can (without
+isolation) so the zoo can check that none outlives its case.
 """
 
 from __future__ import annotations
@@ -18,12 +18,17 @@ from earthbench import Plan, Planner
 
 def _harness_pipe() -> int:
     """The descriptor a case reports on: anyone in the process can find it (here: the argv)."""
-    return int(sys.argv[2])
+    return int(sys.argv[1])
 
 
 def _note(name: str, *pids: int) -> None:
-    with open(os.path.join(os.environ["EARTHBENCH_TEST_PIDDIR"], f"{name}.pids"), "a") as f:
-        f.write("".join(f"{p}\n" for p in pids))
+    """Without isolation the zoo checks these pids; in a sandbox the folder is out of reach (and
+    the pids are its PID namespace's), so the zoo looks for the case's processes by their tag."""
+    try:
+        with open(os.path.join(os.environ["EARTHBENCH_TEST_PIDDIR"], f"{name}.pids"), "a") as f:
+            f.write("".join(f"{p}\n" for p in pids))
+    except OSError:
+        pass
 
 
 def _sleeper(**kw) -> subprocess.Popen:
@@ -173,3 +178,149 @@ class BigResult(Planner):
         text = Plan(info={"pad": "x" * int(mb * 2**20)}).to_json()
         os.write(_harness_pipe(), (json.dumps({"event": "done", "outcome": "plan", "plan": text}) + "\n").encode())
         os._exit(0)
+
+
+# -- channels that only isolation closes (docs/isolation.md); each raises once it got through,
+# so a case that ends ``ok`` found the channel shut
+
+def _other_pids() -> list[int]:
+    """Every process this one can see that is not of its own case's tree (warden and below)."""
+    mine = {os.getpid(), os.getppid()}
+    out = []
+    for name in os.listdir("/proc"):
+        if name.isdigit() and int(name) not in mine:
+            try:
+                with open(f"/proc/{name}/stat", "rb") as f:
+                    ppid = int(f.read().rsplit(b")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            if ppid not in mine:
+                out.append(int(name))
+    return out
+
+
+class ReadsStore(Planner):
+    """Looks through /proc/*/fd for an open SQLite store (the harness's), reads it, rewrites its runs."""
+
+    name = "h-read-store"
+
+    def plan(self, scenario):
+        import sqlite3
+
+        for pid in _other_pids():
+            try:
+                fds = os.listdir(f"/proc/{pid}/fd")
+            except OSError:
+                continue
+            for fd in fds:
+                try:
+                    target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                except OSError:
+                    continue
+                if target.endswith(".db"):
+                    try:
+                        db = sqlite3.connect(f"/proc/{pid}/fd/{fd}")
+                        db.execute("UPDATE runs SET reason='crashed', solve_time_s=0.001")
+                        db.commit()
+                    except (OSError, sqlite3.Error):
+                        pass
+                    raise RuntimeError(f"reached the store {target} through /proc/{pid}/fd/{fd}")
+        return Plan()
+
+
+class ReadsHarnessMemory(Planner):
+    """Opens /proc/PID/mem of every process it can see outside its case and reads a mapped page."""
+
+    name = "h-read-mem"
+
+    def plan(self, scenario):
+        for pid in _other_pids():
+            try:
+                with open(f"/proc/{pid}/maps") as f:
+                    first = f.readline().split()[0]
+                lo = int(first.split("-")[0], 16)
+                with open(f"/proc/{pid}/mem", "rb") as mem:
+                    mem.seek(lo)
+                    if mem.read(4096):
+                        raise RuntimeError(f"read the memory of process {pid}")
+            except (OSError, ValueError, IndexError):
+                continue
+        return Plan()
+
+
+class RewritesOtherCases(Planner):
+    """Looks for other cases' folders in the machine's temp folder and writes into them."""
+
+    name = "h-rewrite-other"
+
+    def plan(self, scenario):
+        import glob
+        import tempfile
+
+        for d in glob.glob(os.path.join(tempfile.gettempdir(), "earthbench-case-*")) + glob.glob("/tmp/earthbench-case-*"):
+            if os.path.abspath(d) == os.path.abspath(os.getcwd()):
+                continue
+            try:
+                with open(os.path.join(d, "case.json"), "w") as f:
+                    f.write('{"name": "t-fast", "source": "forged", "overrides": {}}')
+            except OSError:
+                continue
+            raise RuntimeError(f"wrote into another case's folder {d}")
+        return Plan()
+
+
+def _burn(seconds: float) -> None:
+    t = time.process_time()
+    while time.process_time() - t < seconds:
+        pass
+
+
+class ForgesReport(Planner):
+    """Reopens its warden's report pipe through /proc and writes a report of 0 s CPU and 1 MB
+    first, then burns 2 s of CPU holding 300 MB."""
+
+    name = "h-forge-report"
+
+    def plan(self, scenario):
+        import json
+
+        forged = {"status": 0, "cpu_s": 0.0, "maxrss_kb": 1024, "others": 0}
+        report = json.dumps({"planner": os.getpid()}) + "\n" + json.dumps(forged) + "\n"
+        try:
+            fd = os.open(f"/proc/{os.getppid()}/fd/{sys.argv[2]}", os.O_WRONLY)
+            os.write(fd, report.encode())
+            os.close(fd)
+        except OSError:
+            pass
+        hoard = b"\x01" * (300 * 2**20)
+        _burn(2.0)
+        return Plan(info={"held": len(hoard)})
+
+
+class TreeOverMemory(Planner):
+    """Three child processes of 600 MB each, every page written: 1.8 GB under a 1,024 MB budget
+    (each process stays under the per-process limit)."""
+
+    name = "h-tree-memory"
+
+    def plan(self, scenario):
+        hold = "import sys, time\nb = b'\\x01' * (600 * 2**20)\nprint(flush=True)\ntime.sleep(3)"
+        kids = [subprocess.Popen([sys.executable, "-c", hold], stdout=subprocess.PIPE) for _ in range(3)]
+        for k in kids:
+            k.stdout.readline()
+        for k in kids:
+            k.wait()
+        return Plan()
+
+
+class EscapesCores(Planner):
+    """Asks for every core of the machine with sched_setaffinity and says which it got."""
+
+    name = "h-affinity"
+
+    def plan(self, scenario):
+        try:
+            os.sched_setaffinity(0, range(os.cpu_count() or 1))
+        except OSError:
+            pass
+        return Plan(info={"affinity": sorted(os.sched_getaffinity(0))})

@@ -115,7 +115,7 @@ class ForgesDictStep(StepPlanner):
     name = "s-forge-dict"
 
     def step(self, observation):
-        os.write(int(sys.argv[2]), b'{"event": "step", "plan": {"actions": []}}\n')
+        os.write(int(sys.argv[1]), b'{"event": "step", "plan": {"actions": []}}\n')
         time.sleep(60)
 
 
@@ -126,7 +126,7 @@ class ForgesExtraStep(StepPlanner):
 
     def step(self, observation):
         first = super().step(observation)
-        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": first.to_json()}) + "\n").encode())
+        os.write(int(sys.argv[1]), (__import__("json").dumps({"event": "step", "plan": first.to_json()}) + "\n").encode())
         return first
 
 
@@ -142,6 +142,46 @@ class OpenLoopSendsStep(StepPlanner):
     Config = OpenConfig
 
     def plan(self, scenario):
-        os.write(int(sys.argv[2]), (__import__("json").dumps({"event": "step", "plan": Plan().to_json()}) + "\n").encode())
+        os.write(int(sys.argv[1]), (__import__("json").dumps({"event": "step", "plan": Plan().to_json()}) + "\n").encode())
         time.sleep(60)
         return Plan()
+
+
+class HelperComputes(StepPlanner):
+    """Forks a helper at step 0 that burns CPU for as long as it lives, and answers every step
+    at once with a stand-still: without the freezer the helper computes while the harness works."""
+
+    name = "s-helper"
+
+    def step(self, observation):
+        if observation.step == 0:
+            if os.fork() == 0:
+                while True:
+                    pass
+        p = observation.scenario.machines.truck_pose
+        t = observation.t
+        return Plan((Move("truck", ((t, p.x, p.y, p.yaw), (t + 1.0, p.x, p.y, p.yaw))),))
+
+
+class PreWritten(StepPlanner):
+    """Writes five step messages in its first call, echoing the one nonce it was given (dug out
+    of its bootstrap's frame), as answers to observations it never read."""
+
+    name = "s-prewritten"
+
+    def step(self, observation):
+        import json
+
+        frame, nonce = sys._getframe(), None
+        while frame is not None and nonce is None:
+            given = frame.f_locals.get("given")
+            nonce = given.get("nonce") if isinstance(given, dict) else None
+            frame = frame.f_back
+        first = super().step(observation)
+        p = observation.scenario.machines.truck_pose
+        for k in range(4):  # far in plan time, after whatever the first answer does
+            t = 1e4 + 2.0 * k
+            still = Plan((Move("truck", ((t, p.x, p.y, p.yaw), (t + 1.0, p.x, p.y, p.yaw))),))
+            os.write(int(sys.argv[1]), (json.dumps({"event": "step", "plan": still.to_json(), "nonce": nonce}) + "\n").encode())
+        time.sleep(5)
+        return first
