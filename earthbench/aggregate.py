@@ -9,18 +9,29 @@ its CSVs alike:
 * ``runs``: stored runs of the group; ``scenarios``: distinct scenario digests among them;
   ``of``: the group's scenario count in the suite (``members``, else ``sizes`` for a whole
   suite), never fewer than ``scenarios``.
-* ``success_rate`` (with its 95 % bootstrap interval ``_lo``/``_hi``): successes
-  (:func:`earthbench.scoring.is_success`) over ``of``: runs that failed in any way and
+* ``success_rate`` (with its exact 95 % interval ``_lo``/``_hi``, :func:`earthbench.stats.rate_ci`):
+  successes (:func:`earthbench.scoring.is_success`) over ``of``: runs that failed in any way and
   scenarios the planner has no run for count as failures, so a planner run on part of a
   suite is never ranked on that part alone.
 * over *valid* runs (reason ``ok``; an invalid plan is reported, never ranked):
-  ``volume_ratio_mean`` / ``_sd`` (sample SD, NaN for one run), ``overshoot_m3_mean``, and
-  over those that loaded something (the others are counted in ``loaded_nothing``) the medians
-  with bootstrap intervals of ``time_per_target_m3`` (the primary time metric; with ``_q1`` /
-  ``_q3``), ``time_per_target_m3_ratio`` (to the scenario's lower bound) and ``time_per_m3``.
-* ``solve_time_median`` (with interval) / ``_p90`` and ``solve_cpu_median``: over every run with
-  a measured solve time, failures included (a timeout's solve time is the time it was given);
-  ``prepare_max``: the longest preparation (wall s) the runs used, NaN for a planner without one
+  ``volume_ratio_mean`` / ``_sd`` (sample SD, NaN for one run), ``overshoot_m3_mean``, the
+  medians with distribution-free intervals (:func:`earthbench.stats.median_ci`; none below 6
+  runs) of ``time_per_target_m3`` (the primary time metric, :func:`earthbench.scoring.time_per_target`:
+  infinite for a run short of the target, counted in ``short_of_target``; with ``_q1`` / ``_q3``)
+  and ``time_per_target_m3_ratio`` (to the scenario's lower bound), and over runs that loaded
+  something (the others are counted in ``loaded_nothing``) ``time_per_m3``.
+* ``target_share_mean``: the mean over valid runs of the share of the target loaded, capped at 1
+  (:func:`earthbench.scoring.target_share`): the tie-break among runs short of the target.
+* ``solve_cpu_median`` (the ranked solve-time figure: CPU seconds of the case's process tree, with
+  interval) and ``solve_time_median`` (wall, with interval) / ``_p90``: over every run with a
+  measured time, failures included (a timeout's solve time is the time it was given).
+* ``load_min`` / ``load_max``: the machine's 1-minute load average around the runs' cases
+  (before and after each), ``steal_max``: the largest share of CPU time stolen by a hypervisor
+  during one (NaN for runs stored before these were recorded).
+* ``config_label``: the configuration's readable name (:mod:`earthbench.labels`); ``separable``:
+  whether the table has enough scenarios (:func:`earthbench.stats.min_separating_n`) for any paired
+  test to tell two planners apart at :data:`RANK_ALPHA`.
+* ``prepare_max``: the longest preparation (wall s) the runs used, NaN for a planner without one
   (docs/DESIGN.md §6 "Preparation": paid once per machine, never in the solve times).
 * ``n_<reason>`` for each termination reason; ``cpu_models``: how many CPU models the runs
   came from (solve times from different models are not comparable).
@@ -39,7 +50,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .stats import bootstrap_ci, mcnemar_p, wilcoxon_p
+from .scoring import target_share
+from .stats import ALPHA, mcnemar_p, median_ci, min_separating_n, paired_differences, rate_ci, wilcoxon_p
 
 REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
 GROUP = ["suite", "track", "planner", "planner_version", "config_hash"]
@@ -49,23 +61,26 @@ SCOPES = ("suite", "family", "target")
 #: The primary time metric of tables, rankings, profiles and figures.
 PRIMARY = "time_per_target_m3"
 #: Significance level of the paired tests that decide shared ranks.
-RANK_ALPHA = 0.05
+RANK_ALPHA = ALPHA
 RANKING_RULE = (
-    "ranked by success rate (higher first), then median time per target m³ over valid runs (lower first), then "
-    f"median solve time (lower first); a planner shares the rank of the first planner of the group above it (shown "
-    f"as 1=) unless a paired test on their shared scenarios separates the two at α = {RANK_ALPHA:g} (exact McNemar on "
+    "ranked by success rate (higher first), then median time per target m³ over valid runs (lower first; a run "
+    "short of the target counts as infinite), then the mean share of the target loaded (capped at 1; higher first), then "
+    "median solve CPU time (lower first); a planner shares the rank "
+    "of the first planner of the group above it (shown as 1=) unless a paired test on their shared scenarios "
+    f"separates the two at α = {RANK_ALPHA:g} (exact McNemar on "
     "success, or Wilcoxon signed-rank on time per target m³ where both are valid); ranks cover the latest version of each planner "
     "(older versions: history) and never a configuration without a valid run")
 
 SUMMARY_COLUMNS = [
-    "rank", "rank_label", "ranked", "latest", *TABLE, *GROUP[2:], "runs", "of", "scenarios", "successes", "success_rate",
+    "rank", "rank_label", "ranked", "latest", *TABLE, *GROUP[2:], "config_label", "runs", "of", "scenarios", "successes", "success_rate",
     "success_rate_lo", "success_rate_hi", "valid_runs", "volume_ratio_mean", "volume_ratio_sd", "overshoot_m3_mean",
-    "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
+    "target_share_mean", "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
     "time_per_target_m3_q3", "time_per_target_m3_ratio_median", "time_per_target_m3_ratio_lo",
     "time_per_target_m3_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
-    "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "solve_time_median",
-    "solve_time_lo", "solve_time_hi", "solve_time_p90", "solve_cpu_median", "prepare_max",
-    *(f"n_{r}" for r in REASONS), "n_other", "cpu_models",
+    "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "short_of_target",
+    "solve_cpu_median", "solve_cpu_lo", "solve_cpu_hi", "solve_time_median", "solve_time_lo", "solve_time_hi", "solve_time_p90",
+    "prepare_max",
+    *(f"n_{r}" for r in REASONS), "n_other", "cpu_models", "load_min", "load_max", "steal_max", "separable",
 ]
 
 
@@ -78,9 +93,27 @@ def _num(g: pd.DataFrame, col: str) -> np.ndarray:
 def _median_ci(x: np.ndarray) -> tuple[float, float, float]:
     if not len(x):
         return math.nan, math.nan, math.nan
-    lo, hi = bootstrap_ci(x, "median")
+    lo, hi = median_ci(x)
     return float(np.median(x)), lo, hi
 
+
+def _quartiles(x: np.ndarray) -> tuple[float, float]:
+    """First and third quartile; infinite where the quartile falls among infinite values (no NaN from inf − inf)."""
+    if not len(x):
+        return math.nan, math.nan
+    with np.errstate(invalid="ignore"):
+        q = np.percentile(x, [25, 75])
+    return tuple(math.inf if math.isnan(v) else float(v) for v in q)  # type: ignore[return-value]
+
+
+def _load_range(g: pd.DataFrame) -> tuple[float, float, float]:
+    cols = [c for c in ("load_before", "load_after") if c in g]
+    load = np.concatenate([_num(g, c) for c in cols]) if cols else np.array([])
+    load = load[np.isfinite(load)]
+    steal = _num(g, "steal_share")
+    steal = steal[np.isfinite(steal)]
+    return (float(load.min()) if len(load) else math.nan, float(load.max()) if len(load) else math.nan,
+            float(steal.max()) if len(steal) else math.nan)
 
 def target_label(v: Any) -> str:
     """A target volume as a breakdown's group name: ``4 m³``."""
@@ -100,7 +133,7 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
     over = over[np.isfinite(over)]
     tpt, tpt_ratio = _num(g, PRIMARY)[ok], _num(g, "time_per_target_m3_ratio")[ok]
     tpm, tpm_ratio = _num(g, "time_per_m3")[ok], _num(g, "time_per_m3_ratio")[ok]
-    tpt_f, tpm_f = tpt[np.isfinite(tpt)], tpm[np.isfinite(tpm)]
+    tpt_f, tpm_f = tpt[~np.isnan(tpt)], tpm[np.isfinite(tpm)]  # the primary metric keeps its infinities: they rank
     st = _num(g, "solve_time_s")
     st = st[np.isfinite(st)]
     cpu = _num(g, "solve_cpu_s")
@@ -112,15 +145,15 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
     of = max(int(of), n_sc) if of else n_sc
     # success per scenario (a duplicate run of one scenario counts once, as its best), padded with failures
     per_sc = pd.Series(success).groupby(g["scenario_digest"].to_numpy()).max()
-    hits = np.zeros(of)
-    hits[: int(per_sc.sum())] = 1.0
-    s_lo, s_hi = bootstrap_ci(hits, "mean") if of else (math.nan, math.nan)
+    s_lo, s_hi = rate_ci(int(per_sc.sum()), of)
     tpt_med, tpt_lo, tpt_hi = _median_ci(tpt_f)
-    r_med, r_lo, r_hi = _median_ci(tpt_ratio[np.isfinite(tpt_ratio)])
+    r_med, r_lo, r_hi = _median_ci(tpt_ratio[~np.isnan(tpt_ratio)])
     tpm_med, tpm_lo, tpm_hi = _median_ci(tpm_f)
     st_med, st_lo, st_hi = _median_ci(st)
-    tq1, tq3 = np.percentile(tpt_f, [25, 75]) if len(tpt_f) else (math.nan, math.nan)
-    q1, q3 = np.percentile(tpm_f, [25, 75]) if len(tpm_f) else (math.nan, math.nan)
+    cpu_med, cpu_lo, cpu_hi = _median_ci(cpu)
+    tq1, tq3 = _quartiles(tpt_f)
+    q1, q3 = _quartiles(tpm_f)
+    load_min, load_max, steal_max = _load_range(g)
     tr = tpm_ratio[np.isfinite(tpm_ratio)]
     return {
         "runs": len(g), "of": of, "scenarios": n_sc, "successes": int(per_sc.sum()),
@@ -129,19 +162,21 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
         "volume_ratio_mean": float(vr.mean()) if len(vr) else math.nan,
         "volume_ratio_sd": float(vr.std(ddof=1)) if len(vr) > 1 else math.nan,
         "overshoot_m3_mean": float(over.mean()) if len(over) else math.nan,
+        "target_share_mean": float(np.mean([target_share(v) for v in vr])) if len(vr) else math.nan,
         "time_per_target_m3_median": tpt_med, "time_per_target_m3_lo": tpt_lo, "time_per_target_m3_hi": tpt_hi,
         "time_per_target_m3_q1": float(tq1), "time_per_target_m3_q3": float(tq3),
         "time_per_target_m3_ratio_median": r_med, "time_per_target_m3_ratio_lo": r_lo, "time_per_target_m3_ratio_hi": r_hi,
         "time_per_m3_median": tpm_med, "time_per_m3_lo": tpm_lo, "time_per_m3_hi": tpm_hi,
         "time_per_m3_q1": float(q1), "time_per_m3_q3": float(q3), "time_per_m3_iqr": float(q3 - q1),
         "time_per_m3_ratio_median": float(np.median(tr)) if len(tr) else math.nan,
-        "loaded_nothing": int(np.isinf(tpm).sum()),
+        "loaded_nothing": int(np.isinf(tpm).sum()), "short_of_target": int(np.isinf(tpt_f).sum()),
+        "solve_cpu_median": cpu_med, "solve_cpu_lo": cpu_lo, "solve_cpu_hi": cpu_hi,
         "solve_time_median": st_med, "solve_time_lo": st_lo, "solve_time_hi": st_hi,
         "solve_time_p90": float(np.percentile(st, 90)) if len(st) else math.nan,
-        "solve_cpu_median": float(np.median(cpu)) if len(cpu) else math.nan,
         "prepare_max": float(prep.max()) if len(prep) else math.nan,
         **counts, "n_other": int(len(g) - sum(counts.values())),
         "cpu_models": int(g["cpu_model"].dropna().nunique()) if "cpu_model" in g else 0,
+        "load_min": load_min, "load_max": load_max, "steal_max": steal_max, "separable": of >= min_separating_n(RANK_ALPHA),
     }
 
 
@@ -193,6 +228,9 @@ def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None, *, member
             for key, n in m.groupby(["suite", "scope", "group"]).size().items():
                 of[key] = int(n)
     latest = latest_versions(runs) if len(runs) else set()
+    from .labels import config_labels
+
+    labels = config_labels(runs)
     rows, vectors = [], []
     for scope in scopes:
         if not len(runs):
@@ -207,18 +245,18 @@ def aggregate(runs: pd.DataFrame, sizes: dict[str, int] | None = None, *, member
             n_of = of.get((suite, scope, group), sizes.get(suite) if scope == "suite" else None)
             is_latest = (suite, track, planner, str(version)) in latest
             rows.append({**dict(zip(["suite", "track", "scope", "group", *GROUP[2:]], key)), "latest": is_latest,
-                         **_summarise(g, n_of)})
+                         "config_label": labels.get((str(planner), str(_cfg)), str(planner)), **_summarise(g, n_of)})
             vectors.append(_paired_vectors(g))
     out = pd.DataFrame.from_records(rows, columns=[c for c in SUMMARY_COLUMNS if c not in ("rank", "rank_label", "ranked")])
     return rank(out, vectors, all_versions=all_versions)
 
 
 def _paired_vectors(g: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
-    """Per scenario digest: success (best run) and the primary time of valid runs (finite only)."""
+    """Per scenario digest: success (best run) and the primary time of valid runs (infinite: short of the target)."""
     d = g["scenario_digest"].to_numpy()
     succ = pd.Series(g["success"].fillna(False).astype(bool).to_numpy()).groupby(d).max()
     t = _num(g, PRIMARY)
-    ok = (g["reason"].astype(str).to_numpy() == "ok") & np.isfinite(t)
+    ok = (g["reason"].astype(str).to_numpy() == "ok") & ~np.isnan(t)
     times = pd.Series(t[ok]).groupby(d[ok]).min()
     return succ, times
 
@@ -238,7 +276,7 @@ def separated(a: tuple[pd.Series, pd.Series], b: tuple[pd.Series, pd.Series], al
     both = a[1].index.intersection(b[1].index)
     if len(both) == 0:
         return False
-    return wilcoxon_p(b[1].loc[both].to_numpy() - a[1].loc[both].to_numpy())[1] < alpha
+    return wilcoxon_p(paired_differences(a[1].loc[both].to_numpy(), b[1].loc[both].to_numpy()))[1] < alpha
 
 
 def rank(summary: pd.DataFrame, vectors: Sequence[tuple[pd.Series, pd.Series]] | None = None, *,
@@ -256,9 +294,10 @@ def rank(summary: pd.DataFrame, vectors: Sequence[tuple[pd.Series, pd.Series]] |
     s["ranked"] = (s["latest"].astype(bool) | all_versions) & (s["valid_runs"] > 0)
     s["_unranked"] = ~s["ranked"]
     s["_neg_success"] = -s["success_rate"].fillna(0.0)
+    s["_neg_share"] = -s["target_share_mean"].fillna(0.0)
     s["_scope"] = s["scope"].map({sc: i for i, sc in enumerate(SCOPES)})
     s = s.sort_values(["suite", "track", "_scope", "group", "_unranked", "_neg_success", "time_per_target_m3_median",
-                       "solve_time_median", "planner", "planner_version", "config_hash"],
+                       "_neg_share", "solve_cpu_median", "solve_time_median", "planner", "planner_version", "config_hash"],
                       na_position="last", kind="mergesort").reset_index(drop=True)
     ranks: list[float] = [math.nan] * len(s)
     labels: list[str] = ["–"] * len(s)

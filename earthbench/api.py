@@ -40,7 +40,7 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     "earthbench.soil": ("draw", "nominal", "slump"),
     "earthbench.sensing": ("observe",),
     # metrics: a metric plugin is a callable (scenario, plan, verdict) -> dict; the scoring rule
-    "earthbench.scoring": ("evaluate", "is_success"),
+    "earthbench.scoring": ("evaluate", "is_success", "run_order", "target_share", "time_per_target", "time_to_target"),
     # scripts and notebooks: run suites, read results
     "earthbench.suite": ("MAX_CELLS", "load_suite"),
     "earthbench.store": ("Store", "load_runs"),

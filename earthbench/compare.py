@@ -2,8 +2,10 @@
 
 For a planner author checking a change, or CI guarding one: runs of configuration A and of
 configuration B are paired by scenario digest (same terrain, task and budget). For each
-metric, over the pairs where both values are finite, the table gives both medians, the effect
-size — the median of the differences ``B − A`` with its 95 % bootstrap interval — the mean
+metric, over the pairs where both values are known (infinite counts: a run short of the target
+has an infinite time per target m³, and ranks after every finite one), the table gives both
+medians, the effect size — the median of the differences ``B − A`` with its distribution-free
+95 % interval (:func:`earthbench.stats.median_ci`; none below 6 pairs) — the mean
 difference, and the two-sided Wilcoxon signed-rank test (:func:`earthbench.stats.wilcoxon_p`,
 zero differences dropped). The p-values are Holm-adjusted across the metrics of the table
 (family-wise error ≤ alpha), and the verdict uses the adjusted value. Success is compared
@@ -26,7 +28,8 @@ import numpy as np
 import pandas as pd
 
 from .errors import EarthbenchError
-from .stats import bootstrap_ci, holm, mcnemar_p, min_wilcoxon_p, wilcoxon_p
+from .stats import (INTERVAL_NOTE, holm, mcnemar_p, median_ci, min_separating_n, min_wilcoxon_p, paired_differences,
+                    separation_note, wilcoxon_p)
 
 #: +1 where higher is better, −1 where lower is better.
 DIRECTION = {
@@ -47,7 +50,9 @@ class CompareError(EarthbenchError):
 
 @dataclass(frozen=True)
 class Selector:
-    """``PLANNER[@VERSION][#CONFIG_HASH_PREFIX]``; None parts match anything."""
+    """``PLANNER[@VERSION][#CONFIG_HASH_PREFIX]`` or ``LABEL[@VERSION]`` (e.g. ``greedy[closed_loop]@1.1``,
+    :mod:`earthbench.labels`); None parts match anything. A planner name that is also the label of one
+    of its configurations (the one at its defaults) names that configuration."""
 
     planner: str | None = None
     version: str | None = None
@@ -58,30 +63,40 @@ class Selector:
         if not text:
             return cls()
         rest, _, config = text.partition("#")
-        planner, _, version = rest.rpartition("@") if "@" in rest else (rest, "", "")
+        planner, _, version = rest.rpartition("@") if "@" in rest.rpartition("]")[2] else (rest, "", "")
         return cls(planner or None, version or None, config or None)
 
     def pick(self, runs: pd.DataFrame, side: str) -> pd.DataFrame:
         """The runs of exactly one (planner, version, config); an error lists the choices otherwise."""
+        from .labels import config_labels
+
+        names = config_labels(runs)
+        label = pd.Series([names.get((str(p), str(c)), str(p)) for p, c in zip(runs["planner"], runs["config_hash"])],
+                          index=runs.index, dtype=object)
         m = pd.Series(True, index=runs.index)
         if self.planner is not None:
-            m &= runs["planner"] == self.planner
+            m &= (runs["planner"] == self.planner) | (label == self.planner)
         if self.version is not None:
             m &= runs["planner_version"].astype(str) == self.version
         if self.config is not None:
             m &= runs["config_hash"].astype(str).str.startswith(self.config)
-        sel = runs[m]
-        keys = sorted(
-            {(r.planner, str(r.planner_version), r.config_hash) for r in sel[["planner", "planner_version", "config_hash"]].itertuples()}
-        )
-        choices = sorted({f"{p}@{v}#{c[:8]}" for p, v, c in runs[["planner", "planner_version", "config_hash"]].itertuples(index=False)})
+
+        def keys_of(mask: pd.Series) -> list[tuple[str, str, str, str]]:
+            sub = runs[mask]
+            return sorted({(str(p), str(v), str(c), str(lab)) for p, v, c, lab
+                           in zip(sub["planner"], sub["planner_version"], sub["config_hash"], label[mask])})
+
+        keys = keys_of(m)
+        if len(keys) > 1 and self.planner is not None and (m & (label == self.planner)).any():
+            m &= label == self.planner  # the name is also a configuration's label: that configuration
+            keys = keys_of(m)
         if not keys:
-            raise CompareError(f"side {side}: no runs match {self}; stored configurations: {', '.join(choices) or '(none)'}")
+            choices = ", ".join(_choice(k) for k in keys_of(pd.Series(True, index=runs.index))) or "(none)"
+            raise CompareError(f"side {side}: no runs match {self}; stored configurations: {choices}")
         if len(keys) > 1:
-            found = ", ".join(f"{p}@{v}#{c[:8]}" for p, v, c in keys)
-            raise CompareError(f"side {side}: {self} matches several configurations ({found}); "
-                               f"name one as PLANNER@VERSION#CONFIG with --{side.lower()}")
-        return sel
+            raise CompareError(f"side {side}: {self} matches several configurations: {', '.join(_choice(k) for k in keys)}; "
+                               f"name one with --{side.lower()} LABEL@VERSION or PLANNER@VERSION#CONFIG")
+        return runs[m].assign(config_label=keys[0][3])
 
     def __str__(self) -> str:
         s = self.planner or "*"
@@ -116,9 +131,15 @@ class Comparison:
         return [m for m in metrics if m in worse]
 
 
+def _choice(key: tuple[str, str, str, str]) -> str:
+    planner, version, config, label = key
+    return f"{label}@{version} (#{config[:8]})"
+
+
 def _label(runs: pd.DataFrame) -> str:
     r = runs.iloc[0]
-    return f"{r['planner']} {r['planner_version']} [{str(r['config_hash'])[:8]}]"
+    name = r["config_label"] if "config_label" in runs else r["planner"]
+    return f"{name} {r['planner_version']} (#{str(r['config_hash'])[:8]})"
 
 
 def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT_METRICS, alpha: float = 0.05) -> Comparison:
@@ -137,16 +158,16 @@ def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT
             continue
         x = pd.to_numeric(a1[m], errors="coerce").to_numpy(dtype=float)
         y = pd.to_numeric(b1[m], errors="coerce").to_numpy(dtype=float)
-        ok = np.isfinite(x) & np.isfinite(y)
+        ok = ~np.isnan(x) & ~np.isnan(y)
         n = int(ok.sum())
-        d = y[ok] - x[ok]
+        d = paired_differences(x[ok], y[ok])
         stat, p = wilcoxon_p(d) if n else (math.nan, math.nan)
-        lo, hi = bootstrap_ci(d, "median") if n else (math.nan, math.nan)
+        lo, hi = median_ci(d) if n else (math.nan, math.nan)
         rows.append({
             "metric": m, "pairs": n, "nonzero": int((d != 0).sum()), "dropped": int(len(shared) - n),
             "median_a": float(np.median(x[ok])) if n else math.nan, "median_b": float(np.median(y[ok])) if n else math.nan,
             "median_diff": float(np.median(d)) if n else math.nan, "median_diff_lo": lo, "median_diff_hi": hi,
-            "mean_diff": float(d.mean()) if n else math.nan, "wilcoxon_w": stat, "p_value": p,
+            "mean_diff": _mean(d) if n else math.nan, "wilcoxon_w": stat, "p_value": p,
         })
     table = pd.DataFrame(rows, columns=["metric", "pairs", "nonzero", "dropped", "median_a", "median_b", "median_diff",
                                         "median_diff_lo", "median_diff_hi", "mean_diff", "wilcoxon_w", "p_value"])
@@ -163,9 +184,17 @@ def compare(a: pd.DataFrame, b: pd.DataFrame, metrics: tuple[str, ...] = DEFAULT
         if ca != cb or len(ca) > 1:
             note = (f"solve times come from different CPU models (A: {', '.join(sorted(ca)) or '?'}; "
                     f"B: {', '.join(sorted(cb)) or '?'}): their differences mix planner and machine")
+    notes = _power_notes(table, alpha)
+    if len(shared) < min_separating_n(alpha):
+        notes.insert(0, separation_note(len(shared), alpha))
     return Comparison(_label(a), _label(b), len(shared), int(a["scenario_digest"].nunique() - len(shared)),
-                      int(b["scenario_digest"].nunique() - len(shared)), table, success, note, alpha,
-                      _power_notes(table, alpha))
+                      int(b["scenario_digest"].nunique() - len(shared)), table, success, note, alpha, notes)
+
+
+def _mean(d: np.ndarray) -> float:
+    """Mean difference; NaN where infinities of both signs meet (no mean exists)."""
+    with np.errstate(invalid="ignore"):
+        return float(d.mean())
 
 
 def _verdict(r: Any, alpha: float) -> str:
@@ -175,6 +204,8 @@ def _verdict(r: Any, alpha: float) -> str:
         return "no significant difference"
     sign = DIRECTION.get(r.metric, 0)
     toward = r.median_diff if r.median_diff != 0 else r.mean_diff
+    if math.isnan(toward):
+        return "no direction"
     if sign == 0:
         return "B higher" if toward > 0 else "B lower"
     return "B better" if toward * sign > 0 else "B worse"
@@ -215,8 +246,9 @@ def _lines(c: Comparison) -> tuple[list[str], str, list[str]]:
             f"{c.pairs} shared scenario(s); {c.only_a} only in A, {c.only_b} only in B (not compared)"]
     succ = (f"success: A {100 * s['rate_a']:.0f}%, B {100 * s['rate_b']:.0f}% — both {s['both']}, only A {s['only_a']}, "
             f"only B {s['only_b']}, neither {s['neither']}; exact McNemar p = {s['p_value']:.3g}")
-    tail = ["(−n: pairs dropped because a value is missing or infinite, e.g. no plan or nothing loaded; "
-            "p-values Holm-adjusted across the metrics of the table; the interval is a 95 % bootstrap interval)"]
+    tail = ["(−n: pairs dropped because a value is missing, e.g. no plan; an infinite time (short of the target, or nothing "
+            "loaded) is kept and ranks last; p-values Holm-adjusted across the metrics of the table; "
+            f"{INTERVAL_NOTE}: here of the median difference)"]
     tail += [f"warning: {n}" for n in c.notes]
     if c.cpu_note:
         tail.append(f"note: {c.cpu_note}")

@@ -4,17 +4,23 @@ A planner tuned on the public seeds should do about as well on draws nobody saw 
 (docs/sealed-evaluation.md); one that recognises public scenarios (or was tuned to them
 alone) does worse. For every planner configuration with runs on both the public suite and
 at least one sealed draw of it (``SUITE~sealed-C``, :mod:`earthbench.seal`; every draw pooled),
-:func:`gap_table` gives, per metric, the public and sealed figures with their 95 % bootstrap
-intervals and the gap sealed − public with its own interval (a two-sample percentile
-bootstrap). A planner is **flagged** on a metric when its sealed figures fall outside the
-public figure's interval: the sealed interval and the public one do not overlap. (A sealed
-point estimate alone leaves an honest planner's interval about one time in six on a median of
-30 runs: two samples of one planner differ by chance; disjoint intervals do not, at about
-the 1 % level.)
+:func:`gap_table` gives, per metric, the public and sealed figures with the board's 95 %
+intervals (:mod:`earthbench.stats`: exact Clopper–Pearson for the success rate, the
+distribution-free order-statistic interval for the median time per target m³, none where n is
+too small; a BCa bootstrap for the mean volume ratio) and the gap sealed − public with its own
+interval. For the rate and the median the gap's interval joins the two samples' 97.5 %
+intervals (sealed low − public high, sealed high − public low): both cover with probability at
+least 0.975² > 0.95, so the gap's interval covers at least 95 % without assuming a
+distribution; for the mean it is a two-sample percentile bootstrap. A planner is **flagged**
+on a metric when its sealed figures fall outside the public figure's interval: the sealed
+interval and the public one do not overlap. (A sealed point estimate alone leaves an honest
+planner's interval about one time in six on a median of 30 runs: two samples of one planner
+differ by chance; disjoint intervals do not, at about the 1 % level.)
 
 Metrics (each as the leaderboard computes it): ``success_rate`` (per scenario, a scenario
-without a run counts as failed), ``time_per_target_m3`` (median over valid runs) and
-``volume_ratio`` (mean over valid runs).
+without a run counts as failed), ``time_per_target_m3`` (median over valid runs, a run short of
+the target counting as ∞, as it ranks: :mod:`earthbench.scoring`) and ``volume_ratio`` (mean
+over valid runs).
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from .seal import public_name
-from .stats import CONFIDENCE, N_RESAMPLES, SEED, STATISTICS, bootstrap_ci
+from .stats import CONFIDENCE, N_RESAMPLES, SEED, STATISTICS, bootstrap_ci, median_ci, rate_ci
 
 KEY = ["planner", "planner_version", "config_hash"]
 #: metric → (statistic, what the sample is)
@@ -38,23 +44,44 @@ COLUMNS = [*KEY, "public_suite", "draws", "metric", "public", "public_lo", "publ
 
 def _sample(runs: pd.DataFrame, metric: str, of: int) -> np.ndarray:
     """The values a metric is a statistic of: per-scenario successes padded to ``of`` scenarios,
-    or the finite values of the valid runs."""
+    or the values of the valid runs (a median keeps ∞, a run short of the target: dropping it
+    would reward loading less; a mean only the finite ones)."""
     if metric == "success_rate":
         per = runs.groupby("scenario_digest")["success"].max().astype(float).to_numpy()
         return np.concatenate([per, np.zeros(max(of - len(per), 0))])
     ok = runs[runs["reason"] == "ok"]
     x = pd.to_numeric(ok[metric], errors="coerce").to_numpy(dtype=float) if metric in ok else np.array([])
-    return x[np.isfinite(x)]
+    return x[~np.isnan(x)] if METRICS[metric] == "median" else x[np.isfinite(x)]
+
+
+def interval(x: np.ndarray, metric: str, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """The board's interval of ``metric`` over the sample ``x`` (NaN where n allows none)."""
+    if not len(x):
+        return math.nan, math.nan
+    if metric == "success_rate":
+        return rate_ci(int(round(float(x.sum()))), len(x), confidence)
+    if METRICS[metric] == "median":
+        return median_ci(x, confidence)
+    return bootstrap_ci(x, METRICS[metric]) if confidence == CONFIDENCE else (math.nan, math.nan)
 
 
 def _stat(x: np.ndarray, statistic: str) -> float:
     return float(STATISTICS[statistic](x)) if len(x) else math.nan
 
 
-def gap_ci(public: np.ndarray, sealed: np.ndarray, statistic: str) -> tuple[float, float]:
-    """95 % percentile-bootstrap interval of ``statistic(sealed) − statistic(public)`` (two independent samples)."""
+def gap_ci(public: np.ndarray, sealed: np.ndarray, metric: str) -> tuple[float, float]:
+    """95 % interval of the metric's sealed − public difference (two independent samples): the
+    two 97.5 % intervals joined for a rate or a median, a percentile bootstrap for a mean."""
     from scipy.stats import bootstrap
 
+    statistic = METRICS[metric]
+    if statistic == "median" or metric == "success_rate":
+        one_side = 1 - (1 - CONFIDENCE) / 2
+        p_lo, p_hi = interval(public, metric, one_side)
+        s_lo, s_hi = interval(sealed, metric, one_side)
+        with np.errstate(invalid="ignore"):
+            lo, hi = float(np.float64(s_lo) - p_hi), float(np.float64(s_hi) - p_lo)
+        return (lo, hi) if not (math.isnan(lo) or math.isnan(hi)) else (math.nan, math.nan)
     if len(public) < 2 or len(sealed) < 2:
         return math.nan, math.nan
     if np.all(public == public[0]) and np.all(sealed == sealed[0]):
@@ -94,10 +121,10 @@ def gap_table(runs: pd.DataFrame, members: pd.DataFrame) -> pd.DataFrame:
             b = np.concatenate([_sample(sea[sea["suite"] == d], metric, int(sizes.get(d, 0))) for d in draws]) \
                 if metric == "success_rate" else _sample(sea, metric, of_sea)
             p, s = _stat(a, statistic), _stat(b, statistic)
-            p_lo, p_hi = bootstrap_ci(a, statistic) if len(a) else (math.nan, math.nan)
-            s_lo, s_hi = bootstrap_ci(b, statistic) if len(b) else (math.nan, math.nan)
-            g_lo, g_hi = gap_ci(a, b, statistic)
-            flagged = bool(all(map(math.isfinite, (p_lo, p_hi, s_lo, s_hi))) and (s_hi < p_lo or s_lo > p_hi))
+            p_lo, p_hi = interval(a, metric)
+            s_lo, s_hi = interval(b, metric)
+            g_lo, g_hi = gap_ci(a, b, metric)
+            flagged = bool(not any(map(math.isnan, (p_lo, p_hi, s_lo, s_hi))) and (s_hi < p_lo or s_lo > p_hi))
             rows.append({**dict(zip(KEY, key)), "public_suite": public, "draws": len(draws), "metric": metric,
                          "public": p, "public_lo": p_lo, "public_hi": p_hi, "public_n": len(a),
                          "sealed": s, "sealed_lo": s_lo, "sealed_hi": s_hi, "sealed_n": len(b),
@@ -115,7 +142,8 @@ def markdown(table: pd.DataFrame) -> str:
         return ""
     out = ["## Generalisation gap: sealed draws against the public suite", "",
            "Each planner's figures on the public suite and on the sealed draws of it (docs/sealed-evaluation.md), "
-           "95 % bootstrap intervals in brackets; gap = sealed − public. **flagged**: the sealed interval lies "
+           "95 % intervals in brackets (exact for rates, order statistics for medians, – where n is too small); "
+           "gap = sealed − public. **flagged**: the sealed interval lies "
            "outside the public one (they do not overlap). Success rates in %.", ""]
     for public, t in table.groupby("public_suite", sort=True):
         out += [f"### {public} ({int(t['draws'].max())} sealed draw(s))", "",

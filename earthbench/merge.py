@@ -43,7 +43,7 @@ from typing import Any
 from . import identity
 from .errors import StoreError
 from .harness.cases import Case, CaseResult, PlannerRef
-from .store import Store, decompress, stored_steps
+from .store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 
 
@@ -199,6 +199,10 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
         env = {"hostname": e["hostname"], "cpu_model": e["cpu_model"], "cores": e["cores"], "os": e["os"],
                "python": e["python"], "packages": json.loads(e["packages"] or "{}"),
                "project_commit": e["project_commit"], "plugin_commit": e["plugin_commit"]}
+        keys = e.keys()
+        if "earthbench_version" in keys:  # schema 5: the build of the code and the plugin's distribution
+            env["earthbench_version"] = e["earthbench_version"]
+            env["plugin"] = json.loads(e["plugin"]) if e["plugin"] else None
     metrics = json.loads(row["metrics"]) if row["metrics"] else None
     res = CaseResult(
         key=case.key, scenario_id=row["scenario_id"], reason=row["reason"], solve_time_s=row["solve_time_s"],
@@ -209,6 +213,7 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
         finished_at=row["finished_at"] or "", environment=env, steps=stored_steps(row),
         isolation=(row["isolation"] if "isolation" in row.keys() else None) or "none",
         processes=row["processes"] if "processes" in row.keys() else None,
+        machine_load={c: row[c] for c in LOAD_COLUMNS if c in row.keys()},
         **{k: row[k] for k in ("prepare_s", "prepare_cpu_s") if k in row.keys()},
     )
     return case, res

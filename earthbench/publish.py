@@ -14,7 +14,9 @@
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
 * ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
-  ``scope`` = suite | family | target and ``group``), medians and rates with 95 % bootstrap intervals;
+  ``scope`` = suite | family | target and ``group``), medians and rates with their 95 % intervals
+  (:data:`earthbench.stats.INTERVAL_NOTE`); a table with too few scenarios for any paired test to
+  separate two planners has ``‡`` on its Rank heading and the stamp says so (:func:`earthbench.stats.separation_note`);
 * ``index.html`` — one self-contained page: inline CSS, a small inline script (allowed by a
   content-security policy hash, so no other script can run), tables that sort on a click,
   filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
@@ -54,7 +56,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .aggregate import PRIMARY, RANKING_RULE, REASONS, SCOPES, aggregate, ci_text, latest_versions
+from .aggregate import PRIMARY, RANKING_RULE, RANK_ALPHA, REASONS, SCOPES, aggregate, ci_text, latest_versions
+from .provenance import build_text
+from .stats import INTERVAL_NOTE, min_separating_n, separation_note
 from .profiles import cost_matrix, profile
 
 from .plotting import mpl_text, planner_colours, pyplot
@@ -152,9 +156,10 @@ def slug(text: str) -> str:
 def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> list[dict[str, Any]]:
     """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
 
-    Medians and the success rate carry their 95 % bootstrap interval in brackets; a
-    configuration hash in ``closed`` (closed loop, docs/DESIGN.md §6) is labelled so; a
-    "Prepare s" column (the longest preparation a row's runs used) appears when a row has one.
+    Medians and the success rate carry their 95 % interval in brackets (none where n is too small);
+    a configuration shows its label (:mod:`earthbench.labels`) and hash; one in ``closed`` (closed
+    loop, docs/DESIGN.md §6) is labelled so where the label does not say it already.
+    A "Prepare s" column (the longest preparation a row's runs used) appears when a row has one.
     """
     rows = []
     # the preparation's wall seconds (docs/DESIGN.md §6), in a column of their own when a row has one
@@ -167,26 +172,48 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                 ("Rank", str(r["rank_label"]), r["rank"]),
                 ("Planner", str(r["planner"]), None),
                 ("Version", str(r["planner_version"]), None),
-                ("Config", str(r["config_hash"])[:8] + (" closed-loop" if str(r["config_hash"]) in closed else ""), None),
+                ("Config", _config_cell(r, closed), None),
                 ("Runs", f"{r['runs']}/{r['of']}", r["runs"]),
                 ("Success", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
                  r["success_rate"]),
                 ("Volume ratio (mean ± SD)", vr, r["volume_ratio_mean"]),
                 ("Overshoot m³ (mean)", _f(r["overshoot_m3_mean"], ".2f"), r["overshoot_m3_mean"]),
                 ("Time per target m³, s (median)",
-                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
-                 r["time_per_target_m3_median"]),
+                 ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"])
+                 + (f"; {r['short_of_target']} short" if r["short_of_target"] else ""), r["time_per_target_m3_median"]),
                 ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
                                           r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
                 ("Time per m³, s (median)", _f(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
-                ("Solve s (median)", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
+                ("Solve CPU s (median)", ci_text(r["solve_cpu_median"], r["solve_cpu_lo"], r["solve_cpu_hi"], ".2f"),
+                 r["solve_cpu_median"]),
+                ("Solve wall s (median)", ci_text(r["solve_time_median"], r["solve_time_lo"], r["solve_time_hi"], ".2f"),
                  r["solve_time_median"]),
-                ("Solve s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
+                ("Solve wall s (p90)", _f(r["solve_time_p90"], ".2f"), r["solve_time_p90"]),
                 *((("Prepare s", _f(r["prepare_max"], ".0f"), r["prepare_max"]),) if prepared else ()),
                 *((reason, str(r[f"n_{reason}"]), r[f"n_{reason}"]) for reason in FAILURE_COLUMNS),
             ]
         })
     return rows
+
+
+def _config_cell(r: Any, closed: frozenset[str]) -> str:
+    """The configuration's settings off the defaults (its label without the planner's name, which has its own column) and hash."""
+    label = str(r.get("config_label") or r["planner"])
+    settings = label[len(str(r["planner"])):] if label.startswith(str(r["planner"])) else label
+    text = (f"{settings} " if settings and not settings.startswith("#") else "") + str(r["config_hash"])[:8]
+    return text + (" closed-loop" if str(r["config_hash"]) in closed and "closed_loop" not in label else "")
+
+
+#: The marker on the Rank heading of a table whose scenarios are too few for any paired test to separate two planners.
+UNSEPARABLE = "‡"
+
+
+def mark_unseparable(rows: list[dict[str, Any]], table: pd.DataFrame) -> list[dict[str, Any]]:
+    """``Rank ‡`` on a table that has fewer scenarios than a paired test needs to reach α (every shared rank is then moot)."""
+    if not len(table) or bool(table["separable"].astype(bool).all()):
+        return rows
+    return [{**r, "cells": [((h + " " + UNSEPARABLE) if h == "Rank" else h, text, key) for h, text, key in r["cells"]]}
+            for r in rows]
 
 
 def section_tables(summary: pd.DataFrame, all_versions: bool = False, closed: frozenset[str] = frozenset()) -> dict[str, Any]:
@@ -203,9 +230,9 @@ def section_tables(summary: pd.DataFrame, all_versions: bool = False, closed: fr
         parts = mine(shown[shown["scope"] == scope])
         if parts["group"].nunique() > 1:  # one family (or target) would repeat the suite's table
             for group, g in parts.groupby("group", sort=True):
-                breakdowns.append((f"{word} {group}", table_rows(g, closed)))
+                breakdowns.append((f"{word} {group}", mark_unseparable(table_rows(g, closed), g)))
     history = summary[(summary["scope"] == "suite") & ~summary["latest"].astype(bool)] if not all_versions else summary.iloc[:0]
-    return {"rows": table_rows(main, closed), "breakdowns": breakdowns,
+    return {"rows": mark_unseparable(table_rows(main, closed), main), "breakdowns": breakdowns,
             "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"), closed)}
 
 
@@ -228,6 +255,9 @@ class Stamp:
     n_machines: int = 1
     seeds: str = ""  #: the seeds the table covers when the board was limited to some (``--seeds``): "seed 0", "seeds 0–2"
     isolation: str = ""  #: the fences the table's runs had (docs/isolation.md), with the count of those without
+    builds: list[str] = field(default_factory=list)  #: the builds of earthbench the runs came from (:func:`build_text`)
+    load: str = ""  #: the machine's load around the runs' cases
+    scenarios: int = 0  #: scenarios of the suite's table (for the separation note)
 
     @property
     def mixed(self) -> bool:
@@ -240,11 +270,14 @@ class Stamp:
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
             *([f"scenarios: {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
-            f"project commit: {commits or 'unknown'}",
+            *([f"code: {'; '.join(self.builds)}"] if self.builds else [f"project commit: {commits or 'unknown'}"]),
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
             f"runs: {self.first or '?'} to {self.last or '?'}; generated {self.generated}",
+            *([f"machine load: {self.load}"] if self.load else []),
             PROVENANCE,
             *([f"isolation: {self.isolation}"] if self.isolation else []),
+            *([f"{UNSEPARABLE} {separation_note(self.scenarios, RANK_ALPHA)}"]
+              if 0 < self.scenarios < min_separating_n(RANK_ALPHA) else []),
             *(["† solve-time columns mix machines: compare those figures only between rows from the same machine"] if self.mixed else []),
         ]
 
@@ -296,7 +329,38 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     spots = [c.line() for c in spot_checks if (c.planner, c.version) in versions]
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
-                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds, _isolation(runs))
+                 max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds,
+                 _isolation(runs), builds_of(runs), load_text(runs), int(runs["scenario_digest"].nunique()) if len(runs) else 0)
+
+
+def builds_of(runs: pd.DataFrame) -> list[str]:
+    """Every build of earthbench the runs came from, with the machines that ran it: a board merged from
+    two machines' stores names both builds."""
+    if not len(runs) or "project_commit" not in runs:
+        return []
+    version = runs["earthbench_version"] if "earthbench_version" in runs else pd.Series(None, index=runs.index)
+    key = pd.Series([build_text(v, c) for v, c in zip(version, runs["project_commit"])], index=runs.index)
+    machine = _machine_of(runs)
+    out = []
+    for text, idx in key.groupby(key, sort=True).groups.items():
+        hosts = sorted(set(machine.loc[idx]))
+        out.append(f"{text} on {', '.join(hosts)} ({len(idx)} run{'s' if len(idx) != 1 else ''})")
+    return out
+
+
+def load_text(runs: pd.DataFrame) -> str:
+    """The 1-minute load average around the runs' cases and the most CPU stolen, or "" when none was recorded."""
+    cols = [c for c in ("load_before", "load_after") if c in runs]
+    if not cols:
+        return ""
+    load = pd.concat([pd.to_numeric(runs[c], errors="coerce") for c in cols]).dropna()
+    if not len(load):
+        return "not recorded (runs stored before schema 5)"
+    steal = pd.to_numeric(runs["steal_share"], errors="coerce").dropna() if "steal_share" in runs else pd.Series(dtype=float)
+    n_missing = int(pd.to_numeric(runs[cols[0]], errors="coerce").isna().sum())
+    text = (f"1-minute load average {load.min():.2f}–{load.max():.2f} around the cases (before and after each)"
+            + (f", CPU steal up to {100 * steal.max():.1f} %" if len(steal) else ""))
+    return text + (f"; {n_missing} run(s) without a record" if n_missing else "")
 
 
 def _isolation(runs: pd.DataFrame) -> str:
@@ -401,9 +465,12 @@ def profiles_figure(runs: pd.DataFrame, title: str):
     cpu = runs["cpu_model"].fillna("unknown CPU") if "cpu_model" in runs else pd.Series("unknown CPU", index=runs.index)
     for ax, model in zip(axes[1:], models):
         sub = runs[cpu == model]  # only the planners that ran on this CPU model are compared here
-        c = cost_matrix(sub, "solve_time_s").reindex(columns=sorted(sub["solver"].unique()), fill_value=np.inf)
-        label = "solve time" + (f" — only runs on {model}" if len(models) > 1 else "")
-        _draw_profile(ax, profile(c), colours, "τ (solve time within τ × the best)", label)
+        # the ranked solve-time figure, CPU time, where the runs have it (wall time in stores without it)
+        col = "solve_cpu_s" if "solve_cpu_s" in sub and sub["solve_cpu_s"].notna().any() else "solve_time_s"
+        word = "solve CPU time" if col == "solve_cpu_s" else "solve time"
+        c = cost_matrix(sub, col).reindex(columns=sorted(sub["solver"].unique()), fill_value=np.inf)
+        label = word + (f" — only runs on {model}" if len(models) > 1 else "")
+        _draw_profile(ax, profile(c), colours, f"τ ({word} within τ × the best)", label)
     axes[0].legend(fontsize=7, loc="lower right")
     fig.suptitle(mpl_text(title) + " — failures count as never solved", fontsize=10)
     return fig
@@ -439,13 +506,16 @@ def history_figure(rows: pd.DataFrame, title: str):
             ("success_rate", "success_rate_lo", "success_rate_hi", 100.0, "success rate, %"),
             ("time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", 1.0, "time per target m³, s (median)"))):
         y = rows[col].to_numpy(dtype=float) * scale
-        err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
-        ax.errorbar(x, y, yerr=np.nan_to_num(np.abs(err)), fmt="o-", capsize=3)
+        with np.errstate(invalid="ignore"):
+            err = np.vstack([y - rows[lo].to_numpy(dtype=float) * scale, rows[hi].to_numpy(dtype=float) * scale - y])
+        y = np.where(np.isfinite(y), y, np.nan)  # a median short of the target (∞) is not drawn
+        err = np.where(np.isfinite(err), np.abs(err), 0.0)  # nor an interval without an end (none at small n, or ∞)
+        ax.errorbar(x, y, yerr=err, fmt="o-", capsize=3)
         ax.set_xticks(x, [mpl_text(t) for t in labels], fontsize=8)
         ax.set_xlabel("version")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-    fig.suptitle(mpl_text(title) + " — by version, 95 % bootstrap intervals", fontsize=10)
+    fig.suptitle(mpl_text(title) + " — by version, 95 % intervals (exact for rates, order statistics for medians)", fontsize=10)
     return fig
 
 
@@ -486,7 +556,7 @@ def terrain_figure(scenario_json: str, plan_json: str, title: str):
 
 #: Columns the run figures read (the frame shipped to a figure worker).
 FIGURE_COLUMNS = ["scenario_digest", "family", "solver", "reason", "success", "makespan_s", "loaded_volume", "time_per_m3",
-                  PRIMARY, "solve_time_s", "cpu_model"]
+                  PRIMARY, "solve_time_s", "solve_cpu_s", "cpu_model"]
 
 
 def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
@@ -500,7 +570,7 @@ def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
 
 class Renderer:
     """Figure jobs drawn in parallel worker processes (fork on Linux) while the caller goes on, e.g.
-    computing the tables' bootstrap intervals; in this process when there is one core."""
+    computing the tables' intervals and paired tests; in this process when there is one core."""
 
     def __init__(self, workers: int | None = None):
         import multiprocessing as mp
@@ -601,9 +671,11 @@ FILTERS = {"family": "family", "planner": "planner", "version": "planner_version
 RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner"), ("reason", "Reason"),
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
-               ("time_per_target_m3_ratio", "× bound"), ("solve_time_s", "Solve s"), ("violation_rules", "Violations"),
-               ("cpu_model", "CPU"), ("hostname", "Host"), ("isolation", "Isolation")]
-_NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_time_s"}
+               ("time_per_target_m3_ratio", "× bound"), ("solve_cpu_s", "Solve CPU s"), ("solve_time_s", "Solve wall s"),
+               ("load_before", "Load before"), ("violation_rules", "Violations"), ("cpu_model", "CPU"), ("hostname", "Host"),
+               ("isolation", "Isolation")]
+_NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio", "solve_cpu_s", "solve_time_s",
+                "load_before"}
 
 
 def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
@@ -799,7 +871,8 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
         f"<style>{_CSS}{REPLAY_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f'<p class="intro">Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. '
-        "Brackets hold 95 % bootstrap confidence intervals. Invalid plans are counted, never ranked. "
+        f"{e(INTERVAL_NOTE)}. {UNSEPARABLE} on a Rank heading: too few scenarios for any paired test to separate two planners. "
+        "Invalid plans are counted, never ranked. "
         'Tables: <a href="summary.csv">summary.csv</a>; every run: <a href="runs.csv">runs.csv</a>.</p>',
     ]
     if len(sections) > 1 or (sections and viewer):
@@ -931,7 +1004,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
             sec["replay_runs"] = [{"id": int(r["id"]), "solver": r["solver"],
                                    "what": "success" if bool(r["success"]) else ("valid" if r["reason"] == "ok" else str(r["reason"]))}
                                   for _, r in mine.sort_values(["solver", "id"]).iterrows()]
-        # the tables (bootstrap intervals, paired tests) while the workers draw
+        # the tables (intervals, paired tests) while the workers draw
         summary = aggregate(runs, members=members, scopes=SCOPES,
                             all_versions=all_versions)
         result.runs, result.summary = runs, summary
@@ -986,13 +1059,13 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         "# earthbench leaderboard",
         "",
         f"Generated {generated} by `earthbench leaderboard`. Invalid plans are counted, never ranked; "
-        "`–` means no value (no valid run). Brackets hold 95 % bootstrap confidence intervals "
-        "(zero width where every run agrees, as in a 100 % success rate). Columns: runs "
+        f"`–` means no value (no valid run). {INTERVAL_NOTE}. {UNSEPARABLE} on a Rank heading: too few scenarios for "
+        "any paired test to separate two planners. Columns: runs "
         "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
         "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
-        "the dump that reached min(loaded, target), divided by that volume) over valid runs that loaded something, "
-        "with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
-        "solve time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
+        "the dump that reached the target, divided by the target; ∞ for a run short of it, and \"N short\" counts "
+        "those) over valid runs, with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
+        "solve CPU time (ranked) and wall time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
         "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).",
         "",
     ]

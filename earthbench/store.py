@@ -18,8 +18,10 @@ pandas. Tables:
   run, and its scenarios' ids and digests: how a suite finds its runs, including those stored
   while running another suite with the same scenarios (``standard`` includes ``paper-switch``).
 * ``planner_configs`` — (name, version, config hash) → the full configuration as JSON.
-* ``environments`` — CPU model, cores, OS, Python and package versions, git commits of the
-  project and of the planner's plugin, hostname; deduplicated by a hash of their content.
+* ``environments`` — CPU model, cores, OS, Python and package versions, the build of earthbench
+  (version and the commit it was built from, :mod:`earthbench.provenance`) and of the planner's
+  plugin (its distribution and source commit, or a plugin file's SHA-256), hostname;
+  deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 
 Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
@@ -31,11 +33,13 @@ The schema version is ``PRAGMA user_version`` and the file is tagged with
 store from an older schema opened for writing is brought up to date by the named steps of
 :data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
 ``isolation``, the fences a case ran in (docs/isolation.md), and ``processes``, the most
-processes it held, from its cgroup; version 5 ``prepare_s`` and ``prepare_cpu_s``, the
-planner's preparation); read-only, it is read as it is (a version-1 store's runs
-read as open-loop runs, a store before version 3 as public runs, runs stored before version 4
-as ``isolation: none``: they ran with per-process fences; runs stored before version 5 as runs
-without a preparation).
+processes it held, from its cgroup; version 5 the machine's load around each case — ``load_before``,
+``load_after``, ``steal_share`` — and the build of the code, ``environments.earthbench_version``
+and ``environments.plugin``: the plugin's distribution, version and source commit as JSON);
+read-only, it is read as it is (a version-1 store's runs read as open-loop runs, a store before
+version 3 as public runs, runs stored before version 4 as ``isolation: none``: they ran with
+per-process fences, runs before version 5 without load or build; version 6 ``prepare_s`` and
+``prepare_cpu_s``, the planner's preparation, NULL before it).
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ from urllib.parse import quote
 from typing import TYPE_CHECKING, Any, Protocol, overload
 
 from .errors import StoreError
-from .scoring import is_success
+from .scoring import is_success, restate
 from .world import Scenario
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -75,7 +79,11 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     )),
     ("4: the isolation stamp and process count of a run",
      ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
-    ("5: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
+    ("5: the machine's load around each case and the build of the code that ran it (issue 35)", (
+        "ALTER TABLE runs ADD COLUMN load_before REAL", "ALTER TABLE runs ADD COLUMN load_after REAL",
+        "ALTER TABLE runs ADD COLUMN steal_share REAL", "ALTER TABLE environments ADD COLUMN earthbench_version TEXT",
+        "ALTER TABLE environments ADD COLUMN plugin TEXT")),
+    ("6: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
      ("ALTER TABLE runs ADD COLUMN prepare_s REAL", "ALTER TABLE runs ADD COLUMN prepare_cpu_s REAL")),
 )
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
@@ -83,6 +91,9 @@ APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
 #: Metrics kept as real columns of ``runs`` (all metrics are also in the ``metrics`` JSON).
+#: The machine's load around a case (:mod:`earthbench.harness.load`), columns of ``runs`` since version 3.
+LOAD_COLUMNS = ("load_before", "load_after", "steal_share")
+
 METRIC_COLUMNS = (
     "valid", "volume_ratio", "loaded_volume", "makespan_s", "time_per_m3", "time_per_m3_ratio",
     "digs", "mean_bucket_fill", "travel_m",
@@ -93,7 +104,7 @@ CREATE TABLE environments (
     id INTEGER PRIMARY KEY,
     hash TEXT NOT NULL UNIQUE,
     hostname TEXT, cpu_model TEXT, cores INTEGER, os TEXT, python TEXT,
-    packages TEXT, project_commit TEXT, plugin_commit TEXT
+    packages TEXT, project_commit TEXT, plugin_commit TEXT, earthbench_version TEXT, plugin TEXT
 );
 CREATE TABLE planner_configs (
     id INTEGER PRIMARY KEY,
@@ -134,6 +145,7 @@ CREATE TABLE runs (
     exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
     sealed INTEGER NOT NULL DEFAULT 0,
     isolation TEXT, processes INTEGER,
+    load_before REAL, load_after REAL, steal_share REAL,
     prepare_s REAL, prepare_cpu_s REAL,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
@@ -358,6 +370,7 @@ class Store:
                     "steps": _json([list(s) for s in result.steps]) if result.steps is not None else None,
                     "isolation": result.isolation, "processes": result.processes,
                     "sealed": int(bool(sc.meta.get("sealed"))),
+                    **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                     "prepare_s": result.prepare_s, "prepare_cpu_s": result.prepare_cpu_s,
                 }
                 cols = ", ".join(row)
@@ -410,10 +423,11 @@ class Store:
             return None
         h = hashlib.sha256(_json(env).encode()).hexdigest()
         self.db.execute(
-            "INSERT OR IGNORE INTO environments (hash, hostname, cpu_model, cores, os, python, packages, project_commit, plugin_commit)"
-            " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT OR IGNORE INTO environments (hash, hostname, cpu_model, cores, os, python, packages, project_commit,"
+            " plugin_commit, earthbench_version, plugin) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (h, env.get("hostname"), env.get("cpu_model"), env.get("cores"), env.get("os"), env.get("python"),
-             _json(env.get("packages", {})), env.get("project_commit"), env.get("plugin_commit")),
+             _json(env.get("packages", {})), env.get("project_commit"), env.get("plugin_commit"), env.get("earthbench_version"),
+             _json(env["plugin"]) if env.get("plugin") else None),
         )
         return self.db.execute("SELECT id FROM environments WHERE hash=?", (h,)).fetchone()[0]
 
@@ -532,9 +546,13 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
     held, from its cgroup) and the environment:
     ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
-    ``project_commit``, ``plugin_commit``, and ``sealed`` (a run of a sealed draw,
-    :mod:`earthbench.seal`). Metrics are NaN for runs without a plan (timeout,
-    memory, error, crashed); ``time_per_m3`` is ``inf`` when a plan loaded nothing.
+    ``project_commit`` (the commit the installed earthbench was built from, ``+dirty`` when its
+    tree had changes), ``plugin_commit``, ``sealed`` (a run of a sealed draw, :mod:`earthbench.seal`),
+    ``earthbench_version``, ``plugin`` (JSON text: the planner's distribution, version and source
+    commit), and the machine's load around the case: ``load_before``, ``load_after``, ``steal_share``
+    (missing in stores written before schema version 5). Metrics are NaN for runs without a plan
+    (timeout, memory, error, crashed); ``time_per_m3`` and ``time_per_target_m3`` are ``inf`` when a
+    plan loaded nothing or fell short of the target.
     """
     import pandas as pd
 
@@ -543,6 +561,9 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         view = _suite_view(store, suite) if suite else None
         sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
         stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
+        have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
+        newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
+                           *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
         prep = ", ".join(f"r.{c}" if c in _columns(store.db, "runs") else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
         rows = store.db.execute(
             f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
@@ -550,7 +571,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
                       r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
                       r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
                       {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit, {sealed}
+                      e.project_commit, e.plugin_commit, {sealed}, {newer}
                FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
                            LEFT JOIN environments e ON e.id = r.environment_id
                ORDER BY r.id"""
@@ -563,13 +584,13 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
             "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
-            "plugin_commit", "sealed"]
+            "plugin_commit", "sealed", *LOAD_COLUMNS, "earthbench_version", "plugin"]
     metric_names: list[str] = []
     records = []
     for r in rows:
         d = {k: r[k] for k in head}
         d["success"] = bool(r["success"])
-        metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+        metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
         if view is not None:
             ver, members = view
             m = members.get(r["scenario_digest"])

@@ -127,6 +127,10 @@ def differences(row: Any, judged: Judgement) -> list[str]:
         stored = json.loads(row["metrics"]) if row["metrics"] else None
     except ValueError:
         stored = "unreadable"
+    if isinstance(stored, dict):
+        from .scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
+
+        restate(stored)  # a store written under the rule before issue 35 is not a tampered one
     fresh = judged.metrics
     if not isinstance(stored, dict) or fresh is None:
         if not (stored is None and fresh is None):
@@ -291,6 +295,10 @@ class SpotCheck:
     machine: str                        #: where the sample was rerun
     stored_machines: tuple[str, ...]    #: where the stored runs had run
     checked_at: str
+    cpu_ratios: tuple[float, ...] = ()  #: CPU time here / stored CPU time, per run with both
+    load_stored: tuple[float, ...] = ()  #: the 1-minute load averages recorded around the stored runs
+    load_here: tuple[float, ...] = ()    #: and around their reruns
+    steal: float | None = None           #: the largest CPU steal share of the reruns
 
     @property
     def n(self) -> int:
@@ -301,11 +309,18 @@ class SpotCheck:
         return statistics.median(self.ratios) if self.ratios else None
 
     def line(self) -> str:
-        r = self.ratios
-        ratio = (f"solve time here / stored: median {self.ratio_median:.2f} ({min(r):.2f}–{max(r):.2f})" if r
-                 else "no solve times to compare")
+        """One line: agreement, the re-timings as ratios (wall and CPU), and the load both were measured under."""
+        def ratios(name: str, r: tuple[float, ...]) -> str:
+            return f"{name} here / stored: median {statistics.median(r):.2f} ({min(r):.2f}–{max(r):.2f})" if r else ""
+
+        def load(values: tuple[float, ...]) -> str:
+            return f"{min(values):.2f}–{max(values):.2f}" if values else "not recorded"
+
+        timing = "; ".join(t for t in (ratios("solve wall time", self.ratios), ratios("CPU time", self.cpu_ratios)) if t)
+        context = (f" (load average {load(self.load_here)} here, {load(self.load_stored)} when stored"
+                   + (f"; CPU steal up to {100 * self.steal:.1f} % here" if self.steal else "") + ")")
         return (f"{self.planner} {self.version}: {self.n} run(s) rerun on {self.machine} ({self.checked_at}); "
-                f"referee figures agree {self.agree}/{self.n}; {ratio}")
+                f"referee figures agree {self.agree}/{self.n}; " + (timing + context if timing else "no solve times to compare"))
 
 
 def machine_label(env: dict[str, Any] | Any) -> str:
@@ -371,6 +386,10 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     for key in refs:
         runs = [(c, by_key[c.key]) for c in cases if (c.planner.name, c.planner.version, c.planner.config_hash) == key]
         agree, ratios, bad = 0, [], []
+        cpu_ratios: list[float] = []
+        load_stored: list[float] = []
+        load_here: list[float] = []
+        steal: list[float] = []
         for case, row in runs:
             res = fresh.get(case.key)
             if res is None:
@@ -385,8 +404,15 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
                 agree += 1
             if row["solve_time_s"] and res.solve_time_s is not None:
                 ratios.append(res.solve_time_s / row["solve_time_s"])
+            if row["solve_cpu_s"] and res.solve_cpu_s is not None:
+                cpu_ratios.append(res.solve_cpu_s / row["solve_cpu_s"])
+            load_stored += [float(row[c]) for c in ("load_before", "load_after") if c in row.keys() and row[c] is not None]
+            load_here += [float(v) for c in ("load_before", "load_after") if (v := res.machine_load.get(c)) is not None]
+            if res.machine_load.get("steal_share") is not None:
+                steal.append(float(res.machine_load["steal_share"]))
         out.append(SpotCheck(key[0], key[1], key[2], tuple(r["id"] for _, r in runs), agree, tuple(ratios), tuple(bad), here,
-                             tuple(sorted({stored_env.get(r["environment_id"], "unknown machine") for _, r in runs})), now))
+                             tuple(sorted({stored_env.get(r["environment_id"], "unknown machine") for _, r in runs})), now,
+                             tuple(cpu_ratios), tuple(load_stored), tuple(load_here), max(steal) if steal else None))
     return sorted(out, key=lambda s: (s.planner, s.version, s.config_hash))
 
 
@@ -402,11 +428,15 @@ def record_spot_checks(store: Store, checks: Iterable[SpotCheck]) -> None:
         with store.db:
             store.db.execute("BEGIN IMMEDIATE")
             store.db.execute(_SPOT_TABLE)
+            if "context" not in {r[1] for r in store.db.execute("PRAGMA table_info(spot_checks)")}:
+                store.db.execute("ALTER TABLE spot_checks ADD COLUMN context TEXT")  # CPU ratios and load (issue 35)
             store.db.executemany(
                 "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
-                "disagreements, machine, stored_machines) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "disagreements, machine, stored_machines, context) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 [(c.checked_at, c.planner, c.version, c.config_hash, json.dumps(c.run_ids), c.agree, json.dumps(c.ratios),
-                  json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines)) for c in checks])
+                  json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines),
+                  json.dumps({"cpu_ratios": c.cpu_ratios, "load_stored": c.load_stored, "load_here": c.load_here, "steal": c.steal}))
+                 for c in checks])
     except sqlite3.OperationalError as exc:
         raise StoreError(store._explain(exc)) from None
 
@@ -418,9 +448,14 @@ def latest_spot_checks(store: Store) -> list[SpotCheck]:
     rows = store.db.execute(
         "SELECT * FROM spot_checks WHERE id IN (SELECT MAX(id) FROM spot_checks GROUP BY planner, planner_version, config_hash) "
         "ORDER BY planner, planner_version, config_hash").fetchall()
-    return [SpotCheck(r["planner"], r["planner_version"], r["config_hash"], tuple(json.loads(r["run_ids"])), r["agree"],
-                      tuple(json.loads(r["ratios"])), tuple(json.loads(r["disagreements"])), r["machine"],
-                      tuple(json.loads(r["stored_machines"])), r["checked_at"]) for r in rows]
+    out = []
+    for r in rows:
+        ctx = json.loads(r["context"] or "{}") if "context" in r.keys() else {}
+        out.append(SpotCheck(r["planner"], r["planner_version"], r["config_hash"], tuple(json.loads(r["run_ids"])), r["agree"],
+                             tuple(json.loads(r["ratios"])), tuple(json.loads(r["disagreements"])), r["machine"],
+                             tuple(json.loads(r["stored_machines"])), r["checked_at"], tuple(ctx.get("cpu_ratios", ())),
+                             tuple(ctx.get("load_stored", ())), tuple(ctx.get("load_here", ())), ctx.get("steal")))
+    return out
 
 
 # -- suite identity and sealed draws ----------------------------------------------------------

@@ -1,14 +1,12 @@
 """The built-in metric plugin ``core``: the metrics of one run, from the referee's verdict
 (docs/DESIGN.md §7).
 
-``time_to_target_s`` — the time at which the truck holds what the plan counts for: the end of
-the first dump at which the referee's cumulative loaded volume (``Verdict.load_curve``) reaches
-``min(loaded, target)``. ``time_per_target_m3`` divides it by that volume. Unlike
-``time_per_m3`` (makespan / loaded), loading past the target cannot lower it: volume beyond the
-target is not counted, and the dumps that put it there end after the target was reached. When
-the plan loads exactly the target it equals ``time_per_m3`` minus any time after the last
-dump (none for a plan that ends with its last dump). Nothing loaded: ``time_to_target_s`` is
-the makespan and ``time_per_target_m3`` is infinite, like ``time_per_m3``.
+``time_to_target_s`` — the end of the first dump after which the truck holds the target
+(:func:`earthbench.scoring.time_to_target`, the rule's one definition); infinite for a plan
+that never gets there. ``time_per_target_m3`` divides it by the target. Loading past the target
+cannot lower it (the dumps after the target end later), and stopping short of it can only raise
+it to infinity, so no prefix of a plan scores better than the plan (docs/metrics.md). When the
+plan loads exactly the target it equals ``time_per_m3`` minus any time after the last dump.
 
 ``time_per_m3_lower_bound`` — why it holds: every m³ loaded into the truck was dug and dumped.
 A bucket carries at most ``C`` m³, so loading ``V`` takes at least ``V / C`` digs and as many
@@ -35,10 +33,10 @@ from typing import Any
 
 from earthbench.plan import Plan
 from earthbench.referee import Verdict
+from earthbench.scoring import time_per_target
+from earthbench.scoring import time_to_target as scoring_time_to_target
 from earthbench.world import Scenario
 
-#: Relative slack when matching the cumulative loaded volume to min(loaded, target): float sums only.
-_SUM_SLACK = 1e-9
 
 
 def lower_bound_time_per_m3(scenario: Scenario) -> float:
@@ -62,17 +60,11 @@ def lower_bound_time_per_m3(scenario: Scenario) -> float:
 
 
 def time_to_target(verdict: Verdict, target: float) -> float:
-    """End of the first dump at which the cumulative loaded volume reaches min(loaded, target) (s).
+    """End of the first dump after which the truck holds ``target`` m³ (s), ``inf`` if none does.
 
-    The makespan when nothing was loaded (no dump ever counts).
+    Kept for callers of this name; the rule is :func:`earthbench.scoring.time_to_target`.
     """
-    goal = min(verdict.loaded_volume, target)
-    if goal <= 0:
-        return verdict.makespan
-    for t_end, cumulative in verdict.load_curve:
-        if cumulative >= goal * (1 - _SUM_SLACK):
-            return t_end
-    return verdict.makespan  # unreachable: the last cumulative volume is the loaded volume
+    return scoring_time_to_target(verdict.load_curve, target)
 
 
 def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, Any]:
@@ -81,9 +73,8 @@ def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, 
     loaded = verdict.loaded_volume
     makespan = verdict.makespan
     tpm = makespan / loaded if loaded > 0 else math.inf
-    counted = min(loaded, target)
     ttt = time_to_target(verdict, target)
-    tpt = ttt / counted if counted > 0 else math.inf
+    tpt = time_per_target(verdict.load_curve, target)
     bound = lower_bound_time_per_m3(scenario)
     fills = [d.fill for d in verdict.digs]
     pred = plan.predicted

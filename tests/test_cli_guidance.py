@@ -49,7 +49,7 @@ def test_exit_status_and_legend(tmp_path, suite, capsys):
     db = str(tmp_path / "ok.db")
     assert main(["run", suite, "--planner", "greedy", "--db", db]) == 0
     cap = capsys.readouterr()
-    assert "solve s: median wall time" in cap.out and "(s)" not in cap.err
+    assert "solve CPU s: median CPU time" in cap.out and "(s)" not in cap.err
     # t-fast's plans are valid but load nothing: exit 0, unless success is required
     assert main(["run", suite, "--planner", "t-fast", "--plugin", PLUGIN, "--db", db, "--quiet"]) == 0
     assert main(["run", suite, "--planner", "t-fast", "--plugin", PLUGIN, "--db", db, "--quiet", "--require-success"]) == 1

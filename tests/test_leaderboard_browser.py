@@ -70,7 +70,7 @@ def test_tables_sort_on_click(page):
     _click_heading(page, "Success")
     success = [float(v.split("%")[0]) for v in _column(page, 5)]  # "50% [12%–88%]": the rate, then its interval
     assert success == sorted(success)
-    _click_heading(page, "Rank")
+    _click_heading(page, "Rank ‡")  # 4 scenarios: too few to separate two planners
     ranks = [int(v.rstrip("=")) for v in _column(page, 0)]  # shared ranks read "1="
     assert ranks == sorted(ranks) and ranks[0] == 1
 

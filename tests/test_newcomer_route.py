@@ -98,7 +98,8 @@ def test_script_file_and_package_reach_a_ranked_table(fresh):
     # the board ranks all four
     run("-m", "earthbench", "leaderboard", "--db", "route.db", "--out", "board", "--no-terrain", "--replays", "2")
     table = (work / "board" / "README.md").read_text()
-    main = table[table.index("| Rank |"):].split("\n\n")[0].splitlines()[2:]  # the suite's ranked table
+    # the suite's ranked table ("Rank ‡" when the suite is too small for a paired test to separate planners)
+    main = table[table.index("| Rank"):].split("\n\n")[0].splitlines()[2:]
     assert sorted(row.split("|")[2].strip() for row in main) == ["file-greedy", "greedy", "route-demo", "script-greedy"]
     assert all(row.split("|")[1].strip().rstrip("=").isdigit() for row in main), main  # every one ranked
     # the package went into the fresh environment, not the test's

@@ -10,6 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import earthbench
+
 from earthbench.cli import main
 from earthbench.compare import Selector, compare
 from earthbench.merge import MergeError, merge
@@ -45,7 +47,7 @@ def test_tables_ranked_with_rule_and_stamp(board, db):
     assert "Ranking: ranked by success rate (higher first), then median time per target m³" in md
     runs = load_runs(db)
     assert f"suite digest: {runs['suite_digest'].iloc[0]}" in md
-    assert "project commit: " in md and "CPU: " in md and "generated " in md
+    assert "code: earthbench " in md and "CPU: " in md and "generated " in md
     assert runs["cpu_model"].iloc[0] in md
     main_table = md.split("### Breakdowns")[0]
     rows = [line for line in main_table.splitlines() if re.match(r"\| \d+=? \|", line)]
@@ -54,6 +56,27 @@ def test_tables_ranked_with_rule_and_stamp(board, db):
     assert planners[0] == "greedy" and planners[1] == "flaky" and planners[-1] == "half"
     assert md_escape(EVIL) in planners
     assert "<script>" not in md
+
+
+def test_a_board_from_two_machines_names_both_builds(db, tmp_path):
+    """Runs from two machines (as a merge of their stores gives) with two builds: the stamp names each with its machine."""
+    import shutil
+    import sqlite3
+
+    two = tmp_path / "two.db"
+    shutil.copy(db, two)
+    with sqlite3.connect(two) as con:
+        env = con.execute("SELECT * FROM environments").fetchone()
+        cols = [d[0] for d in con.execute("SELECT * FROM environments").description]
+        other = dict(zip(cols, env))
+        other.update(id=None, hash="other", hostname="second-host", project_commit="f" * 40 + "+dirty", earthbench_version="9.9")
+        cur = con.execute(f"INSERT INTO environments ({', '.join(other)}) VALUES ({', '.join('?' * len(other))})", list(other.values()))
+        con.execute("UPDATE runs SET environment_id=? WHERE planner='half'", (cur.lastrowid,))
+    res = publish(two, tmp_path / "lb2", figures=False, generated="(fixed)")
+    code = next(line for line in (res.out / "README.md").read_text().splitlines() if line.startswith("code: "))
+    assert code.count("earthbench ") == 2
+    assert "earthbench 9.9 (commit ffffffffffff, uncommitted changes) on second-host" in code
+    assert f"earthbench {earthbench.__version__} (commit" in code
 
 
 def test_csvs_match_the_store(board, db):

@@ -344,3 +344,21 @@ seeds = "0-7"
             assert e1.yaw == pytest.approx(e0.yaw) and e1.x - e0.x == pytest.approx(dx)  # moved, never mirrored
     finally:
         TERRAINS.unregister("t-shift-only")
+
+
+def test_the_gap_table_uses_the_boards_intervals_and_counts_a_run_short_of_the_target_as_infinite():
+    """Runs that stop short of the target (∞ time to it) make the sealed median worse, never
+    better; the success rate gets its exact interval (30/30 is not [100 %–100 %])."""
+    rng = np.random.default_rng(1)
+    public = list(rng.normal(40, 2, 30))
+    sealed = list(rng.normal(35, 2, 6)) + [math.inf] * 24  # faster where it loads the target, short elsewhere
+    runs = pd.concat([_runs("stopper", "s", [True] * 30, public),
+                      _runs("stopper", "s~sealed-aaaaaaaaaaaa", [True] * 6 + [False] * 24, sealed)], ignore_index=True)
+    members = pd.DataFrame({"suite": ["s"] * 30 + ["s~sealed-aaaaaaaaaaaa"] * 30,
+                            "scenario_digest": [f"s-{i}" for i in range(30)] + [f"s~sealed-aaaaaaaaaaaa-{i}" for i in range(30)]})
+    g = gap_table(runs, members).set_index(["planner", "metric"])
+    t = g.loc[("stopper", "time_per_target_m3")]
+    assert t["sealed"] == math.inf and t["sealed_n"] == 30 and t["gap"] == math.inf
+    assert t["flagged"] and t["gap_lo"] > 0  # worse beyond doubt: stopping short never looks faster
+    r = g.loc[("stopper", "success_rate")]
+    assert r["public"] == 1.0 and 0.88 < r["public_lo"] < 0.89 and r["public_hi"] == 1.0

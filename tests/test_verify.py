@@ -272,7 +272,7 @@ def test_verify_reruns_a_sample_here_and_the_leaderboard_shows_it(tmp_path, caps
     capsys.readouterr()
     assert main(["verify", str(db), "--sample", "1", "--seed", "3"]) == 0
     out = capsys.readouterr().out
-    assert "greedy" in out and "1/1" in out and "solve ratio median" in out
+    assert "greedy" in out and "1/1" in out and "solve ratio median" in out and "CPU ratio median" in out and "load here" in out
     from earthbench.publish import publish
 
     page = publish(db, tmp_path / "board", figures=False)
@@ -297,10 +297,10 @@ def test_leaderboard_names_the_machine_of_each_planners_solve_times(tmp_path):
     merge(tmp_path / "all.db", [a, b])
     both = publish(tmp_path / "all.db", tmp_path / "two", figures=False)
     md = (both.out / "README.md").read_text()
-    assert "| Solve s (median) † |" in md and "solve-time columns mix machines" in md
+    assert "| Solve CPU s (median) † |" in md and "| Solve wall s (median) † |" in md and "solve-time columns mix machines" in md
     assert "solve times of half 1.0: " in md and "Other CPU 9000" in md.split("solve times of half 1.0: ")[1].splitlines()[0]
     page = (both.out / "index.html").read_text()
-    assert "solve times of greedy 1.0: " in page and "Solve s (median) †" in page
+    assert "solve times of greedy 1.0: " in page and "Solve CPU s (median) †" in page
     runs = load_runs(tmp_path / "all.db")  # every run keeps the environment stamp it came with
     assert set(runs.groupby("planner").cpu_model.first()) == {runs[runs.planner == "greedy"].cpu_model.iloc[0], "Other CPU 9000"}
 

@@ -4,11 +4,14 @@ With two databases, side A is read from DB_A and side B from DB_B (e.g. before a
 change, run on the same suite); with one, both sides come from it. Each side is a selection
 PLANNER[@VERSION][#CONFIG] (--a, --b) that must match exactly one configuration; it may be
 left out when the database holds only one. Runs are paired by scenario digest; each metric
-gets the medians, the median difference B − A with its 95 % bootstrap interval, the mean
-difference and a two-sided Wilcoxon signed-rank p-value, Holm-adjusted across the metrics;
-success gets an exact McNemar test. A warning says when the number of pairs can never reach
-alpha. In CI: --format markdown for a comment, --fail-on-regression time_per_target_m3,success
-exits 1 when B is significantly worse on any of them.
+gets the medians, the median difference B − A with its distribution-free 95 % interval (none
+below 6 pairs), the mean difference and a two-sided Wilcoxon signed-rank p-value, Holm-adjusted
+across the metrics; success gets an exact McNemar test. A run short of the target has an
+infinite time per target m³, which ranks after every finite one. A warning says when the number
+of pairs can never reach alpha. A side may be named by its configuration's label, e.g.
+greedy[closed_loop]; an ambiguous one lists the candidates. In CI: --format markdown for a
+comment, --fail-on-regression time_per_target_m3,success exits 1 when B is significantly worse
+on any of them.
 """
 
 from __future__ import annotations
@@ -26,8 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("db_a", nargs="?", default=default_db(), metavar="DB_A", help="results database of side A")
     p.add_argument("db_b", nargs="?", metavar="DB_B", help="results database of side B (default: DB_A)")
-    p.add_argument("--a", metavar="PLANNER[@VERSION][#CONFIG]", help="side A's planner configuration")
-    p.add_argument("--b", metavar="PLANNER[@VERSION][#CONFIG]", help="side B's planner configuration")
+    p.add_argument("--a", metavar="PLANNER[@VERSION][#CONFIG]", help="side A's planner configuration (or its label[@VERSION])")
+    p.add_argument("--b", metavar="PLANNER[@VERSION][#CONFIG]", help="side B's planner configuration (or its label[@VERSION])")
     p.add_argument("--suite", help="only the runs of this suite's scenarios")
     p.add_argument("--metric", action="append", default=[], metavar="NAME", help="compare this metric (repeatable; default: the main ones)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdicts (default 0.05)")

@@ -13,7 +13,7 @@ import signal
 import sys
 from typing import Any
 
-from ..errors import EarthbenchError
+from ..errors import EarthbenchError, SuiteError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
 from ..store import DEFAULT_DB, Store, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
@@ -74,46 +74,60 @@ def _fmt(v: Any, spec: str = ".2f") -> str:
     return format(v, spec)
 
 
-def print_summary(store: Store, suite: str, planners: list[str] | None = None, file: Any = None) -> None:
-    """A row per planner configuration of everything stored for ``suite``: the leaderboard's aggregates
-    (:func:`earthbench.aggregate.aggregate`), 95 % intervals in brackets."""
+def print_summary(store: Store, suite: str, planners: list[str] | None = None, file: Any = None,
+                  seeds: tuple[int, ...] | None = None) -> None:
+    """A row per planner configuration of everything stored for ``suite`` (only the scenarios of
+    ``seeds`` when given: runs and denominators alike): the leaderboard's aggregates
+    (:func:`earthbench.aggregate.aggregate`), its intervals in brackets and its wording."""
     import pandas as pd
 
-    from ..aggregate import aggregate, ci_text
+    from ..aggregate import RANK_ALPHA, aggregate, ci_text
+    from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
 
     runs = load_runs(store, suite=suite)
+    members = suite_members(store, [suite])
+    if seeds is not None:
+        members = members[members["seed"].isin(seeds)]
+        runs = runs[runs["scenario_digest"].isin(set(members["scenario_digest"]))]
     if planners is not None:
         runs = runs[runs["planner"].isin(planners)]
     file = file or sys.stdout
     if runs.empty:
-        print(f"no runs stored for suite {suite!r}", file=file)
+        print(f"no runs stored for suite {suite!r}" + (" on the selected seeds" if seeds is not None else ""), file=file)
         return
-    rows = aggregate(runs, members=suite_members(store, [suite]), all_versions=True)
-    head = ["planner", "runs", "success", "vol.ratio mean±sd", "time/target m³ med", "time/m³ med", "solve s med", *REASONS]
+    rows = aggregate(runs, members=members, all_versions=True)
+    head = ["configuration", "runs", "success", "vol.ratio mean±sd", "time/target m³ med", "short", "time/m³ med",
+            "solve CPU s med", "wall s med", *REASONS]
     table = [head]
-    names = rows["planner"].tolist()
     for _, r in rows.iterrows():
         vr = _fmt(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else "±" + _fmt(r["volume_ratio_sd"]))
-        label = f"{r['planner']} {r['planner_version']}" + (f" [{r['config_hash'][:8]}]" if names.count(r["planner"]) > 1 else "")
         table.append([
-            label, f"{r['runs']}/{r['of']}", ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
+            f"{r['config_label']} {r['planner_version']}", f"{r['runs']}/{r['of']}",
+            ci_text(r["success_rate"], r["success_rate_lo"], r["success_rate_hi"], ".0f", 100, "%"),
             vr, ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"]),
-            _fmt(r["time_per_m3_median"], ".1f"), _fmt(r["solve_time_median"], ".2f"), *(str(r[f"n_{k}"]) for k in REASONS),
+            str(r["short_of_target"]), _fmt(r["time_per_m3_median"], ".1f"), _fmt(r["solve_cpu_median"], ".2f"),
+            _fmt(r["solve_time_median"], ".2f"), *(str(r[f"n_{k}"]) for k in REASONS),
         ])
     widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    print(f"\nsuite {suite} (95 % bootstrap intervals in brackets):", file=file)
+    what = f"{plural(int(rows['of'].max()), 'scenario')}" + (" of the selected seeds" if seeds is not None else "")
+    print(f"\nsuite {suite}, {what} ({INTERVAL_NOTE}):", file=file)
     for n, row in enumerate(table):
         print("  " + "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))), file=file)
         if n == 0:
             print("  " + "  ".join("-" * w for w in widths), file=file)
     print(LEGEND, file=file)
+    n_of = int(rows["of"].max())
+    if len(rows) > 1 and n_of < min_separating_n(RANK_ALPHA):
+        print(f"  note: {separation_note(n_of, RANK_ALPHA)}", file=file)
 
 
 #: What the summary's columns mean (printed under it).
-LEGEND = """  runs: stored / scenarios in the suite; success: scenarios with a valid plan loading ≥ the threshold
+LEGEND = """  runs: stored / scenarios (selected); success: scenarios with a valid plan loading ≥ the threshold
   (a scenario without a run counts as failed); vol.ratio: loaded / target volume over valid runs;
-  time/m³: plan time per loaded m³, median over valid runs; solve s: median wall time of the planner
-  call; ok … crashed: runs by termination reason (invalid: the referee found a broken rule)"""
+  time/target m³: time to the target / the target, median over valid runs (∞: short of the target,
+  counted in short); time/m³: plan time per loaded m³; solve CPU s: median CPU time of the case's
+  processes (ranked), wall s: its wall time; ok … crashed: runs by termination reason (invalid: the
+  referee found a broken rule)"""
 
 
 def _sigterm(signum: int, frame: Any) -> None:
@@ -135,6 +149,10 @@ def run(args: argparse.Namespace) -> int:
         for name in dict.fromkeys(args.planner):  # the command line's settings over the suite file's
             suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, PLANNERS.get(name))}
     seeds = parse_seed_range(args.seeds) if args.seeds else None
+    if seeds is not None and not suite.select(seeds):
+        have = sorted({int(s.meta["seed"]) for s in suite.scenarios if s.meta.get("seed") is not None})
+        raise SuiteError(f"--seeds {args.seeds} selects no scenario of suite {suite.name!r}; its seeds: "
+                         f"{', '.join(map(str, have[:20])) or '(none)'}{' …' if len(have) > 20 else ''}")
     cases, notes = build_cases(suite, args.planner or None, plugins=args.plugin, seeds=seeds)
     for note in notes:
         print(f"earthbench: note: {note}", file=sys.stderr)
@@ -173,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
         if report.skipped and not args.quiet:
             print(f"{plural(report.skipped, 'case')} already stored {'was' if report.skipped == 1 else 'were'} skipped "
                   "(use --rerun to run them again)", file=sys.stderr)
-        print_summary(store, suite.name, planners)
+        print_summary(store, suite.name, planners, seeds=seeds)
         if report.interrupted:
             left = report.planned - report.skipped - report.stored
             print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run; "

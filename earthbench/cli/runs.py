@@ -10,12 +10,12 @@ import sys
 from typing import Any
 
 from ..harness import REASONS
-from ..scoring import is_success
+from ..scoring import is_success, restate
 from ..store import Store
 from .run import default_db
 
-COLUMNS = ("id", "suite", "scenario_id", "planner", "planner_version", "reason", "success", "volume_ratio",
-           "time_per_target_m3", "time_per_m3", "solve_time_s")
+COLUMNS = ("id", "suite", "scenario_id", "configuration", "planner_version", "reason", "success", "volume_ratio",
+           "time_per_target_m3", "time_per_m3", "solve_cpu_s", "solve_time_s")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -43,11 +43,22 @@ def _cell(v: object) -> str:
     return str(v)
 
 
-def _values(r: Any, threshold: float | None) -> dict[str, Any]:
-    """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, and with a
-    suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`, as the leaderboard)."""
-    metrics = json.loads(r["metrics"]) if r["metrics"] else {}
+def labels_of(store: Store) -> dict[tuple[str, str], str]:
+    """(planner, config hash) → the configuration's readable label (:mod:`earthbench.labels`), over the store's configurations."""
+    import pandas as pd
+
+    from ..labels import config_labels
+
+    rows = store.db.execute("SELECT DISTINCT name, config_hash, config FROM planner_configs").fetchall()
+    return config_labels(pd.DataFrame([tuple(r) for r in rows], columns=["planner", "config_hash", "config"]))
+
+
+def _values(r: Any, threshold: float | None, labels: dict[tuple[str, str], str] | None = None) -> dict[str, Any]:
+    """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, the configuration's
+    label, and with a suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`)."""
+    metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
     d = {c: r[c] if c in r.keys() else metrics.get(c) for c in COLUMNS}
+    d["configuration"] = (labels or {}).get((r["planner"], r["config_hash"]), r["planner"])
     if threshold is not None:
         d["success"] = int(is_success(r["valid"], r["volume_ratio"], threshold))
     return d
@@ -59,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
             return _show(store, args)
         stored = store.query(suite=args.suite, planner=args.planner, reason=args.reason, scenario=args.scenario, limit=args.limit or None)
         ver = store.suite_version(args.suite) if args.suite else None
-        rows = [_values(r, None if ver is None else ver["threshold"]) for r in stored]
+        labels = labels_of(store)
+        rows = [_values(r, None if ver is None else ver["threshold"], labels) for r in stored]
         if args.format == "json":
             json.dump([{c: r[c] for c in COLUMNS} for r in rows], sys.stdout, indent=1)
             print()
@@ -87,7 +99,8 @@ def _show(store: Store, args: argparse.Namespace) -> int:
     r = rows[0]
     cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
     env = store.db.execute("SELECT * FROM environments WHERE id=?", (r["environment_id"],)).fetchone()
-    print(f"run {r['id']}: {r['scenario_id']} × {r['planner']} {r['planner_version']} (config {r['config_hash']})")
+    label = labels_of(store).get((r["planner"], r["config_hash"]), r["planner"])
+    print(f"run {r['id']}: {r['scenario_id']} × {label} {r['planner_version']} (config {r['config_hash']})")
     print(f"  suite {r['suite']} ({r['suite_digest'][:12]}), scenario digest {r['scenario_digest'][:12]}")
     print(f"  reason {r['reason']}, success {bool(r['success'])} (threshold {r['threshold']})")
     violations = json.loads(r["violations"] or "[]")

@@ -26,6 +26,7 @@ that differ from the stored ones.
 from __future__ import annotations
 
 import argparse
+import statistics
 
 from ._common import add_plugin_arg, load_plugins, plain
 
@@ -95,12 +96,21 @@ def _spot(store, args: argparse.Namespace) -> bool:
     if not args.no_record:
         store.check_writable()
     checks = spot_check(store, args.sample, seed=args.seed, suite=args.suite, planners=args.planner, jobs=args.jobs)
-    head = ("planner", "version", "runs", "referee agree", "solve ratio median", "min", "max", "stored on")
-    rows = [(c.planner, c.version, str(c.n), f"{c.agree}/{c.n}",
-             *((f"{c.ratio_median:.2f}", f"{min(c.ratios):.2f}", f"{max(c.ratios):.2f}") if c.ratios else ("–",) * 3),
-             "; ".join(c.stored_machines)) for c in checks]
+
+    def spread(r: tuple[float, ...]) -> tuple[str, ...]:
+        return (f"{statistics.median(r):.2f}", f"{min(r):.2f}–{max(r):.2f}") if r else ("–", "–")
+
+    def load(v: tuple[float, ...]) -> str:
+        return f"{min(v):.2f}–{max(v):.2f}" if v else "–"
+
+    head = ("planner", "version", "runs", "referee agree", "solve ratio median", "range", "CPU ratio median", "range",
+            "load here", "load stored", "stored on")
+    rows = [(c.planner, c.version, str(c.n), f"{c.agree}/{c.n}", *spread(c.ratios), *spread(c.cpu_ratios),
+             load(c.load_here), load(c.load_stored), "; ".join(c.stored_machines)) for c in checks]
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
-    print(f"rerun on {checks[0].machine}; solve ratio = solve time here / stored solve time")
+    print(f"rerun on {checks[0].machine}; solve ratio = wall time here / stored, CPU ratio = CPU time here / stored; "
+          "load: the 1-minute load average around the cases (a ratio far from 1 at a high load says more about the "
+          "machine than the planner)")
     for r in (head, *rows):
         print("  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip())
     for c in checks:

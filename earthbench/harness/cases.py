@@ -188,6 +188,9 @@ class CaseResult:
     isolation: str = "none"
     #: The most processes the case held at once, from its cgroup (None without one).
     processes: int | None = None
+    #: The machine's load around the case (:func:`earthbench.harness.load.around`): ``load_before``,
+    #: ``load_after``, ``steal_share``; empty where it was not measured (e.g. a merged run of an older store).
+    machine_load: dict[str, Any] = field(default_factory=dict)
     #: The wall and CPU seconds of the planner's preparation this case used (None: it has none);
     #: the harness's measurements of that job, never part of the solve time.
     prepare_s: float | None = None

@@ -66,6 +66,7 @@ from ..errors import EarthbenchError
 from ..world import Budget
 from .cases import Case, CaseResult, Prepared, utc_now
 from .child import BOOTSTRAP
+from . import load
 from .environment import environment
 from ..scoring import score  # the one scoring rule, in the core
 from ..sensing import observe
@@ -178,6 +179,7 @@ def run_case(
     started_at = utc_now()
     fences = isolation.support()
     _undumpable()
+    load_before = load.snapshot()
     tmp = _case_dir()  # the harness's own folder (the case's log); a sandboxed case never sees it
     try:
         try:
@@ -235,7 +237,7 @@ def run_case(
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     out.isolation = fence.label
-    res = _result(case, out, cores, started_at, log_tail)
+    res = _result(case, out, cores, started_at, log_tail, load.around(load_before, load.snapshot()))
     if prepared is not None:
         res = dataclasses.replace(res, prepare_s=prepared.wall_s, prepare_cpu_s=prepared.cpu_s)
     return res
@@ -829,7 +831,8 @@ def _mentions_memory(text: str) -> bool:
     return any(w in tail for w in _MEMORY_WORDS)
 
 
-def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str) -> CaseResult:
+def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, log_tail: str,
+            machine_load: dict[str, Any] | None = None) -> CaseResult:
     budget = case.scenario.budget
     times: dict[str, Any] = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
     loop = o.loop
@@ -842,7 +845,7 @@ def _result(case: Case, o: _Outcome, cores: tuple[int, ...], started_at: str, lo
         environment=environment(case.planner.source),
         detail=dict(o.done.get("detail") or {}) if o.done else {},
         steps=tuple(loop.steps) if loop is not None else None,
-        isolation=o.isolation, processes=o.processes,
+        isolation=o.isolation, processes=o.processes, machine_load=machine_load or {},
     )
     if o.cancelled and o.done is None:
         return CaseResult(reason="cancelled", error="the run was interrupted", **common)

@@ -1,12 +1,13 @@
-"""Speed of ``earthbench leaderboard`` on a store of 2,000 runs (goal: ≤ 3 s on 2 cores with the bootstrap).
+"""Speed of ``earthbench leaderboard`` on a store of 2,000 runs (goal: ≤ 3 s on 2 cores with the intervals).
 
 The store: 400 small rbf scenarios × 5 planner configurations, greedy plans (some cut short,
 some replaced by timeouts) judged by the referee and written with ``Store.record`` — about
 half a minute to build, once per session. Each round writes every file: Markdown, both CSVs,
 the HTML page and 9 figures (PNG and SVG), 5 of them terrain before/after re-judged from
-stored plans, and every table gets its 95 % bootstrap intervals and paired rank tests. The
-variant ``without_intervals`` makes the same files with :func:`earthbench.stats.bootstrap_ci`
-stubbed out, side by side, to show what the intervals cost. Run with
+stored plans, and every table gets its 95 % intervals (exact for rates, order statistics for
+medians) and paired rank tests. The variant ``without_intervals`` makes the same files with
+:func:`earthbench.stats.median_ci` and :func:`earthbench.stats.rate_ci` stubbed out, side by side,
+to show what the intervals cost. Run with
 ``pytest tests/bench/test_bench_leaderboard.py --benchmark-only``.
 """
 
@@ -35,7 +36,8 @@ def test_leaderboard_2000_runs(benchmark, store_2000, tmp_path, monkeypatch, var
     if variant == "without_intervals":
         import earthbench.aggregate
 
-        monkeypatch.setattr(earthbench.aggregate, "bootstrap_ci", lambda values, statistic="median": (float("nan"),) * 2)
+        monkeypatch.setattr(earthbench.aggregate, "median_ci", lambda values: (float("nan"),) * 2)
+        monkeypatch.setattr(earthbench.aggregate, "rate_ci", lambda k, n: (float("nan"),) * 2)
 
     def cpu() -> float:
         return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime
