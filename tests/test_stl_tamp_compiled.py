@@ -12,7 +12,7 @@ from earthbench.world import ExcavatorSpec, TruckSpec
 from earthbench_planners.stl_tamp import StlTampPlanner, compiled, model, nlp_cache
 from earthbench_planners.stl_tamp.problem import Shape
 
-pytestmark = pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler")
+needs_cc = pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler")
 
 SHAPE = Shape(phases=1, steps=3, contact_step=1, unit_width=0.7, unit_length=1.0, unit_depth=0.4, vmax=0.28,
               work_time=5.0, terrain_shape=(3, 4), terrain_spacing=0.6, terrain_sigma=0.6)
@@ -38,6 +38,7 @@ def prepared(tmp_path_factory):
     mp.undo()
 
 
+@needs_cc
 def test_compiled_functions_evaluate_as_the_virtual_machine(prepared):
     folder, summary = prepared
     key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
@@ -65,6 +66,7 @@ def test_compiled_functions_evaluate_as_the_virtual_machine(prepared):
     assert np.array_equal(vm.lbg, cc.lbg) and np.array_equal(vm.ubg, cc.ubg)
 
 
+@needs_cc
 def test_ipopt_takes_the_same_iterates_on_compiled_functions(prepared):
     folder, _ = prepared
     sols = []
@@ -80,6 +82,7 @@ def test_ipopt_takes_the_same_iterates_on_compiled_functions(prepared):
     assert np.array_equal(a.info["w"], b.info["w"])
 
 
+@needs_cc
 def test_an_nlp_without_its_compiled_library_is_loaded_as_before(prepared, tmp_path):
     import shutil
 
@@ -90,3 +93,9 @@ def test_an_nlp_without_its_compiled_library_is_loaded_as_before(prepared, tmp_p
     model.use_prepared(folder)
     assert model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX).cache == "hit"  # the preparation filled the cache too
     assert compiled.load(folder, key) is None
+
+
+def test_without_a_compiler_the_preparation_compiles_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(compiled, "compiler", lambda: None)
+    summary = Small().prepare(tmp_path / "none", jobs=1)
+    assert summary["nlps"] == {} and "no C compiler" in summary["note"]

@@ -226,6 +226,9 @@ class StlTampPlanner(Planner):
         from .model import build_functions
 
         out: dict[str, Any] = {"compiler": compiled.compiler_version(), "nlps": {}}
+        if compiled.compiler() is None:  # nothing to compile with: cases load their NLPs as before
+            out["note"] = "no C compiler: the NLPs stay uncompiled (the same plans, solved more slowly)"
+            return out
         for label, shape, exc, truck in self.prepared_shapes():
             t0 = time.perf_counter()
             name, fns = build_functions(shape, exc, truck)
