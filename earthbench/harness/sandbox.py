@@ -177,66 +177,19 @@ def run_case(
             return run_case(case, slot, stop=stop, startup_s=startup_s, prepared=prepared)
     cores = tuple(cores)
     started_at = utc_now()
-    fences = isolation.support()
-    _undumpable()
     load_before = load.snapshot()
-    tmp = _case_dir()  # the harness's own folder (the case's log); a sandboxed case never sees it
-    try:
-        try:
-            log = open(os.path.join(tmp, "log.txt"), "wb")
-        except OSError as exc:
-            raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-        spec = json.dumps({"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides,
-                           "prepared": prepared.path if prepared is not None else None}).encode() + b"\n"
-        scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
-        loop = (
-            StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES)
-            if case.planner.config.get("closed_loop")
-            else None
-        )
-        mr, mw = os.pipe()
-        rr, rw = os.pipe()
-        mem = int(budget.memory_mb) * 1024 * 1024
-        tag = os.path.basename(tmp)
-        env = _child_env(len(cores), tag)
-        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
-            env["TMPDIR"] = "/tmp"
-        argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
-                "0" if fences.bwrap else str(os.getpid())]
-        fence = isolation.Fence(
-            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem,
-            visible=isolation.visible_paths(case.planner.source) + ((prepared.path,) if prepared is not None else ()),
-            pass_fds=(mw, rw), env=env, stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
-        )
-        t_spawn = time.monotonic()
-        try:
-            try:
-                proc = fence.start()
-            except isolation.FenceError as exc:
-                raise HarnessError(f"cannot start a sandbox for a case: {exc}") from None
-            finally:
-                os.close(mw)
-                os.close(rw)
-                log.close()
-            assert proc.stdin is not None
-            try:  # the specification: the first line of the case's input (a pipe; no file anyone else can reach)
-                proc.stdin.write(spec)
-                proc.stdin.flush()
-            except OSError:
-                pass
-            out = _Supervisor(proc, mr, rr, scenario, tag, budget, startup_s, stop, t_spawn, loop,
-                              fence.cgroup, bool(fences.bwrap)).run()
-        finally:
-            os.close(mr)
-            os.close(rr)
-            fence.close()
-        with open(os.path.join(tmp, "log.txt"), "rb") as f:
-            f.seek(0, os.SEEK_END)
-            f.seek(max(0, f.tell() - LOG_TAIL))
-            log_tail = f.read().decode(errors="replace")
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    out.isolation = fence.label
+    spec = {"name": case.planner.name, "source": case.planner.source, "overrides": case.planner.overrides,
+            "prepared": prepared.path if prepared is not None else None}
+    scenario = json.dumps(observe(case.scenario).to_dict()).encode() + b"\n"  # the planner's view; the referee keeps the truth
+    loop = (
+        StepLoop(case.scenario, max_steps=budget.max_steps, max_bytes=MAX_RESULT_BYTES)
+        if case.planner.config.get("closed_loop")
+        else None
+    )
+    visible = isolation.visible_paths(case.planner.source) + ((prepared.path,) if prepared is not None else ())
+    out, log_tail, label = _run_fenced(spec, scenario, cores, budget, what="a case", visible=visible, loop=loop,
+                                       stop=stop, startup_s=startup_s)
+    out.isolation = label
     res = _result(case, out, cores, started_at, log_tail, load.around(load_before, load.snapshot()))
     if prepared is not None:
         res = dataclasses.replace(res, prepare_s=prepared.wall_s, prepare_cpu_s=prepared.cpu_s)
@@ -272,50 +225,61 @@ def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: B
     """Run a non-case job (``job`` is its specification, with ``"job"`` naming it) in a fresh,
     fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one input once
     it is ready; ``writable`` is the folder it may write. Only a ``prepare`` job exists (:mod:`.prepare`)."""
-    cores = tuple(cores)
+    o, tail, label = _run_fenced(job, payload, tuple(cores), budget, what="a preparation",
+                                 visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,),
+                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s)
+    return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
+                      tail, label)
+
+
+def _run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], budget: Budget, *, what: str,
+                visible: Sequence[str], writable: Sequence[str] = (), loop: StepLoop | None = None, prepare: bool = False,
+                stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> tuple[_Outcome, str, str]:
+    """One process tree of the bootstrap in the fences (namespaces, cgroup) on ``cores`` under
+    ``budget``, supervised until it ends: ``spec`` is the first line of its input (a pipe; no file
+    anyone else can reach), ``payload`` the one it is handed once ready (a case's observation, a
+    preparation's job). Returns the outcome, the tail of its log and the fences it had; a case
+    and a preparation differ only in these arguments (``what`` names it in errors)."""
     fences = isolation.support()
     _undumpable()
-    tmp = _case_dir()
+    tmp = _case_dir()  # the harness's own folder (the log); a sandboxed process never sees it
     try:
         try:
             log = open(os.path.join(tmp, "log.txt"), "wb")
         except OSError as exc:
             raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
-        spec = json.dumps(job).encode() + b"\n"
         mr, mw = os.pipe()
         rr, rw = os.pipe()
         mem = int(budget.memory_mb) * 1024 * 1024
         tag = os.path.basename(tmp)
         env = _child_env(len(cores), tag)
-        if fences.bwrap:
+        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
             env["TMPDIR"] = "/tmp"
         argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
                 "0" if fences.bwrap else str(os.getpid())]
         fence = isolation.Fence(
-            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem,
-            visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,), pass_fds=(mw, rw), env=env,
-            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
+            argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem, visible=visible, writable=writable,
+            pass_fds=(mw, rw), env=env, stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
         )
         t_spawn = time.monotonic()
         try:
             try:
                 proc = fence.start()
             except isolation.FenceError as exc:
-                raise HarnessError(f"cannot start a sandbox for a preparation: {exc}") from None
+                raise HarnessError(f"cannot start a sandbox for {what}: {exc}") from None
             finally:
                 os.close(mw)
                 os.close(rw)
                 log.close()
             assert proc.stdin is not None
             try:
-                proc.stdin.write(spec)
+                proc.stdin.write(json.dumps(spec).encode() + b"\n")
                 proc.stdin.flush()
             except OSError:
                 pass
-            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn, None,
-                              fence.cgroup, bool(fences.bwrap))
-            sup.prepare = job.get("job") == "prepare"
-            o = sup.run()
+            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn, loop, fence.cgroup, bool(fences.bwrap))
+            sup.prepare = prepare
+            out = sup.run()
         finally:
             os.close(mr)
             os.close(rr)
@@ -323,11 +287,10 @@ def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: B
         with open(os.path.join(tmp, "log.txt"), "rb") as f:
             f.seek(0, os.SEEK_END)
             f.seek(max(0, f.tell() - LOG_TAIL))
-            tail = f.read().decode(errors="replace")
+            log_tail = f.read().decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
-                      tail, fence.label)
+    return out, log_tail, fence.label
 
 
 @functools.lru_cache(maxsize=1)
