@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import sqlite3
 import zlib
 from collections.abc import Iterable
@@ -89,6 +90,12 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
+
+
+def default_db() -> str:
+    """The store every command uses unless told otherwise: ``$EARTHBENCH_DB``, else :data:`DEFAULT_DB`."""
+    return os.environ.get("EARTHBENCH_DB", DEFAULT_DB)
+
 
 #: Metrics kept as real columns of ``runs`` (all metrics are also in the ``metrics`` JSON).
 #: The machine's load around a case (:mod:`earthbench.harness.load`), columns of ``runs`` since version 3.

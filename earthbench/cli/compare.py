@@ -17,11 +17,10 @@ on any of them.
 from __future__ import annotations
 
 import argparse
-
-from ._common import plain
 import sys
 
-from .run import default_db
+from ..store import default_db
+from ._common import plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

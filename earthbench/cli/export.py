@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..store import default_db
 from ._common import plain
-
-from .run import default_db
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

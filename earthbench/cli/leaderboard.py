@@ -10,12 +10,11 @@ and terrain before and after for one case per planner.
 from __future__ import annotations
 
 import argparse
-
-from ._common import plain
 import sys
 import time
 
-from .run import default_db
+from ..store import default_db
+from ._common import plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

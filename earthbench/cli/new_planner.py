@@ -10,13 +10,12 @@ until the target is loaded. It comes with a test that checks the referee accepts
 from __future__ import annotations
 
 import argparse
-
-from ._common import plain
 import keyword
 import re
 from pathlib import Path
 
 from ..errors import EarthbenchError
+from ._common import plain
 
 NAME_RE = re.compile(r"^[a-z][a-z0-9]*(?:[-_][a-z0-9]+)*$")
 

@@ -9,13 +9,11 @@ the same function ``earthbench merge`` uses to verify incoming runs.
 from __future__ import annotations
 
 import argparse
-
-from ._common import plain
 import sys
 
-from ..store import Store, decompress, stored_steps
+from ..store import Store, decompress, default_db, stored_steps
 from ..verify import rejudge
-from .run import default_db
+from ._common import plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

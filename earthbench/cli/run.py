@@ -15,7 +15,7 @@ from typing import Any
 
 from ..errors import EarthbenchError, SuiteError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
-from ..store import DEFAULT_DB, Store, load_runs, suite_members
+from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
 
@@ -32,10 +32,6 @@ Exit status: 1 when no case of the command (run now or stored before) has a vali
 (every one invalid, timed out, out of memory, an error or crashed); with --require-success,
 1 unless at least one case succeeded (valid and at the success threshold). Otherwise 0;
 2 for bad input, 130 when interrupted."""
-
-
-def default_db() -> str:
-    return os.environ.get("EARTHBENCH_DB", DEFAULT_DB)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -11,8 +11,7 @@ from typing import Any
 
 from ..harness import REASONS
 from ..scoring import is_success, restate
-from ..store import Store
-from .run import default_db
+from ..store import Store, default_db
 
 COLUMNS = ("id", "suite", "scenario_id", "configuration", "planner_version", "reason", "success", "volume_ratio",
            "time_per_target_m3", "time_per_m3", "solve_cpu_s", "solve_time_s")
