@@ -162,7 +162,7 @@ def with_sealed_draws(store: Any, suites: Any) -> list[str] | None:
     """``suites`` and every sealed draw of them that ``store`` lists (None stays None: every suite)."""
     if not suites:
         return None
-    names = [r[0] for r in store.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+    names = store.suite_names()
     return list(dict.fromkeys([*suites, *(n for n in names if public_name(n) in suites)]))
 
 

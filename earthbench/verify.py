@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import math
 import random
-import sqlite3
 import statistics
 import traceback
 from collections import Counter
@@ -33,7 +32,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
-from .errors import EarthbenchError, StoreError, UnknownNameError
+from .errors import EarthbenchError, UnknownNameError
 from .harness.steps import step_metrics
 from .store import METRIC_COLUMNS, Store, decompress, stored_steps
 from .suite import suite_digest
@@ -200,9 +199,8 @@ def _label(row: Any) -> str:
 
 def _check_suites(store: Store, audit: Audit) -> None:
     """Each stored suite version's digest, recomputed from its members and threshold."""
-    for s in store.db.execute("SELECT id, name, digest, threshold FROM suites ORDER BY id"):
-        members = [(m[0], m[1]) for m in store.db.execute(
-            "SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (s["id"],))]
+    for s in store.suite_versions():
+        members = [(m["scenario_id"], m["scenario_digest"]) for m in store.suite_members(s["id"])]
         got = suite_digest(members, s["threshold"])
         if got != s["digest"]:
             audit.broken.append(Finding(None, f"suite {s['name']}", f"the stored digest {s['digest'][:12]}… is not the one its "
@@ -213,12 +211,12 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
     """Each stored scenario by digest, or the reason it cannot be used (digest recomputed from the document)."""
     out: dict[str, Scenario | str] = {}
     for d in digests:
-        row = store.db.execute("SELECT doc FROM scenarios WHERE digest=?", (d,)).fetchone()
-        if row is None:
+        blob = store.scenario_blob(d)
+        if blob is None:
             out[d] = f"its scenario {d[:12]}… is not stored"
             continue
         try:
-            sc = Scenario.from_text(decompress(row[0]))
+            sc = Scenario.from_text(decompress(blob))
         except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
             out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
             continue
@@ -232,11 +230,9 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
     result = Audit(str(store.path))
     _check_suites(store, result)
     if rows is None:
-        rows = store.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
-    suites = {
-        (s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")
-    }
-    members = {(m[0], m[1]) for m in store.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
+        rows = store.runs()
+    suites = {(s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.suite_versions()}
+    members = store.memberships()
     scenarios = _scenarios(store, {r["scenario_digest"] for r in rows})
     result.scenarios = {d: sc for d, sc in scenarios.items() if isinstance(sc, Scenario)}
     for r in rows:
@@ -325,7 +321,7 @@ class SpotCheck:
 
 def machine_label(env: dict[str, Any] | Any) -> str:
     """A machine as readers know it: hostname, CPU model, cores."""
-    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a sqlite3.Row
+    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a stored row
     host, cpu, cores = get("hostname"), get("cpu_model"), get("cores")
     return f"{host or 'unknown host'} ({cpu or 'unknown CPU'}" + (f", {cores} cores)" if cores else ")")
 
@@ -372,15 +368,15 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
             raise VerifyError(f"run {r['id']} ({_label(r)}): {sc}")
         key = (r["planner"], r["planner_version"], r["config_hash"])
         if key not in refs:
-            cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
-            refs[key] = _ref_for(r, json.loads(cfg[0]) if cfg else {})
+            cfg = store.planner_config(r["planner_config_id"])
+            refs[key] = _ref_for(r, json.loads(cfg["config"]) if cfg else {})
         # re-timed as it was timed: with its planner's preparation when the run used one
         prepared = "prepare_s" in r.keys() and r["prepare_s"] is not None
         cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key], prepare=prepared))
     by_key = {c.key: r for c, r in zip(cases, sample)}
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
     here = machine_label(environment())
-    stored_env = {e["id"]: machine_label(e) for e in store.db.execute("SELECT id, hostname, cpu_model, cores FROM environments")}
+    stored_env = {e["id"]: machine_label(e) for e in store.environments()}
     now = datetime.now(UTC).isoformat(timespec="seconds")
     out = []
     for key in refs:
@@ -416,46 +412,10 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     return sorted(out, key=lambda s: (s.planner, s.version, s.config_hash))
 
 
-_SPOT_TABLE = """CREATE TABLE IF NOT EXISTS spot_checks (
-    id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, planner_version TEXT NOT NULL,
-    config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, ratios TEXT NOT NULL,
-    disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL)"""
-
-
-def record_spot_checks(store: Store, checks: Iterable[SpotCheck]) -> None:
-    """Keep a spot check in the store it sampled, so the leaderboard's stamp can show it (one transaction)."""
-    try:
-        with store.db:
-            store.db.execute("BEGIN IMMEDIATE")
-            store.db.execute(_SPOT_TABLE)
-            if "context" not in {r[1] for r in store.db.execute("PRAGMA table_info(spot_checks)")}:
-                store.db.execute("ALTER TABLE spot_checks ADD COLUMN context TEXT")  # CPU ratios and load (issue 35)
-            store.db.executemany(
-                "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
-                "disagreements, machine, stored_machines, context) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                [(c.checked_at, c.planner, c.version, c.config_hash, json.dumps(c.run_ids), c.agree, json.dumps(c.ratios),
-                  json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines),
-                  json.dumps({"cpu_ratios": c.cpu_ratios, "load_stored": c.load_stored, "load_here": c.load_here, "steal": c.steal}))
-                 for c in checks])
-    except sqlite3.OperationalError as exc:
-        raise StoreError(store._explain(exc)) from None
-
-
 def latest_spot_checks(store: Store) -> list[SpotCheck]:
-    """The most recent spot check of each planner version and configuration (none if never checked)."""
-    if not store.db.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='spot_checks'").fetchone():
-        return []
-    rows = store.db.execute(
-        "SELECT * FROM spot_checks WHERE id IN (SELECT MAX(id) FROM spot_checks GROUP BY planner, planner_version, config_hash) "
-        "ORDER BY planner, planner_version, config_hash").fetchall()
-    out = []
-    for r in rows:
-        ctx = json.loads(r["context"] or "{}") if "context" in r.keys() else {}
-        out.append(SpotCheck(r["planner"], r["planner_version"], r["config_hash"], tuple(json.loads(r["run_ids"])), r["agree"],
-                             tuple(json.loads(r["ratios"])), tuple(json.loads(r["disagreements"])), r["machine"],
-                             tuple(json.loads(r["stored_machines"])), r["checked_at"], tuple(ctx.get("cpu_ratios", ())),
-                             tuple(ctx.get("load_stored", ())), tuple(ctx.get("load_here", ())), ctx.get("steal")))
-    return out
+    """The most recent spot check of each planner version and configuration (none if never checked);
+    :meth:`Store.record_spot_checks` keeps them."""
+    return [SpotCheck(**fields) for fields in store.latest_spot_checks()]
 
 
 # -- suite identity and sealed draws ----------------------------------------------------------
@@ -466,7 +426,7 @@ def suite_versions(store: Store) -> list[Any]:
     from .identity import Version
 
     out = []
-    for s in store.db.execute("SELECT * FROM suites ORDER BY id"):
+    for s in store.suite_versions():
         keys = s.keys()
         out.append(Version(s["name"], s["digest"], str(store.path),
                            *(s[k] if k in keys else None for k in ("sealed_from", "public_digest", "commitment"))))
@@ -506,7 +466,7 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     except (SealError, EarthbenchError) as exc:
         out.problems.append(f"key for {key.name}: {exc}")
         return out
-    ver = store.db.execute("SELECT * FROM suites WHERE name=?", (sealed.name,)).fetchall()
+    ver = store.suite_versions(sealed.name)
     if not ver:
         out.problems.append(f"{store.path} holds no suite {sealed.name!r}: this key draws another store's board")
         return out
@@ -519,14 +479,15 @@ def check_seal(store: Store, key: Any) -> SealCheck:
         if "commitment" in keys and v["commitment"] != key.commitment:
             out.problems.append(f"suite {sealed.name!r} is stored with commitment {str(v['commitment'])[:12]}…, not the key's "
                                 f"{key.commitment[:12]}…")
-        for m in store.db.execute("SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (v["id"],)):
-            if regenerated.get(m[0]) != m[1]:
-                out.problems.append(f"scenario {m[0]} is stored with digest {m[1][:12]}…, the key regenerates "
-                                    f"{str(regenerated.get(m[0], 'nothing'))[:12]}…")
+        for m in store.suite_members(v["id"]):
+            sid, digest = m["scenario_id"], m["scenario_digest"]
+            if regenerated.get(sid) != digest:
+                out.problems.append(f"scenario {sid} is stored with digest {digest[:12]}…, the key regenerates "
+                                    f"{str(regenerated.get(sid, 'nothing'))[:12]}…")
             else:
                 out.scenarios += 1
     digests = set(regenerated.values())
-    for r in store.db.execute("SELECT * FROM runs WHERE suite=? ORDER BY id", (sealed.name,)):
+    for r in store.runs(labelled=sealed.name):
         if r["scenario_digest"] in digests:
             out.run_rows.append(r)
         else:

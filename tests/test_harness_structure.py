@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import graphlib
+import re
 from pathlib import Path
 
 
@@ -191,3 +192,40 @@ def test_a_rule_imported_from_its_old_place_in_the_referee_still_works_with_a_wa
         assert "no_such_rule" in str(e)
     else:
         raise AssertionError("an unknown name must raise AttributeError")
+
+
+# -- the store owns its SQL ------------------------------------------------------------------------
+
+_SQL = re.compile(r"^\s*(SELECT|INSERT|UPDATE|DELETE|REPLACE|CREATE|ALTER|DROP|PRAGMA|BEGIN|COMMIT|ROLLBACK|WITH)\b")
+_CURSOR_CALLS = {"execute", "executemany", "executescript"}
+
+
+def _sql_in(source: str) -> set[tuple[int, str]]:
+    """(line, what) for each SQL statement (an f-string's too), ``sqlite3`` import or cursor call on a string literal in ``source``."""
+    out = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and _SQL.match(node.value):
+            out.add((node.lineno, node.value.split()[0]))
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names = [node.module or ""] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+            if "sqlite3" in names:
+                out.add((node.lineno, "import sqlite3"))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in _CURSOR_CALLS \
+                and node.args and isinstance(node.args[0], (ast.Constant, ast.JoinedStr, ast.BinOp)):
+            out.add((node.lineno, f".{node.func.attr}()"))
+    return out
+
+
+def test_the_sql_finder_sees_every_shape_of_statement():
+    source = ('import sqlite3\nQ = """\n  SELECT 1"""\ndb.execute(f"UPDATE runs SET x={x}")\n'
+              'db.executemany("INS" + "ERT INTO t VALUES (?)", [])\nengine.execute(fig)\nprint("Selected runs; DROP it")\n')
+    assert _sql_in(source) == {(1, "import sqlite3"), (2, "SELECT"), (4, "UPDATE"), (4, ".execute()"), (5, ".executemany()")}
+
+
+def test_no_sql_outside_the_store():
+    """Every SQL statement lives in :mod:`earthbench.store`, behind a named method (docs/DESIGN.md §2):
+    the rest of the core, the plugins and the scripts read and write a store only through it."""
+    files = [p for top in ("earthbench", *FOLDER_PACKAGES, "scripts") for p in sorted((ROOT.parent / top).rglob("*.py"))]
+    found = {(str(p.relative_to(ROOT.parent)), *hit) for p in files if p != ROOT / "store.py" for hit in _sql_in(p.read_text())}
+    assert found == set()
+    assert _sql_in((ROOT / "store.py").read_text())  # the finder reads the store's own statements
