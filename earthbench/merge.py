@@ -42,7 +42,7 @@ from typing import Any
 
 from . import identity
 from .errors import StoreError
-from .harness.cases import Case, CaseResult, PlannerRef
+from .records import Case, CaseResult, PlannerRef
 from .store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 

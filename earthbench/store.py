@@ -69,7 +69,7 @@ from .world import Scenario
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from .harness.cases import Case, CaseResult
+    from .records import Case, CaseResult
 
 #: The columns of ``spot_checks`` before ``context`` (the CPU ratios and load, issue 35) joined them.
 _SPOT_CHECK_COLUMNS = """

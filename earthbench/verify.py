@@ -328,7 +328,7 @@ def machine_label(env: dict[str, Any] | Any) -> str:
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from .harness import PlannerRef
+    from .records import PlannerRef
 
     try:
         ref = PlannerRef.resolve(row["planner"], config)
@@ -350,7 +350,8 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .harness import Case, LocalExecutor
+    from .harness import LocalExecutor
+    from .records import Case
     from .harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:

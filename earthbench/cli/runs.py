@@ -9,7 +9,7 @@ import math
 import sys
 from typing import Any
 
-from ..harness import REASONS
+from ..records import REASONS
 from ..scoring import is_success, restate
 from ..store import Store, default_db
 
