@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from . import assets
 from .aggregate import PRIMARY, RANKING_RULE, RANK_ALPHA, REASONS, SCOPES, aggregate, ci_text, latest_versions
 from .provenance import build_text
 from .stats import INTERVAL_NOTE, min_separating_n, separation_note
@@ -698,80 +699,9 @@ def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
     return out
 
 
-_CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5rem auto;max-width:1800px;padding:0 1rem;color:#222}
-h1{font-size:1.6rem}h2{font-size:1.25rem;margin-top:2.5rem;border-bottom:1px solid #ccc}
-table{border-collapse:collapse;margin:1rem 0;font-size:.8rem}
-th,td{border:1px solid #ddd;padding:.2rem .35rem;text-align:right}
-th{white-space:normal;vertical-align:bottom;min-width:3.2em}td{white-space:normal}
-td:nth-child(2),td:nth-child(3){white-space:normal;overflow-wrap:anywhere;min-width:6em}
-.filters{display:flex;flex-wrap:wrap;gap:.3rem 1rem;font-size:.85rem;margin:.6rem 0}
-tr.hidden{display:none}
-@media (max-width:900px){body{margin:.5rem;padding:0 .25rem}table{font-size:.72rem}th,td{padding:.15rem .2rem}}
-td:nth-child(2),td:nth-child(3),th:nth-child(2),th:nth-child(3){text-align:left}
-th{background:#f3f3f3;cursor:pointer;user-select:none}
-th[aria-sort=ascending]::after{content:" ▲"}th[aria-sort=descending]::after{content:" ▼"}
-tbody tr:nth-child(even){background:#fafafa}
-.stamp{font-family:ui-monospace,monospace;font-size:.8rem;background:#f7f7f7;padding:.5rem;white-space:pre-wrap}
-.rule{font-style:italic}
-nav.contents{font-size:.9rem;margin:.4rem 0 1rem}.replays{font-size:.85rem}
-details.stamp-box summary{font-size:.85rem;color:#555;cursor:pointer}
-figure{margin:1rem 0}figure img{max-width:min(100%,1000px);border:1px solid #eee}
-details{margin:1rem 0}.wrap{overflow-x:auto}details .wrap{max-height:30rem;overflow:auto}
-"""
-
-_JS = """
-(function () {
-  function key(row, i) {
-    var c = row.cells[i];
-    if (c.hasAttribute('data-v')) {
-      var s = c.getAttribute('data-v');
-      return s === '' ? null : parseFloat(s);
-    }
-    return c.textContent.trim().toLowerCase();
-  }
-  function sortBy(th) {
-    var table = th.closest('table');
-    var i = Array.prototype.indexOf.call(th.parentNode.children, th);
-    var asc = th.getAttribute('aria-sort') !== 'ascending';
-    table.querySelectorAll('th').forEach(function (h) { h.removeAttribute('aria-sort'); });
-    th.setAttribute('aria-sort', asc ? 'ascending' : 'descending');
-    var body = table.tBodies[0];
-    var rows = Array.prototype.slice.call(body.rows);
-    var keyed = rows.map(function (r, n) { return [key(r, i), n, r]; });
-    keyed.sort(function (a, b) {
-      var x = a[0], y = b[0];
-      if (x === null && y === null) return a[1] - b[1];
-      if (x === null) return 1;
-      if (y === null) return -1;
-      var d = typeof x === 'number' && typeof y === 'number' ? (x < y ? -1 : x > y ? 1 : 0)
-                                                          : String(x).localeCompare(String(y));
-      return (asc ? d : -d) || a[1] - b[1];
-    });
-    var frag = document.createDocumentFragment();
-    keyed.forEach(function (k) { frag.appendChild(k[2]); });
-    body.appendChild(frag);
-  }
-  document.querySelectorAll('table.sortable th').forEach(function (th) {
-    th.addEventListener('click', function () { sortBy(th); });
-  });
-  // filters: a row shows when every chosen value matches its data-KEY attribute
-  document.querySelectorAll('.filters').forEach(function (bar) {
-    var section = bar.closest('section');
-    function apply() {
-      var want = {};
-      bar.querySelectorAll('select').forEach(function (s) { if (s.value) want[s.getAttribute('data-key')] = s.value; });
-      section.querySelectorAll('table.sortable tbody tr').forEach(function (tr) {
-        var show = Object.keys(want).every(function (k) {
-          return !tr.hasAttribute('data-' + k) || tr.getAttribute('data-' + k) === want[k];
-        });
-        tr.classList.toggle('hidden', !show);
-      });
-    }
-    bar.querySelectorAll('select').forEach(function (s) { s.addEventListener('change', apply); });
-  });
-})();
-"""
+#: The page's style sheet and its tables' sorting and filtering script (files in :mod:`earthbench.assets`).
+_CSS = assets.text("page.css")
+_JS = assets.text("page.js")
 
 
 _BREAKDOWN_NOTE = ("the same configurations on one family or one target of the suite, ranked by the same rule "
@@ -858,7 +788,7 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
     from .replay import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
 
     e = html.escape
-    script = _JS + REPLAY_SCRIPT
+    script = f"\n{_JS}\n{REPLAY_SCRIPT}"  # the content-security-policy hash below is of exactly this text
     script_hash = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
     csp = (f"default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'sha256-{script_hash}'; "
            "base-uri 'none'; form-action 'none'")
@@ -868,7 +798,7 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
         f'<meta http-equiv="Content-Security-Policy" content="{e(csp)}">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         "<title>earthbench leaderboard</title>",
-        f"<style>{_CSS}{REPLAY_CSS}</style></head><body>",
+        f"<style>\n{_CSS}\n{REPLAY_CSS}</style></head><body>",
         "<h1>earthbench leaderboard</h1>",
         f'<p class="intro">Generated {e(generated)} by <code>earthbench leaderboard</code>. Click a column heading to sort. '
         f"{e(INTERVAL_NOTE)}. {UNSEPARABLE} on a Rank heading: too few scenarios for any paired test to separate two planners. "
