@@ -703,6 +703,28 @@ def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite
     return ver, members
 
 
+def _joined_runs(store: Store) -> list[sqlite3.Row]:
+    """Every run joined with its configuration and environment, in the order stored; a column an
+    older schema lacks reads as NULL (0 for ``sealed``)."""
+    have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
+    sealed = "r.sealed" if "sealed" in have_r else "0 AS sealed"
+    stamp = "r.isolation, r.processes" if "isolation" in have_r else "NULL AS isolation, NULL AS processes"
+    newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
+                       *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
+    prep = ", ".join(f"r.{c}" if c in have_r else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
+    return store.db.execute(
+        f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
+                  r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
+                  r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
+                  r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
+                  {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
+                  e.project_commit, e.plugin_commit, {sealed}, {newer}
+           FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
+                       LEFT JOIN environments e ON e.id = r.environment_id
+           ORDER BY r.id"""
+    ).fetchall()
+
+
 def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> pd.DataFrame:
     """Stored runs as a pandas DataFrame, one row per run, metrics as flat columns.
 
@@ -740,23 +762,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
-        sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
-        stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
-        have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
-        newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
-                           *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
-        prep = ", ".join(f"r.{c}" if c in _columns(store.db, "runs") else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
-        rows = store.db.execute(
-            f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
-                      r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
-                      r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
-                      r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                      {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit, {sealed}, {newer}
-               FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
-                           LEFT JOIN environments e ON e.id = r.environment_id
-               ORDER BY r.id"""
-        ).fetchall()
+        rows = _joined_runs(store)
     finally:
         if not isinstance(db, Store):
             store.close()
