@@ -247,3 +247,25 @@ def test_the_records_keep_their_old_import_paths():
 
     for name in ("REASONS", "Case", "CaseResult", "PlannerRef"):
         assert getattr(cases, name) is getattr(earthbench.records, name) is getattr(earthbench.harness, name)
+
+
+# -- functions a reader can hold in mind -----------------------------------------------------------
+
+#: Functions over :data:`LONG` lines, each with the reason it stands; the list only shrinks.
+LONG_FUNCTIONS = {
+    ("planners/stl_tamp/model.py", "_build"): "the NLP builder: one problem's variables and constraints in order",
+    ("planners/stl_tamp/guess.py", "build_guess"): "the NLP's initial guess, built in the order of its variables",
+    ("planners/stl_tamp/planner.py", "plan"): "not split yet: the planners are reworked on their own (issue 36)",
+    ("planners/stl_tamp/planner.py", "_local"): "not split yet: the planners are reworked on their own (issue 36)",
+    ("planners/stl_tamp/surface.py", "fit_rbf"): "not split yet: the planners are reworked on their own (issue 36)",
+    ("earthbench/publish.py", "publish"): "not split yet: publishing splits into selection, tables, figures, page (issue 36)",
+    ("earthbench/figures.py", "draw_layers"): "not split yet: the figures move to one place (issue 36)",
+}
+LONG = 80
+
+
+def test_no_function_runs_over_80_lines_but_the_named_ones():
+    files = [p for top in ("earthbench", *FOLDER_PACKAGES) for p in sorted((ROOT.parent / top).rglob("*.py"))]
+    found = {(str(p.relative_to(ROOT.parent)), n.name) for p in files for n in ast.walk(ast.parse(p.read_text()))
+             if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > LONG}
+    assert found <= LONG_FUNCTIONS.keys(), f"split these, or name why they stand: {sorted(found - LONG_FUNCTIONS.keys())}"
