@@ -94,7 +94,7 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         if not suites:
-            suites = sorted(load_runs(store)["suite"].dropna().unique().tolist())
+            suites = store.run_suites()
         frames = [load_runs(store, suite=s) for s in suites]
     finally:
         if not isinstance(db, Store):
@@ -296,9 +296,15 @@ PROVENANCE = ("provenance: success, volume and time-per-m³ figures are the refe
 def _machine_of(runs: pd.DataFrame) -> pd.Series:
     """Each run's machine, labelled as :func:`earthbench.verify.machine_label` does."""
     cols = {"hostname": "hostname", "cpu_model": "cpu_model", "cores": "cpu_cores"}
-    get = {k: (runs[c] if c in runs else pd.Series(None, index=runs.index)) for k, c in cols.items()}
-    return pd.Series([machine_label({k: (None if pd.isna(get[k].iloc[i]) else get[k].iloc[i]) for k in cols})
-                      for i in range(len(runs))], index=runs.index, dtype=object)
+    values = [runs[c].tolist() if c in runs else [None] * len(runs) for c in cols.values()]
+    labels: dict[tuple[Any, ...], str] = {}  # a store holds a few machines: label each once
+    out = []
+    for row in zip(*values):
+        key = tuple(None if pd.isna(v) else v for v in row)
+        if key not in labels:
+            labels[key] = machine_label(dict(zip(cols, key)))
+        out.append(labels[key])
+    return pd.Series(out, index=runs.index, dtype=object)
 
 
 def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = (),
@@ -568,9 +574,18 @@ def _render(job: tuple[str, str, tuple[Any, ...]]) -> bytes:
     return _save(makers[kind](*args), Path(base))[2]
 
 
+#: The figure kinds in the order the workers take them: the costliest first (a terrain figure holds two
+#: heightmaps, a colour bar and every action of a plan), so no long job is left to run alone at the end.
+_HEAVY_FIRST = {"terrain": 0, "profiles": 1, "families": 1, "volume-time": 2, "cost-growth": 3, "history": 4}
+
+
 class Renderer:
     """Figure jobs drawn in parallel worker processes (fork on Linux) while the caller goes on, e.g.
-    computing the tables' intervals and paired tests; in this process when there is one core."""
+    computing the tables' intervals and paired tests; in this process when there is one core.
+
+    :meth:`add` queues a job, :meth:`start` hands the queued ones to the workers (heaviest first);
+    :meth:`results` draws in this process every job no worker has taken yet, so the caller's core
+    is not idle while the workers finish."""
 
     def __init__(self, workers: int | None = None):
         import multiprocessing as mp
@@ -578,7 +593,7 @@ class Renderer:
 
         n = workers if workers else len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
         self._jobs: list[tuple[str, str, tuple[Any, ...]]] = []
-        self._futures: list[Any] = []
+        self._futures: dict[int, Any] = {}
         self._pool = None
         if n > 1 and "fork" in mp.get_all_start_methods():
             from concurrent.futures import ProcessPoolExecutor
@@ -592,15 +607,26 @@ class Renderer:
 
     def add(self, job: tuple[str, str, tuple[Any, ...]]) -> None:
         self._jobs.append(job)
-        if self._pool is not None:
-            self._futures.append(self._pool.submit(_render, job))
+
+    def start(self) -> None:
+        """Give the workers every job queued since the last call, the costliest kinds first."""
+        if self._pool is None:
+            return
+        waiting = [i for i in range(len(self._jobs)) if i not in self._futures]
+        for i in sorted(waiting, key=lambda i: _HEAVY_FIRST.get(self._jobs[i][0], 9)):
+            self._futures[i] = self._pool.submit(_render, self._jobs[i])
 
     def results(self) -> list[bytes]:
         """The PNG of every job, in the order added (waits for the workers, then shuts them down)."""
         if self._pool is None:
             return [_render(j) for j in self._jobs]
+        self.start()
         try:
-            return [f.result() for f in self._futures]
+            done: dict[int, bytes] = {}
+            # one at a time, the last job handed out that no worker has taken yet is drawn here
+            while (i := next((i for i, f in reversed(self._futures.items()) if i not in done and f.cancel()), None)) is not None:
+                done[i] = _render(self._jobs[i])
+            return [done[i] if i in done else self._futures[i].result() for i in range(len(self._jobs))]
         finally:
             self._pool.shutdown()
 
@@ -951,22 +977,17 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
             members = members[members["seed"].isin(seeds)].reset_index(drop=True)
             seed_note = f"{'seed' if len(set(seeds)) == 1 else 'seeds'} {seed_list(seeds)}"
         fig_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
-        renderer = Renderer(workers) if figures else None
         latest = latest_versions(runs)
-        spot_checks = latest_spot_checks(store)
-        sections = []
+        groups = list(runs.groupby(["suite", "track"], sort=True))
+        sections: list[dict[str, Any]] = [{"suite": suite, "track": track, "figures": [], "md_figures": []}
+                                          for (suite, track), _ in groups]
+        renderer = Renderer(workers) if figures else None
         scenarios: dict[str, str] = {}
-        for (suite, track), srun in runs.groupby(["suite", "track"], sort=True):
-            st = stamp(srun, suite, track, generated, spot_checks, seed_note)
-            sec: dict[str, Any] = {
-                "suite": suite, "track": track, "stamp": st,
-                "figures": [], "md_figures": [], "run_rows": run_rows(srun.sort_values("id")),
-            }
-            sections.append(sec)
+        # the figures first, so the workers draw while this process makes the tables
+        for sec, ((suite, track), srun) in zip(sections, groups):
             base = slug(f"{suite}-{track}")
             title = f"suite {suite}, {track}"
-            scale_rows, job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
-            sec["scale_rows"] = mark_mixed_solve_columns(scale_rows, st.mixed) if scale_rows else scale_rows
+            sec["scale_rows"], job = scale_section(srun, str(fig_dir / f"{base}-cost-growth"), title)
             if renderer is None:
                 continue
             if job is not None:
@@ -997,6 +1018,14 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     path = fig_dir / f"{base}-terrain-{slug(str(run['solver']))}"
                     renderer.add(("terrain", str(path), (scenarios[digest], plan, f"{run['solver']} on {run['scenario_id']}")))
                     captions.append((sec, f"Terrain before and after: {run['solver']} on {run['scenario_id']} (run {run['id']})", path))
+        if renderer is not None:
+            renderer.start()
+        spot_checks = latest_spot_checks(store)
+        for sec, ((suite, track), srun) in zip(sections, groups):
+            st = sec["stamp"] = stamp(srun, suite, track, generated, spot_checks, seed_note)
+            sec["run_rows"] = run_rows(srun.sort_values("id"))
+            if sec["scale_rows"]:
+                sec["scale_rows"] = mark_mixed_solve_columns(sec["scale_rows"], st.mixed)
         viewer = viewer_section(store, runs, replays)
         picked = set(pick_runs(runs, replays)["id"].astype(int)) if viewer else set()
         for sec in sections:
@@ -1028,15 +1057,19 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                 path = fig_dir / f"{base}-history-{slug(planner)}"
                 renderer.add(("history", str(path), (hist, f"{planner} on suite {sec['suite']}")))
                 captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
-    for (sec, cap, path), png in zip(captions, renderer.results() if renderer else []):
+    for sec, cap, path in captions:
         png_path, svg_path = path.parent / (path.name + ".png"), path.parent / (path.name + ".svg")
         result.files += [png_path, svg_path]
-        sec["figures"].append((cap, png))
         sec["md_figures"].append((cap, png_path.relative_to(out), svg_path.relative_to(out)))
-    runs_csv = runs.drop(columns=[c for c in ("packages",) if c in runs])
-    spreadsheet_safe(runs_csv).to_csv(out / "runs.csv", index=False)
-    spreadsheet_safe(summary).to_csv(out / "summary.csv", index=False)
-    (out / "README.md").write_text(markdown_page(sections, generated) + gap_markdown(gaps))
+    # every text but the page (which embeds the PNGs) while the workers finish
+    runs_csv = spreadsheet_safe(runs.drop(columns=[c for c in ("packages",) if c in runs])).to_csv(index=False)
+    summary_csv = spreadsheet_safe(summary).to_csv(index=False)
+    readme = markdown_page(sections, generated) + gap_markdown(gaps)
+    for (sec, cap, _), png in zip(captions, renderer.results() if renderer else []):
+        sec["figures"].append((cap, png))
+    _write_csv(out / "runs.csv", runs_csv)
+    _write_csv(out / "summary.csv", summary_csv)
+    (out / "README.md").write_text(readme)
     result.files += write_gaps(gaps, out)
     (out / "index.html").write_text(html_page(sections, generated, viewer))
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
@@ -1046,6 +1079,12 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
             old.unlink()
             result.removed.append(old)
     return result
+
+
+def _write_csv(path: Path, text: str) -> None:
+    """Write what ``DataFrame.to_csv()`` returned as ``to_csv(path)`` would have written it."""
+    with open(path, "w", encoding="utf-8", newline="") as f:
+        f.write(text)
 
 
 def _histories(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
