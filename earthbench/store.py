@@ -596,6 +596,10 @@ class Store:
             sql += f" LIMIT {int(limit)}"
         return self.db.execute(sql, args).fetchall()
 
+    def run_suites(self) -> list[str]:
+        """The names of the suites that runs were stored under, sorted (what ``load_runs`` labels them)."""
+        return sorted(r[0] for r in self.db.execute("SELECT DISTINCT suite FROM runs WHERE suite IS NOT NULL"))
+
     def plan_json(self, run_id: int) -> str | None:
         row = self.db.execute("SELECT plan FROM runs WHERE id=?", (run_id,)).fetchone()
         return decompress(row[0]) if row else None
