@@ -45,7 +45,7 @@ from typing import Any
 from earthbench.motion import ABS_TOL, RATE_TOL
 from earthbench.plan import Plan
 from earthbench.referee import Verdict
-from earthbench.scoring import SUM_SLACK, time_per_target
+from earthbench.scoring import time_per_target
 from earthbench.scoring import time_to_target as scoring_time_to_target
 from earthbench.world import Scenario
 
@@ -72,9 +72,13 @@ def lower_bound_time_per_m3(scenario: Scenario) -> float:
 
 
 def _buckets(target: float, capacity: float) -> int:
-    """The fewest loaded dumps that reach ``target`` when each carries at most ``capacity``
-    (the scoring rule's slack and float sums allowed for: a count never above the true one)."""
-    return max(1, math.ceil(target * (1 - SUM_SLACK) / (capacity * (1 + 1e-9))))
+    """The fewest loaded dumps after which the scoring rule (:func:`earthbench.scoring.time_to_target`,
+    with its slack) finds ``target`` loaded when each carries at most ``capacity``; float sums of
+    the digs may exceed a whole number of buckets by rounding, so a bucket counts 1e-9 fuller."""
+    n = max(1, math.ceil(target / capacity) - 1)
+    while not math.isfinite(scoring_time_to_target(((0.0, n * capacity * (1 + 1e-9)),), target)):
+        n += 1
+    return n
 
 
 def _first_dump_start(scenario: Scenario) -> float:

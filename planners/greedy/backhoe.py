@@ -26,7 +26,7 @@ way to a station is tested before the tilt, as most rejected stations fail the t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -37,7 +37,7 @@ from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_t
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
-from earthbench.world import LATER, ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
+from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..stability import margins
 
@@ -63,7 +63,7 @@ class GreedyConfig:
     max_actions: int = 2000
     closed_loop: bool = closed_loop_setting()
     """Replan after every dump from the observed terrain and truck load."""
-    scan_margin: float | None = field(default=None, metadata=LATER)
+    scan_margin: float | None = None
     """Metres kept above the undermining line for the scan's error; None: derived from the
     observation (``planners/stability.py``: 0 on the exact track)."""
 

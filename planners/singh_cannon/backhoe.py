@@ -58,7 +58,7 @@ before giving up.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -70,7 +70,7 @@ from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
 from earthbench.rules import track_level_and_tilt, undermining_excess
-from earthbench.world import LATER, ExcavatorSpec, Pose, Scenario
+from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from ..stability import margins
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
@@ -125,7 +125,7 @@ class SinghCannonBackhoeConfig:
     max_digs: int = 1000
     closed_loop: bool = closed_loop_setting()
     """Replan every dig from the observed terrain and truck load."""
-    scan_margin: float | None = field(default=None, metadata=LATER)
+    scan_margin: float | None = None
     """Metres kept above the undermining line for the scan's error; None: derived from the
     observation (``planners/stability.py``: 0 on the exact track)."""
 
