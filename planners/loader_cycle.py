@@ -489,6 +489,13 @@ def search_routes(
     if not ok.any():
         return None
     idx = np.nonzero(ok)[0]
+    # routes whose cusp or forward arc stands on the pile cannot be clear: pass them over
+    # before the fastest few are checked in full (a route's order among the rest is kept)
+    kf_s = np.where(np.isfinite(radius[idx]), np.sign(delta[idx]) / radius[idx], 0.0)
+    pts = [np.stack([qx[idx], qy[idx]], axis=1)] + [_on_arc(qx[idx], qy[idx], thq[idx], kf_s, arc_len[idx] * f) for f in (0.25, 0.5, 0.75)]
+    idx = idx[_standable(scenario, z, pts, base)]
+    if idx.size == 0:
+        return None
     final = np.where(lam[idx] <= stop_hi, lam[idx], lam_final)
     kf = np.where(np.isfinite(radius[idx]), 1.0 / radius[idx], 0.0)
     v = spec.travel_speed * MARGIN
@@ -505,6 +512,26 @@ def search_routes(
         if _clear(scenario, z, route, base):
             return route
     return None
+
+
+def _on_arc(x: np.ndarray, y: np.ndarray, th: np.ndarray, kappa: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points ``s`` along arcs of curvature ``kappa`` from ``(x, y)`` heading ``th`` (vectorised)."""
+    straight = np.abs(kappa) < 1e-12
+    k = np.where(straight, 1.0, kappa)
+    px = np.where(straight, x + s * np.cos(th), x + (np.sin(th + k * s) - np.sin(th)) / k)
+    py = np.where(straight, y + s * np.sin(th), y - (np.cos(th + k * s) - np.cos(th)) / k)
+    return np.stack([px, py], axis=1)
+
+
+def _standable(scenario: Scenario, z: np.ndarray, pts: list[np.ndarray], base: float) -> np.ndarray:
+    """Per route: whether none of its points ``pts`` (a list of ``n × 2`` arrays, one point per
+    route each) lies on a cell more than the loader's step (and 5 cm of slack for an arc point
+    between two samples) above ``base``; a point off the map passes (the map's edge is checked
+    in full later)."""
+    spec: LoaderSpec = scenario.machines.loader
+    n = len(pts[0])
+    h = cell_heights(scenario.terrain, z, np.concatenate(pts)).reshape(len(pts), n)
+    return ~np.any(np.nan_to_num(h, nan=-np.inf) > base + spec.max_step + 0.05, axis=0)
 
 
 def _clear(scenario: Scenario, z: np.ndarray, route: Route, base: float) -> bool:
@@ -571,6 +598,9 @@ def search_dubins(
     v_rev = np.minimum(spec.travel_speed, spec.yaw_rate / np.maximum(np.abs(K0[ci, 0]), 1e-12)) * MARGIN
     dur = S0[ci] / v + L0[ci, 0] / v_rev + R * (a1 + a2) / v_arc + (ell + a) / v
     idx = np.nonzero(ok)[0]
+    t1 = np.stack([c1x + s1 * R * np.sin(phi), c1y - s1 * R * np.cos(phi)], axis=1)  # where the first arc ends
+    idx = idx[_standable(scenario, z, [np.stack([qx, qy], axis=1)[idx], t1[idx], (t1 + ell[:, None] * np.stack(
+        [np.cos(phi), np.sin(phi)], axis=1))[idx]], base)]
     order = idx[np.argsort(dur[idx], kind="stable")]
     for k in order[: opts.max_checked]:
         segs = [
