@@ -257,7 +257,8 @@ def charge_model(
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """The planner's charge on copies of ``z`` and ``firm``: the public cut model
     (:func:`earthbench.cut.cut_along` on the bucket's path), with ``soil`` to the harder layer's
-    levels (:func:`earthbench.soil.cut_levels`) and then the faces' slump to the nominal repose
+    levels (:func:`earthbench.soil.cut_levels`), the bucket full at the nominal fill of its
+    capacity (the rest of the path is left), and then the faces' slump to the nominal repose
     (:func:`earthbench.soil.slump`). Returns the volume, the settled grid and the firm ground
     (the fresh cut: what slumped is loose)."""
     x, y, yaw = entry
@@ -267,6 +268,8 @@ def charge_model(
     lv: float | np.ndarray = level
     if soil is not None and soil.hard is not None and soil.top is not None and jj.size:
         lv = cut_levels(soil.hard, soil.top[jj, ii], z[jj, ii], level)
+    if soil is not None:  # the bucket fills at its nominal fill: what lies beyond stays where it is
+        capacity = min(capacity, soil.fill * spec.bucket_capacity)
     zz = np.array(z)
     vol = cut_along(terrain, zz, edge, yaw, spec.bucket_width, penetration, level if jj.size == 0 else lv, capacity, cells).volume
     new_firm = np.minimum(firm, zz)
@@ -650,7 +653,8 @@ class LoaderPlanConfig:
     charge_share: float = 0.85
     """With soil, a charge's path holds at most this share of the bucket's capacity on the
     planner's ground, so the scan's error cannot make the edge push on after the bucket is full
-    (the ``overfill`` rule is judged on the true ground); a charge aims at 1.1 × the nominal fill."""
+    (the ``overfill`` rule is judged on the true ground); a charge aims at 1.1 × the nominal fill.
+    Each further cycle planned without a new scan lowers it (:meth:`CycleBuilder.drift`)."""
     closed_loop: bool = closed_loop_setting()
     """Replan every bucket from the observed terrain and truck load (docs/DESIGN.md §6)."""
 
@@ -685,10 +689,7 @@ class CycleBuilder:
         self.step_base = self.base - self.ground.margin
         self.soil = SoilModel.of(scenario.soil, self.z if z0 is None else z0)
         self.yield_factor = yield_factor
-        if self.soil is None:
-            self.take = self.spec.bucket_capacity
-        else:
-            self.take = min(cfg.charge_share, 1.1 * self.soil.fill) * self.spec.bucket_capacity
+        self.share = cfg.charge_share
         self.t = 0.0
         self.pose = scenario.machines.loader_pose
         self.actions: list = []
@@ -700,6 +701,24 @@ class CycleBuilder:
     def contours(self) -> list[np.ndarray]:
         return zero_contour(self.sc.terrain, self.z, self.level + self.ground.level, self.cfg.contour_spacing, self.spec.bucket_width)
 
+    @property
+    def take(self) -> float:
+        """The most a charge's path holds on the planner's ground: the capacity on exact ground;
+        with soil, 1.1 × the nominal fill, at most :attr:`share` of the capacity."""
+        if self.soil is None:
+            return self.spec.bucket_capacity
+        return min(self.share, 1.1 * self.soil.fill) * self.spec.bucket_capacity
+
+    def drift(self) -> None:
+        """One more cycle planned on ground the planner has not seen since (open loop, with
+        soil): its model of the cut, the slump and the harder layer drifts from the truth, so
+        the overfill share shrinks by 2.5 % of the capacity (to 60 %) and the step margin grows
+        by 1 cm (to 5 cm) per such cycle."""
+        if self.soil is None:
+            return
+        self.share = max(self.share - 0.025, 0.6)
+        self.step_base = max(self.step_base - 0.01, self.base - self.ground.margin - 0.05)
+
     def charge_capacity(self, need: float) -> float:
         """What a charge's path should hold on the planner's ground when the truck still needs
         ``need`` m³: enough to deliver it (at the nominal fill and the learnt yield), at most
@@ -708,7 +727,7 @@ class CycleBuilder:
 
     def _simulate(self, entry: tuple[float, float, float], capacity: float) -> ChargeResult | None:
         return simulate_charge(self.sc.terrain, self.z, self.spec, entry, capacity, self.cfg.max_penetration, self.level,
-                               self.base, self.firm, self.soil, self.step_base, self.cfg.charge_share * self.spec.bucket_capacity)
+                               self.base, self.firm, self.soil, self.step_base, self.share * self.spec.bucket_capacity)
 
     def try_candidate(self, M: np.ndarray, h: np.ndarray, capacity: float) -> Cycle | None:
         """Approach, charge and route to the truck for the bucket edge centred at ``M`` heading
@@ -787,6 +806,7 @@ class CycleBuilder:
         self.t = c.dump.t_end
         self.pose = c.to_truck.end
         self.cycles.append(c)
+        self.drift()
 
     def load_until_target(self, max_cycles: int, choose: Callable[[list[np.ndarray], float], Cycle | str],
                           max_dumps: int | None = None) -> str:
