@@ -19,7 +19,7 @@ rank dig candidates; the rest lives here:
   copy of the grid. The penetration is chosen so that the bucket takes whole cells up to the
   capacity and no more, so the loader never drives onto material its bucket cannot take. With
   the soil's class (:class:`SoilModel`) the cut stops at the harder layer as the class's
-  shallowest layer would stop it (:func:`earthbench.soil.cut_levels`), the faces it leaves
+  shallowest layer would stop it (:meth:`SoilModel.levels`), the faces it leaves
   slump to the nominal angle of repose (:func:`earthbench.soil.slump`), and the bucket is
   expected to deliver the nominal fill factor of its capacity.
 - :func:`search_routes` — car-like routes at or above the minimum turning radius: an optional
@@ -54,7 +54,7 @@ from earthbench.plan import Charge, Dump, Move, Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.cut import cut_along, path_cells
 from earthbench.rules import bodies_touch, cell_heights, loader_base_level, off_map_excess, reach_of, step_excess, wheel_step_excess
-from earthbench.soil import MATERIALS, cut_levels, slump, slump_box
+from earthbench.soil import slump
 from earthbench.world import Heightmap, LoaderSpec, Pose, Scenario, Soil
 
 MARGIN = 0.995
@@ -129,26 +129,29 @@ def read_scan(terrain: Heightmap, floor: float, contour_level: float) -> GroundM
 @dataclass(frozen=True)
 class SoilModel:
     """What a loader planner assumes of the soil from its class (the observation's nominal
-    soil): the bucket's bank fill factor, the angle the faces slump to, and a harder layer as
-    shallow as the class's layer can lie (``MATERIALS``), below the initial ground ``top0``
-    (the first grid the planner saw, less that depth)."""
+    soil): the bucket's bank fill factor, the angle the faces slump to, and a harder layer
+    ``shallower`` m above the nominal depth (every class's documented range of depths is 0.4 m
+    wide: 0.2 m is its shallow end) under the initial ground ``z0``, the first grid the planner
+    saw: ``top``, the layer's top per cell, and ``penetration``, how far one charge cuts into it."""
 
     fill: float
     repose_deg: float
-    hard: Soil | None
     top: np.ndarray | None
+    penetration: float
 
     @classmethod
-    def of(cls, soil: Soil | None, z0: np.ndarray) -> SoilModel | None:
+    def of(cls, soil: Soil | None, z0: np.ndarray, shallower: float = 0.2) -> SoilModel | None:
         if soil is None:
             return None
-        hard = None
-        top = None
-        if soil.hard_depth is not None:
-            shallow = MATERIALS[soil.material].hard_depth[0] if soil.material in MATERIALS else soil.hard_depth
-            hard = Soil(soil.material, soil.fill_factor, soil.swell, soil.repose_deg, min(shallow, soil.hard_depth), soil.hard_penetration)
-            top = np.asarray(z0) - hard.hard_depth
-        return cls(soil.fill_factor, soil.repose_deg, hard, top)
+        top = None if soil.hard_depth is None else np.asarray(z0) - max(soil.hard_depth - shallower, 0.0)
+        return cls(soil.fill_factor, soil.repose_deg, top, soil.hard_penetration)
+
+    def levels(self, jj: np.ndarray, ii: np.ndarray, heights: np.ndarray, level: float) -> float | np.ndarray:
+        """The level each path cell is cut to: ``level``, but no deeper than ``penetration``
+        into the harder layer (the rule of docs/realistic.md, as the referee applies it)."""
+        if self.top is None:
+            return level
+        return np.maximum(level, np.minimum(heights, self.top[jj, ii]) - self.penetration)
 
 
 # -- contour -----------------------------------------------------------------------------------
@@ -257,7 +260,7 @@ def charge_model(
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """The planner's charge on copies of ``z`` and ``firm``: the public cut model
     (:func:`earthbench.cut.cut_along` on the bucket's path), with ``soil`` to the harder layer's
-    levels (:func:`earthbench.soil.cut_levels`), the bucket full at the nominal fill of its
+    levels (:meth:`SoilModel.levels`), the bucket full at the nominal fill of its
     capacity (the rest of the path is left), and then the faces' slump to the nominal repose
     (:func:`earthbench.soil.slump`). Returns the volume, the settled grid and the firm ground
     (the fresh cut: what slumped is loose)."""
@@ -266,16 +269,19 @@ def charge_model(
     cells = path_cells(terrain, z.shape, edge, yaw, spec.bucket_width, penetration)
     jj, ii, _ = cells
     lv: float | np.ndarray = level
-    if soil is not None and soil.hard is not None and soil.top is not None and jj.size:
-        lv = cut_levels(soil.hard, soil.top[jj, ii], z[jj, ii], level)
+    if soil is not None and jj.size:
+        lv = soil.levels(jj, ii, z[jj, ii], level)
     if soil is not None:  # the bucket fills at its nominal fill: what lies beyond stays where it is
         capacity = min(capacity, soil.fill * spec.bucket_capacity)
     zz = np.array(z)
     vol = cut_along(terrain, zz, edge, yaw, spec.bucket_width, penetration, level if jj.size == 0 else lv, capacity, cells).volume
     new_firm = np.minimum(firm, zz)
     if soil is not None and jj.size and vol > 0:
+        # the box the faces can slump in: the path grown by the run of the repose slope over its depth
         depth = float(np.max(z[jj, ii] - level, initial=0.0))
-        box = slump_box(zz.shape, jj, ii, terrain.resolution, depth, soil.repose_deg)
+        pad = int(math.ceil(depth / math.tan(math.radians(soil.repose_deg)) / terrain.resolution)) + 2
+        box = (max(int(jj.min()) - pad, 0), min(int(jj.max()) + pad + 1, zz.shape[0]),
+               max(int(ii.min()) - pad, 0), min(int(ii.max()) + pad + 1, zz.shape[1]))
         j0, j1, i0, i1 = box
         slump(zz, terrain.resolution, soil.repose_deg, np.array(z[j0:j1, i0:i1]), box)
     return vol, zz, new_firm
@@ -309,8 +315,8 @@ def simulate_charge(
         return None
     h = z[jj, ii]
     lv: float | np.ndarray = level
-    if soil is not None and soil.hard is not None and soil.top is not None:
-        lv = cut_levels(soil.hard, soil.top[jj, ii], h, level)
+    if soil is not None:
+        lv = soil.levels(jj, ii, h, level)
     r = terrain.resolution
     ex_v = np.maximum(h - lv, 0.0) * r * r
     if ex_v.sum() <= 1e-9:
@@ -323,7 +329,7 @@ def simulate_charge(
         k = int(np.searchsorted(cum, capacity, side="right")) - 1
         if k < 0:
             return None
-    if soil is not None and soil.hard is not None:
+    if soil is not None:
         # the overfill rule reads the public cut model (to the floor, no harder layer) on the
         # true ground: the path may hold no more than ``overfill_cap`` of it
         public = np.cumsum(np.maximum(h - level, 0.0)) * r * r
