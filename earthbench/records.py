@@ -9,6 +9,7 @@ dataclasses, picklable, so any executor can ship a case to where it runs and its
 from __future__ import annotations
 
 import ast
+import statistics
 import sys
 from dataclasses import dataclass, field
 from datetime import datetime, UTC
@@ -193,3 +194,43 @@ class CaseResult:
         return bool(self.metrics and self.metrics.get("success"))
 
 
+@dataclass(frozen=True)
+class SpotCheck:
+    """One planner's sample, rerun here: do its referee figures agree, how do its solve times compare?"""
+
+    planner: str
+    version: str
+    config_hash: str
+    run_ids: tuple[int, ...]
+    agree: int
+    ratios: tuple[float, ...]          #: solve time here / stored solve time, per run with both
+    disagreements: tuple[str, ...]
+    machine: str                        #: where the sample was rerun
+    stored_machines: tuple[str, ...]    #: where the stored runs had run
+    checked_at: str
+    cpu_ratios: tuple[float, ...] = ()  #: CPU time here / stored CPU time, per run with both
+    load_stored: tuple[float, ...] = ()  #: the 1-minute load averages recorded around the stored runs
+    load_here: tuple[float, ...] = ()    #: and around their reruns
+    steal: float | None = None           #: the largest CPU steal share of the reruns
+
+    @property
+    def n(self) -> int:
+        return len(self.run_ids)
+
+    @property
+    def ratio_median(self) -> float | None:
+        return statistics.median(self.ratios) if self.ratios else None
+
+    def line(self) -> str:
+        """One line: agreement, the re-timings as ratios (wall and CPU), and the load both were measured under."""
+        def ratios(name: str, r: tuple[float, ...]) -> str:
+            return f"{name} here / stored: median {statistics.median(r):.2f} ({min(r):.2f}–{max(r):.2f})" if r else ""
+
+        def load(values: tuple[float, ...]) -> str:
+            return f"{min(values):.2f}–{max(values):.2f}" if values else "not recorded"
+
+        timing = "; ".join(t for t in (ratios("solve wall time", self.ratios), ratios("CPU time", self.cpu_ratios)) if t)
+        context = (f" (load average {load(self.load_here)} here, {load(self.load_stored)} when stored"
+                   + (f"; CPU steal up to {100 * self.steal:.1f} % here" if self.steal else "") + ")")
+        return (f"{self.planner} {self.version}: {self.n} run(s) rerun on {self.machine} ({self.checked_at}); "
+                f"referee figures agree {self.agree}/{self.n}; " + (timing + context if timing else "no solve times to compare"))

@@ -69,7 +69,7 @@ from .world import Scenario
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from .records import Case, CaseResult
+    from .records import Case, CaseResult, SpotCheck
 
 #: The columns of ``spot_checks`` before ``context`` (the CPU ratios and load, issue 35) joined them.
 _SPOT_CHECK_COLUMNS = """
@@ -205,38 +205,6 @@ class SuiteRecord(Protocol):
     def scenarios(self) -> Any: ...
 
 
-class SpotCheckRecord(Protocol):
-    """What :meth:`Store.record_spot_checks` keeps of one planner's re-timed sample
-    (:class:`earthbench.verify.SpotCheck`)."""
-
-    @property
-    def planner(self) -> str: ...
-    @property
-    def version(self) -> str: ...
-    @property
-    def config_hash(self) -> str: ...
-    @property
-    def run_ids(self) -> tuple[int, ...]: ...
-    @property
-    def agree(self) -> int: ...
-    @property
-    def ratios(self) -> tuple[float, ...]: ...
-    @property
-    def disagreements(self) -> tuple[str, ...]: ...
-    @property
-    def machine(self) -> str: ...
-    @property
-    def stored_machines(self) -> tuple[str, ...]: ...
-    @property
-    def checked_at(self) -> str: ...
-    @property
-    def cpu_ratios(self) -> tuple[float, ...]: ...
-    @property
-    def load_stored(self) -> tuple[float, ...]: ...
-    @property
-    def load_here(self) -> tuple[float, ...]: ...
-    @property
-    def steal(self) -> float | None: ...
 
 
 @overload
@@ -523,7 +491,7 @@ class Store:
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 
-    def record_spot_checks(self, checks: Iterable[SpotCheckRecord]) -> None:
+    def record_spot_checks(self, checks: Iterable[SpotCheck]) -> None:
         """Keep spot re-timings in the store they sampled, so the leaderboard's stamp can show them (one transaction)."""
         try:
             with self.db:
