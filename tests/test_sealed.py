@@ -28,10 +28,10 @@ from earthbench.identity import variant_name
 from earthbench.merge import MergeError, merge
 from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import score
-from earthbench.seal import SealError, SealKey, SiteTransform, new_key, open_sealed, public_name
+from earthbench.seal import SealError, SealKey, SiteTransform, public_name
 from earthbench.sensing import ANONYMOUS_ID, observe
 from earthbench.store import SCHEMA_VERSION, Store, load_runs
-from earthbench.suite import load_suite
+from earthbench.suite import load_suite, new_key, open_sealed
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "sealing_planners.py")
