@@ -19,8 +19,8 @@ work array, in C files compiled at ``-O1`` one by one (0.10.1): gcc's time and m
 than the code on one straight-line function of half a million operations (the 8-phase global
 Hessian took 25 s and 2.6 GB at ``-O0``, 212 s and 3.4 GB at ``-O1``, so 0.10.0 compiled it at
 ``-O0``, where it evaluated 2.5× slower than split at ``-O1`` and took 13 % of a plan's CPU). The
-rest: ``-O1``, or ``-O0`` for a function evaluated once per solve (:data:`ONCE`) and, whole, for
-one above :data:`O1_LIMIT` that could not be split.
+rest: ``-O1``, or ``-O0`` for a function evaluated at most a few times per solve (:data:`ONCE`)
+and, whole, for one above :data:`O1_LIMIT` that could not be split.
 """
 
 from __future__ import annotations
@@ -50,9 +50,10 @@ BASE_FLAGS = ("-fPIC", "-ffp-contract=off", "-fno-fast-math")
 #: Instructions above which a function that could not be split is compiled at -O0 (see the
 #: module's docstring).
 O1_LIMIT = 250_000
-#: Evaluated once per solve (the multipliers of the parameters) or never (the oracle, which
-#: only tells ``nlpsol`` where the others are): not worth -O1's compile time.
-ONCE = ("nlp_grad", "nlp")
+#: Evaluated once per solve (the multipliers of the parameters), a few times per area (the
+#: helpers, for guesses and checks) or never (the oracle, which only tells ``nlpsol`` where the
+#: others are): not worth -O1's compile time.
+ONCE = ("nlp_grad", "nlp", *HELPER_NAMES)
 #: This module's code, part of a library's name: other flags or layout, another library.
 _SOURCE = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:8]
 
