@@ -71,58 +71,89 @@ def _inside(box, x: float, y: float) -> bool:
 def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float = math.inf, box=None) -> None:
     """Everything but the heightmap, as it stands at time ``t`` (``inf``: the whole plan)."""
     box = box or view_box(scenario, plan)
-    m = scenario.machines
+    _draw_site(ax, scenario)
+    bad: dict[int, list[str]] = {}  # action index → the rules it broke
+    for v in verdict.violations:
+        if v.action is not None:
+            bad.setdefault(v.action, []).append(v.rule)
+    paths = machine_paths(scenario, plan)
+    for mid in scenario.machines.ids:
+        _draw_machine(ax, scenario, plan, mid, paths, bad, t, box)
+    _draw_reach(ax, scenario, plan, paths, t)
+    _draw_actions(ax, scenario, plan, verdict, paths, bad, t)
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def _draw_site(ax, scenario: Scenario) -> None:
+    """The dig area (dashed) and the keep-outs (red)."""
     area = np.array(scenario.site.dig_area + (scenario.site.dig_area[0],))
     ax.plot(area[:, 0], area[:, 1], "k--", lw=1, label="dig area")
     for ko in scenario.site.keep_outs:
         k = np.array(ko + (ko[0],))
         ax.fill(k[:, 0], k[:, 1], color="red", alpha=0.3)
-    bad: dict[int, list[str]] = {}
-    for v in verdict.violations:
-        if v.action is not None:
-            bad.setdefault(v.action, []).append(v.rule)
+
+
+def _draw_machine(ax, scenario: Scenario, plan: Plan, mid: str, paths: dict[str, Any], bad: dict[int, list[str]],
+                  t: float, box) -> None:
+    """One machine's moves up to ``t`` (red where they broke a rule, a red dashed jump between two moves that do
+    not meet), its start pose (○) and its pose at ``t`` (▲ with the heading, or an arrow at the edge beyond the crop)."""
     index = {id(a): n for n, a in enumerate(plan.actions)}
-    paths = machine_paths(scenario, plan)
-    for mid in m.ids:
-        p0 = m.pose(mid)
-        colour = _COLOURS.get(mid, "k")
-        at = (p0.x, p0.y)
-        moves = [a for a in sorted(plan.actions, key=lambda a: a.t_start) if a.machine == mid and isinstance(a, (Move, Charge))]
-        ax.plot([], [], "-", color=colour, label=mid)  # the legend shows the machine's colour, red or not
-        for seg, mv in zip(paths[mid], moves):
-            if seg[0, 0] > t:
-                break
-            shown = seg[seg[:, 0] <= t] if seg[-1, 0] > t else seg
-            if seg[-1, 0] > t:
-                shown = np.vstack([shown, [t, *pose_at((p0.x, p0.y, p0.yaw), paths[mid], t)]])
-            if math.hypot(seg[0, 1] - at[0], seg[0, 2] - at[1]) > _JUMP:  # a jump: never an ordinary path
-                ax.plot([at[0], seg[0, 1]], [at[1], seg[0, 2]], ls=(0, (3, 2)), color=_RED, lw=1.8, zorder=4)
-            rules = bad.get(index[id(mv)])
-            ax.plot(shown[:, 1], shown[:, 2], "-", color=_RED if rules else colour, lw=2.4 if rules else 1.5, zorder=3)
-            if rules:
-                ax.text(shown[-1, 1], shown[-1, 2], " " + ", ".join(sorted(set(rules))), color=_RED, fontsize=7, zorder=6)
-            at = (seg[-1, 1], seg[-1, 2])
-        if _inside(box, p0.x, p0.y):
-            ax.plot(p0.x, p0.y, "o", color=colour, mfc="white", mew=1.5, ms=7, zorder=5)
-        end = pose_at((p0.x, p0.y, p0.yaw), paths[mid], t)
-        if _inside(box, end[0], end[1]):
-            ax.plot(end[0], end[1], marker=(3, 0, math.degrees(end[2]) - 90), color=colour, mec="k", ms=11, zorder=5)
-            ax.plot([end[0], end[0] + 0.8 * math.cos(end[2])], [end[1], end[1] + 0.8 * math.sin(end[2])], "k-", lw=1.2, zorder=5)
-        else:
-            _edge_marker(ax, box, end[0], end[1], colour, mid)
+    p0 = scenario.machines.pose(mid)
+    colour = _COLOURS.get(mid, "k")
+    at = (p0.x, p0.y)
+    moves = [a for a in sorted(plan.actions, key=lambda a: a.t_start) if a.machine == mid and isinstance(a, (Move, Charge))]
+    ax.plot([], [], "-", color=colour, label=mid)  # the legend shows the machine's colour, red or not
+    for seg, mv in zip(paths[mid], moves):
+        if seg[0, 0] > t:
+            break
+        shown = seg[seg[:, 0] <= t] if seg[-1, 0] > t else seg
+        if seg[-1, 0] > t:
+            shown = np.vstack([shown, [t, *pose_at((p0.x, p0.y, p0.yaw), paths[mid], t)]])
+        if math.hypot(seg[0, 1] - at[0], seg[0, 2] - at[1]) > _JUMP:  # a jump: never an ordinary path
+            ax.plot([at[0], seg[0, 1]], [at[1], seg[0, 2]], ls=(0, (3, 2)), color=_RED, lw=1.8, zorder=4)
+        rules = bad.get(index[id(mv)])
+        ax.plot(shown[:, 1], shown[:, 2], "-", color=_RED if rules else colour, lw=2.4 if rules else 1.5, zorder=3)
+        if rules:
+            ax.text(shown[-1, 1], shown[-1, 2], " " + ", ".join(sorted(set(rules))), color=_RED, fontsize=7, zorder=6)
+        at = (seg[-1, 1], seg[-1, 2])
+    if _inside(box, p0.x, p0.y):
+        ax.plot(p0.x, p0.y, "o", color=colour, mfc="white", mew=1.5, ms=7, zorder=5)
+    end = pose_at((p0.x, p0.y, p0.yaw), paths[mid], t)
+    if _inside(box, end[0], end[1]):
+        ax.plot(end[0], end[1], marker=(3, 0, math.degrees(end[2]) - 90), color=colour, mec="k", ms=11, zorder=5)
+        ax.plot([end[0], end[0] + 0.8 * math.cos(end[2])], [end[1], end[1] + 0.8 * math.sin(end[2])], "k-", lw=1.2, zorder=5)
+    else:
+        _edge_marker(ax, box, end[0], end[1], colour, mid)
+
+
+def _draw_reach(ax, scenario: Scenario, plan: Plan, paths: dict[str, Any], t: float) -> None:
+    """The excavator's reach annulus at every station it dug from up to ``t`` (stations within 1.5 m drawn once)."""
+    m = scenario.machines
     exc, e0 = m.excavator, m.excavator_pose
-    if exc is not None and e0 is not None and "excavator" in paths:
-        bases = [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], a.t_start)[:2]
-                 for a in sorted(plan.actions, key=lambda a: a.t_start) if isinstance(a, Dig) and a.t_start <= t]
-        stations: list[tuple[float, float]] = []
-        for b in bases or [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], t)[:2]]:
-            if all(math.hypot(b[0] - s[0], b[1] - s[1]) > 1.5 for s in stations):  # one ring per station, not per nudge
-                stations.append(b)
-        th = np.linspace(0, 2 * math.pi, 121)
-        for ring, (sx, sy) in enumerate(stations):
-            for r in (exc.reach_min, exc.reach_max):
-                ax.plot(sx + r * np.cos(th), sy + r * np.sin(th), ":", color="0.25", lw=0.9,
-                        label="reach annulus" if ring == 0 and r == exc.reach_min else None, zorder=2)
+    if exc is None or e0 is None or "excavator" not in paths:
+        return
+    bases = [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], a.t_start)[:2]
+             for a in sorted(plan.actions, key=lambda a: a.t_start) if isinstance(a, Dig) and a.t_start <= t]
+    stations: list[tuple[float, float]] = []
+    for b in bases or [pose_at((e0.x, e0.y, e0.yaw), paths["excavator"], t)[:2]]:
+        if all(math.hypot(b[0] - s[0], b[1] - s[1]) > 1.5 for s in stations):  # one ring per station, not per nudge
+            stations.append(b)
+    th = np.linspace(0, 2 * math.pi, 121)
+    for ring, (sx, sy) in enumerate(stations):
+        for r in (exc.reach_min, exc.reach_max):
+            ax.plot(sx + r * np.cos(th), sy + r * np.sin(th), ":", color="0.25", lw=0.9,
+                    label="reach annulus" if ring == 0 and r == exc.reach_min else None, zorder=2)
+
+
+def _draw_actions(ax, scenario: Scenario, plan: Plan, verdict: Verdict, paths: dict[str, Any], bad: dict[int, list[str]],
+                  t: float) -> None:
+    """Every action started by ``t``: bucket footprints and drags, dumps (■ at the truck) and each violation in red
+    at its action with its rule."""
+    m = scenario.machines
     dumps = 0
     if any(isinstance(a, Dump) for a in plan.actions):
         ax.plot([], [], "s", color="#5b3a1a", ms=5, label="dump")
@@ -153,11 +184,6 @@ def draw_layers(ax, scenario: Scenario, plan: Plan, verdict: Verdict, t: float =
             ax.plot(*where, "o", ms=16, mfc="none", mec=_RED, mew=2, zorder=6)
             ax.annotate(f"{n}: " + ", ".join(sorted(set(rules))), where, xytext=(6, 6), textcoords="offset points",
                         color=_RED, fontsize=7, zorder=6)
-    ax.set_xlim(box[0], box[1])
-    ax.set_ylim(box[2], box[3])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
 
 
 def _heights(ax, scenario: Scenario, z: np.ndarray, lo: float, hi: float):

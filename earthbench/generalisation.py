@@ -133,7 +133,16 @@ def gap_table(runs: pd.DataFrame, members: pd.DataFrame) -> pd.DataFrame:
 
 
 def _f(v: Any, scale: float = 1.0) -> str:
-    return "–" if v is None or not math.isfinite(float(v)) else f"{float(v) * scale:.3g}"
+    """A figure: ∞ for an infinite median (every run short of the target), – for no value."""
+    if v is None or math.isnan(float(v)):
+        return "–"
+    return ("∞" if v > 0 else "-∞") if math.isinf(float(v)) else f"{float(v) * scale:.3g}"
+
+
+def _ci(lo: Any, hi: Any, scale: float = 1.0) -> str:
+    """An interval in brackets, or nothing when neither end has a value."""
+    ends = [_f(lo, scale), _f(hi, scale)]
+    return "" if ends == ["–", "–"] else f" [{ends[0]}–{ends[1]}]"
 
 
 def markdown(table: pd.DataFrame) -> str:
@@ -150,10 +159,10 @@ def markdown(table: pd.DataFrame) -> str:
                 "| planner | metric | public | sealed | gap | |", "|---|---|---|---|---|---|"]
         for _, r in t.iterrows():
             k = 100.0 if r["metric"] == "success_rate" else 1.0
-            out.append(f"| {r['planner']} {r['planner_version']} | {r['metric']} | {_f(r['public'], k)} "
-                       f"[{_f(r['public_lo'], k)}–{_f(r['public_hi'], k)}] | {_f(r['sealed'], k)} "
-                       f"[{_f(r['sealed_lo'], k)}–{_f(r['sealed_hi'], k)}] | {_f(r['gap'], k)} "
-                       f"[{_f(r['gap_lo'], k)}–{_f(r['gap_hi'], k)}] | {'**flagged**' if r['flagged'] else ''} |")
+            out.append(f"| {r['planner']} {r['planner_version']} | {r['metric']} "
+                       f"| {_f(r['public'], k)}{_ci(r['public_lo'], r['public_hi'], k)} "
+                       f"| {_f(r['sealed'], k)}{_ci(r['sealed_lo'], r['sealed_hi'], k)} "
+                       f"| {_f(r['gap'], k)}{_ci(r['gap_lo'], r['gap_hi'], k)} | {'**flagged**' if r['flagged'] else ''} |")
         out.append("")
     return "\n".join(out)
 
@@ -162,7 +171,7 @@ def with_sealed_draws(store: Any, suites: Any) -> list[str] | None:
     """``suites`` and every sealed draw of them that ``store`` lists (None stays None: every suite)."""
     if not suites:
         return None
-    names = [r[0] for r in store.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+    names = store.suite_names()
     return list(dict.fromkeys([*suites, *(n for n in names if public_name(n) in suites)]))
 
 

@@ -42,7 +42,7 @@ from typing import Any
 
 from . import identity
 from .errors import StoreError
-from .harness.cases import Case, CaseResult, PlannerRef
+from .records import Case, CaseResult, PlannerRef
 from .store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 
@@ -90,10 +90,10 @@ class MergeReport:
 
 def _suites(store: Store) -> list[_SuiteRecord]:
     out = []
-    for s in store.db.execute("SELECT * FROM suites ORDER BY id"):
+    for s in store.suite_versions():
         members = tuple(
             _SuiteScenario(m["scenario_id"], m["scenario_digest"], {"family": m["family"], "seed": m["seed"]})
-            for m in store.db.execute("SELECT * FROM suite_scenarios WHERE suite_id=? ORDER BY scenario_id", (s["id"],))
+            for m in store.suite_members(s["id"])
         )
         keys = s.keys()
         seal = tuple(s[k] if k in keys else None for k in ("sealed_from", "public_digest", "commitment"))
@@ -132,8 +132,7 @@ def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, s
             problems += identity.problems([s.version(str(st.path))])
             digests.setdefault(s.name, {}).setdefault(s.digest, []).append(str(st.path))
         known = {(s.name, s.digest) for s in _suites(st)}
-        bad = st.db.execute("SELECT suite, suite_digest, COUNT(*) FROM runs GROUP BY suite, suite_digest").fetchall()
-        for name, digest, n in bad:
+        for name, digest, n in st.run_labels():
             if (name, digest) not in known:
                 problems.append(
                     f"{st.path}: {n} run(s) labelled suite {name!r} digest {digest[:12]}…, a suite version that store does not list"
@@ -146,14 +145,13 @@ def check(out: Store | None, inputs: Sequence[Store], renames: dict[tuple[str, s
     seen: dict[tuple[str, str, str, str], tuple[Store, int]] = {}
     dups: list[str] = []
     for st in stores:
-        for row in st.db.execute("SELECT id, scenario_digest, planner, planner_version, config_hash FROM runs ORDER BY id"):
-            k = (row[1], row[2], row[3], row[4])
+        for run_id, k in st.run_keys():
             if k not in seen:
-                seen[k] = (st, row[0])
+                seen[k] = (st, run_id)
                 continue
             first, first_id = seen[k]
-            if skip is not None and st is not out and _same_run(first, first_id, st, row[0]):
-                skip.add((str(st.path), row[0]))
+            if skip is not None and st is not out and _same_run(first, first_id, st, run_id):
+                skip.add((str(st.path), run_id))
             else:
                 dups.append(f"{k[1]} {k[2]} [{k[3][:8]}] on scenario {k[0][:12]}… is in both {first.path} and {st.path}"
                             + (" with a different plan or outcome" if skip is not None else ""))
@@ -168,8 +166,7 @@ def _same_run(a: Store, a_id: int, b: Store, b_id: int) -> bool:
     """Two stored runs of one case that the referee cannot tell apart: the same plan (so the same
     re-judged figures, which the audit checks against each one's stored figures) or, without a
     plan, the same termination reason."""
-    ra = a.db.execute("SELECT reason, plan FROM runs WHERE id=?", (a_id,)).fetchone()
-    rb = b.db.execute("SELECT reason, plan FROM runs WHERE id=?", (b_id,)).fetchone()
+    ra, rb = a.run_outcome(a_id), b.run_outcome(b_id)
     if ra[1] is None or rb[1] is None:
         return ra[1] is None and rb[1] is None and ra[0] == rb[0]
     try:
@@ -188,13 +185,13 @@ def _case_and_result(src: Store, row: Any, scenarios: dict[str, Any],
                              f"{digest[:12]}… (got {sc.digest[:12]}…); it cannot be merged safely")
         scenarios[digest] = sc
     sc = scenarios[digest]
-    cfg = src.db.execute("SELECT config, source FROM planner_configs WHERE id=?", (row["planner_config_id"],)).fetchone()
+    cfg = src.planner_config(row["planner_config_id"])
     ref = PlannerRef(name=row["planner"], version=row["planner_version"], source=(cfg["source"] if cfg else "") or "",
                      config=json.loads(cfg["config"]) if cfg else {}, config_hash=row["config_hash"])
     suite = (renames or {}).get((row["suite"], row["suite_digest"]), row["suite"])
     case = Case(suite, row["suite_digest"], row["threshold"], sc, ref)
     env: dict[str, Any] = {}
-    e = src.db.execute("SELECT * FROM environments WHERE id=?", (row["environment_id"],)).fetchone() if row["environment_id"] else None
+    e = src.environment(row["environment_id"]) if row["environment_id"] else None
     if e is not None:
         env = {"hostname": e["hostname"], "cpu_model": e["cpu_model"], "cores": e["cores"], "os": e["os"],
                "python": e["python"], "packages": json.loads(e["packages"] or "{}"),
@@ -231,11 +228,8 @@ def _new_store(path: Path) -> Iterator[Store]:
         raise MergeError(f"the folder {str(path.parent)!r} for {str(path)!r} does not exist; create it first")
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
-        with Store(tmp) as st:
-            st.db.execute("PRAGMA synchronous=OFF")
+        with Store(tmp) as st, st.unsynced():
             yield st
-            st.db.execute("PRAGMA synchronous=FULL")
-            st.db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         os.replace(tmp, path)
     finally:
         for p in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
@@ -321,8 +315,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
             def fill(out: Store) -> None:
                 for src, a in zip(inputs, audits):
                     report.suites += _register(out, _relabel(_suites(src), renames))
-                    rows = [r for r in src.db.execute("SELECT * FROM runs ORDER BY id")
-                            if (str(src.path), r["id"]) not in (skip or ())]
+                    rows = [r for r in src.runs() if (str(src.path), r["id"]) not in (skip or ())]
                     report.duplicates += sum(1 for s in (skip or ()) if s[0] == str(src.path))
                     changed = {f.run_id: a.judgements[f.run_id] for f in a.differ if f.run_id in a.judgements}
                     n = _copy(src, rows, out, changed, a.scenarios, renames)
@@ -358,14 +351,14 @@ def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[
     with Store(db, read_only=True) as src:
         ver = src.suite_version(suite)
         if ver is None:
-            known = [r[0] for r in src.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+            known = src.suite_names()
             close = difflib.get_close_matches(suite, known, n=3, cutoff=0.5)
             raise MergeError(
                 f"suite {suite!r} has no runs in {str(db)!r}"
                 + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
                 + f" Suites there: {', '.join(known) or '(none)'}"
             )
-        stored = [r[0] for r in src.db.execute("SELECT DISTINCT planner FROM runs ORDER BY planner")]
+        stored = src.planner_names()
         for p in planners:
             if p not in stored:
                 close = difflib.get_close_matches(p, stored, n=3, cutoff=0.5)
@@ -374,7 +367,7 @@ def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[
                     + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
                     + f" Planners there: {', '.join(stored) or '(none)'}"
                 )
-        members = {r[0] for r in src.db.execute("SELECT scenario_digest FROM suite_scenarios WHERE suite_id=?", (ver["id"],))}
+        members = {r["scenario_digest"] for r in src.suite_members(ver["id"])}
         rows = [r for r in sorted(src.query(planner=planners), key=lambda r: r["id"]) if r["scenario_digest"] in members]
         if not rows:
             raise MergeError(f"no runs of {', '.join(planners)} on suite {suite!r} (digest {ver['digest'][:12]}…) in {str(db)!r}")

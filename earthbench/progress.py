@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .harness.cases import REASONS, Case, CaseResult
+from .records import REASONS, Case, CaseResult
 
 
 def _clock(seconds: float) -> str:

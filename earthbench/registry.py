@@ -10,6 +10,7 @@ Unknown names raise :class:`UnknownNameError` with the known names and close mat
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import inspect
 import sys
@@ -138,6 +139,14 @@ def register_planner(cls: type[Planner] | None = None, *, name: str | None = Non
     return deco(cls) if cls is not None else deco
 
 
+def plugin_module_name(path: str | Path) -> str:
+    """The module a plugin file is imported as, the same in the harness and in every case process:
+    ``earthbench_plugin_STEM_DIGEST``, the digest of its resolved path, so two files of one name
+    (``planner.py`` in two folders) never share a module."""
+    p = Path(path).resolve()
+    return f"earthbench_plugin_{p.stem}_{hashlib.sha256(str(p).encode()).hexdigest()[:8]}"
+
+
 def load_plugin_file(path: str | Path) -> list[str]:
     """Import one Python file and register every named Planner subclass defined in it.
 
@@ -146,7 +155,7 @@ def load_plugin_file(path: str | Path) -> list[str]:
     p = Path(path)
     if not p.is_file():
         raise PluginError(f"plugin file {str(p)!r} not found")
-    mod_name = f"earthbench_plugin_{p.stem}_{abs(hash(str(p.resolve()))) % 10**8}"
+    mod_name = plugin_module_name(p)
     spec = importlib.util.spec_from_file_location(mod_name, p)
     if spec is None or spec.loader is None:
         raise PluginError(f"{p} is not an importable Python file")

@@ -23,6 +23,11 @@ pandas. Tables:
   plugin (its distribution and source commit, or a plugin file's SHA-256), hostname;
   deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
+* ``spot_checks`` — each re-timing of ``earthbench verify --sample`` (:mod:`earthbench.verify`), so a
+  leaderboard's stamp can say how its solve times held up on another machine.
+
+Every SQL statement of earthbench is in this module: the rest reads and writes a store through
+:class:`Store`'s named methods.
 
 Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
 was drawn from (``sealed_from``), that suite's digest (``public_digest``) and the draw's
@@ -39,7 +44,8 @@ and ``environments.plugin``: the plugin's distribution, version and source commi
 read-only, it is read as it is (a version-1 store's runs read as open-loop runs, a store before
 version 3 as public runs, runs stored before version 4 as ``isolation: none``: they ran with
 per-process fences, runs before version 5 without load or build; version 6 ``prepare_s`` and
-``prepare_cpu_s``, the planner's preparation, NULL before it).
+``prepare_cpu_s``, the planner's preparation, NULL before it; version 7 ``spot_checks``, which
+``verify`` created on its own before, so a store before it may or may not hold one).
 """
 
 from __future__ import annotations
@@ -49,7 +55,8 @@ import json
 import os
 import sqlite3
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from datetime import datetime, UTC
 from pathlib import Path
 from urllib.parse import quote
@@ -62,7 +69,13 @@ from .world import Scenario
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from .harness.cases import Case, CaseResult
+    from .records import Case, CaseResult, SpotCheck
+
+#: The columns of ``spot_checks`` before ``context`` (the CPU ratios and load, issue 35) joined them.
+_SPOT_CHECK_COLUMNS = """
+    id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, planner_version TEXT NOT NULL,
+    config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, ratios TEXT NOT NULL,
+    disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL"""
 
 #: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
 #: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
@@ -86,6 +99,11 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "ALTER TABLE environments ADD COLUMN plugin TEXT")),
     ("6: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
      ("ALTER TABLE runs ADD COLUMN prepare_s REAL", "ALTER TABLE runs ADD COLUMN prepare_cpu_s REAL")),
+    # `earthbench verify --sample` created this table on its own before it was versioned, at first
+    # without ``context``: a store that has it keeps its rows, one without it gains it empty
+    ("7: the spot re-timings of `earthbench verify --sample`, kept in the store they sampled", (
+        "CREATE TABLE IF NOT EXISTS spot_checks (" + _SPOT_CHECK_COLUMNS + ")",
+        "ALTER TABLE spot_checks ADD COLUMN context TEXT")),
 )
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
@@ -157,6 +175,7 @@ CREATE TABLE runs (
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
+CREATE TABLE spot_checks (""" + _SPOT_CHECK_COLUMNS + """, context TEXT);
 """
 
 
@@ -184,6 +203,8 @@ class SuiteRecord(Protocol):
     def description(self) -> str: ...
     @property
     def scenarios(self) -> Any: ...
+
+
 
 
 @overload
@@ -303,9 +324,16 @@ class Store:
         self.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def finished_keys(self) -> set[tuple[str, str, str, str]]:
-        """Resume keys (scenario digest, planner, version, config hash) already stored."""
-        rows = self.db.execute("SELECT scenario_digest, planner, planner_version, config_hash FROM runs")
+    def finished_keys(self, *, reason: str | None = None, succeeded: bool = False) -> set[tuple[str, str, str, str]]:
+        """Resume keys (scenario digest, planner, version, config hash) already stored; only those
+        that ended with ``reason``, or that succeeded under their suite's threshold, when asked."""
+        sql = "SELECT scenario_digest, planner, planner_version, config_hash FROM runs"
+        if succeeded:
+            rows = self.db.execute(sql + " WHERE success=1")
+        elif reason is not None:
+            rows = self.db.execute(sql + " WHERE reason=?", (reason,))
+        else:
+            rows = self.db.execute(sql)
         return {tuple(r) for r in rows}  # type: ignore[misc]
 
     def register_suite(self, suite: SuiteRecord) -> int:
@@ -463,7 +491,51 @@ class Store:
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 
+    def record_spot_checks(self, checks: Iterable[SpotCheck]) -> None:
+        """Keep spot re-timings in the store they sampled, so the leaderboard's stamp can show them (one transaction)."""
+        try:
+            with self.db:
+                self.db.execute("BEGIN IMMEDIATE")
+                self.db.executemany(
+                    "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
+                    "disagreements, machine, stored_machines, context) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    [(c.checked_at, c.planner, c.version, c.config_hash, json.dumps(c.run_ids), c.agree, json.dumps(c.ratios),
+                      json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines),
+                      json.dumps({"cpu_ratios": c.cpu_ratios, "load_stored": c.load_stored, "load_here": c.load_here,
+                                  "steal": c.steal}))
+                     for c in checks])
+        except sqlite3.OperationalError as exc:
+            raise StoreError(self._explain(exc)) from None
+
+    @contextmanager
+    def unsynced(self) -> Iterator[Store]:
+        """Writes that skip the disk sync, for a file nobody reads before it is complete (a merge's new
+        output); one synced checkpoint at the end makes them durable."""
+        self.db.execute("PRAGMA synchronous=OFF")
+        yield self
+        self.db.execute("PRAGMA synchronous=FULL")
+        self.db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+
     # -- reading -----------------------------------------------------------------------------
+    def latest_spot_checks(self) -> list[dict[str, Any]]:
+        """The most recent spot check of each planner version and configuration, its fields as
+        :meth:`record_spot_checks` was given them (none in a store never spot-checked, read as it is)."""
+        if not self.db.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='spot_checks'").fetchone():
+            return []
+        rows = self.db.execute(
+            "SELECT * FROM spot_checks WHERE id IN (SELECT MAX(id) FROM spot_checks GROUP BY planner, planner_version, config_hash) "
+            "ORDER BY planner, planner_version, config_hash").fetchall()
+        out = []
+        for r in rows:
+            ctx = json.loads(r["context"] or "{}") if "context" in r.keys() else {}
+            out.append({"planner": r["planner"], "version": r["planner_version"], "config_hash": r["config_hash"],
+                        "run_ids": tuple(json.loads(r["run_ids"])), "agree": r["agree"], "ratios": tuple(json.loads(r["ratios"])),
+                        "disagreements": tuple(json.loads(r["disagreements"])), "machine": r["machine"],
+                        "stored_machines": tuple(json.loads(r["stored_machines"])), "checked_at": r["checked_at"],
+                        "cpu_ratios": tuple(ctx.get("cpu_ratios", ())), "load_stored": tuple(ctx.get("load_stored", ())),
+                        "load_here": tuple(ctx.get("load_here", ())), "steal": ctx.get("steal")})
+        return out
+
     def query(self, *, suite: str | None = None, planner: Iterable[str] | None = None, reason: Iterable[str] | None = None,
               scenario: str | None = None, run_id: int | None = None, limit: int | None = None) -> list[sqlite3.Row]:
         """Rows of ``runs`` (newest first) matching every given filter; ``scenario`` is a substring of the id."""
@@ -492,15 +564,89 @@ class Store:
             sql += f" LIMIT {int(limit)}"
         return self.db.execute(sql, args).fetchall()
 
+    def run_suites(self) -> list[str]:
+        """The names of the suites that runs were stored under, sorted (what ``load_runs`` labels them)."""
+        return sorted(r[0] for r in self.db.execute("SELECT DISTINCT suite FROM runs WHERE suite IS NOT NULL"))
+
     def plan_json(self, run_id: int) -> str | None:
         row = self.db.execute("SELECT plan FROM runs WHERE id=?", (run_id,)).fetchone()
         return decompress(row[0]) if row else None
 
     def scenario(self, digest: str) -> Scenario:
-        row = self.db.execute("SELECT doc FROM scenarios WHERE digest=?", (digest,)).fetchone()
-        if row is None:
+        blob = self.scenario_blob(digest)
+        if blob is None:
             raise StoreError(f"scenario {digest[:12]}… is not in {str(self.path)!r}")
-        return Scenario.from_text(decompress(row[0]))
+        return Scenario.from_text(decompress(blob))
+
+    def scenario_blob(self, digest: str) -> bytes | None:
+        """A scenario's document as stored (compressed), unread: a verifier decides what an edited one means."""
+        row = self.db.execute("SELECT doc FROM scenarios WHERE digest=?", (digest,)).fetchone()
+        return None if row is None else row[0]
+
+    def runs(self, *, labelled: str | None = None) -> list[sqlite3.Row]:
+        """Every row of ``runs`` in the order stored; ``labelled``: only those run under that suite name."""
+        if labelled is None:
+            return self.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
+        return self.db.execute("SELECT * FROM runs WHERE suite=? ORDER BY id", (labelled,)).fetchall()
+
+    def run_keys(self) -> list[tuple[int, tuple[str, str, str, str]]]:
+        """(run id, resume key) of every run in the order stored: how a merge finds a run stored twice."""
+        rows = self.db.execute("SELECT id, scenario_digest, planner, planner_version, config_hash FROM runs ORDER BY id")
+        return [(r[0], (r[1], r[2], r[3], r[4])) for r in rows]
+
+    def run_id(self, key: tuple[str, str, str, str]) -> int | None:
+        """The id of the run stored under a resume key (scenario digest, planner, version, config hash)."""
+        row = self.db.execute("SELECT id FROM runs WHERE scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?",
+                              key).fetchone()
+        return None if row is None else int(row[0])
+
+    def run_outcome(self, run_id: int) -> tuple[str, bytes | None]:
+        """A run's termination reason and its plan as stored (compressed, None without a plan)."""
+        row = self.db.execute("SELECT reason, plan FROM runs WHERE id=?", (run_id,)).fetchone()
+        return row[0], row[1]
+
+    def run_labels(self) -> list[tuple[str, str, int]]:
+        """(suite name, suite digest, how many runs) for each suite label the runs carry."""
+        rows = self.db.execute("SELECT suite, suite_digest, COUNT(*) FROM runs GROUP BY suite, suite_digest")
+        return [(r[0], r[1], r[2]) for r in rows]
+
+    def planner_names(self) -> list[str]:
+        """The planners with a stored run, by name."""
+        return [r[0] for r in self.db.execute("SELECT DISTINCT planner FROM runs ORDER BY planner")]
+
+    def suite_names(self) -> list[str]:
+        """Every suite name the store lists, by name."""
+        return [r[0] for r in self.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+
+    def suite_versions(self, name: str | None = None) -> list[sqlite3.Row]:
+        """Every stored suite version (id, name, digest, threshold, seal columns …), or those of one name."""
+        if name is None:
+            return self.db.execute("SELECT * FROM suites ORDER BY id").fetchall()
+        return self.db.execute("SELECT * FROM suites WHERE name=?", (name,)).fetchall()
+
+    def suite_members(self, suite_id: int) -> list[sqlite3.Row]:
+        """The scenarios of one suite version (scenario id and digest, family, seed), by scenario id."""
+        return self.db.execute("SELECT * FROM suite_scenarios WHERE suite_id=? ORDER BY scenario_id", (suite_id,)).fetchall()
+
+    def memberships(self) -> set[tuple[int, str]]:
+        """(suite version id, scenario digest) of every member of every stored suite version."""
+        return {(r[0], r[1]) for r in self.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
+
+    def planner_config(self, config_id: int | None) -> sqlite3.Row | None:
+        """A run's configuration row (``config`` as JSON text, ``source``), None when it has none."""
+        return self.db.execute("SELECT config, source FROM planner_configs WHERE id=?", (config_id,)).fetchone()
+
+    def planner_configs(self) -> list[tuple[str, str, str]]:
+        """(planner name, config hash, configuration as JSON text) of every stored configuration, each once."""
+        return [(r[0], r[1], r[2]) for r in self.db.execute("SELECT DISTINCT name, config_hash, config FROM planner_configs")]
+
+    def environment(self, env_id: int | None) -> sqlite3.Row | None:
+        """A run's environment row (hostname, CPU model, cores, OS, Python, packages, commits …), None without one."""
+        return None if env_id is None else self.db.execute("SELECT * FROM environments WHERE id=?", (env_id,)).fetchone()
+
+    def environments(self) -> list[sqlite3.Row]:
+        """Every stored environment row."""
+        return self.db.execute("SELECT * FROM environments").fetchall()
 
 
 def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
@@ -523,10 +669,32 @@ def stored_steps(row: Any) -> tuple[tuple[int, float], ...] | None:
 def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite3.Row]]:
     ver = store.suite_version(suite)
     if ver is None:
-        known = [r[0] for r in store.db.execute("SELECT DISTINCT name FROM suites ORDER BY name")]
+        known = store.suite_names()
         raise StoreError(f"suite {suite!r} has no runs in {str(store.path)!r}; suites there: {', '.join(known) or '(none)'}")
-    members = {r["scenario_digest"]: r for r in store.db.execute("SELECT * FROM suite_scenarios WHERE suite_id=?", (ver["id"],))}
+    members = {r["scenario_digest"]: r for r in store.suite_members(ver["id"])}
     return ver, members
+
+
+def _joined_runs(store: Store) -> list[sqlite3.Row]:
+    """Every run joined with its configuration and environment, in the order stored; a column an
+    older schema lacks reads as NULL (0 for ``sealed``)."""
+    have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
+    sealed = "r.sealed" if "sealed" in have_r else "0 AS sealed"
+    stamp = "r.isolation, r.processes" if "isolation" in have_r else "NULL AS isolation, NULL AS processes"
+    newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
+                       *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
+    prep = ", ".join(f"r.{c}" if c in have_r else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
+    return store.db.execute(
+        f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
+                  r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
+                  r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
+                  r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
+                  {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
+                  e.project_commit, e.plugin_commit, {sealed}, {newer}
+           FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
+                       LEFT JOIN environments e ON e.id = r.environment_id
+           ORDER BY r.id"""
+    ).fetchall()
 
 
 def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> pd.DataFrame:
@@ -566,23 +734,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         view = _suite_view(store, suite) if suite else None
-        sealed = "r.sealed" if "sealed" in _columns(store.db, "runs") else "0 AS sealed"
-        stamp = "r.isolation, r.processes" if "isolation" in _columns(store.db, "runs") else "NULL AS isolation, NULL AS processes"
-        have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
-        newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
-                           *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
-        prep = ", ".join(f"r.{c}" if c in _columns(store.db, "runs") else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
-        rows = store.db.execute(
-            f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
-                      r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
-                      r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
-                      r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                      {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                      e.project_commit, e.plugin_commit, {sealed}, {newer}
-               FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
-                           LEFT JOIN environments e ON e.id = r.environment_id
-               ORDER BY r.id"""
-        ).fetchall()
+        rows = _joined_runs(store)
     finally:
         if not isinstance(db, Store):
             store.close()

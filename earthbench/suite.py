@@ -466,27 +466,8 @@ def _included_families(names: Any, where: str, path: str, track: str, stack: tup
     return out
 
 
-def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tuple[str, ...] = ()) -> Suite:
-    """Check and build a suite from TOML text; every error names the file and the key."""
-    from .registry import TERRAINS
-
-    where = path or "suite"
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SuiteError(f"{where} is not valid TOML: {exc}") from None
-    _unknown(doc, _TOP_KEYS, where)
-    name = doc.get("name", default_name)
-    if not isinstance(name, str) or not name or "/" in name:
-        raise SuiteError(f"{where}: 'name' must be a non-empty string without '/', got {name!r}")
-    track = doc.get("track", "backhoe")
-    if track not in TRACKS:
-        close = difflib.get_close_matches(str(track), TRACKS, n=1)
-        raise SuiteError(f"{where}: track {track!r} is not one of {', '.join(TRACKS)}" + (f"; did you mean {close[0]!r}?" if close else ""))
-    threshold = doc.get("success_threshold", DEFAULT_THRESHOLD)
-    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold <= 1:
-        raise SuiteError(f"{where}: success_threshold must be a number in (0, 1], got {threshold!r}")
-    budget_doc = doc.get("budget", {})
+def _budget(budget_doc: Any, where: str) -> Budget:
+    """The suite's ``[budget]`` table, checked: positive finite numbers, integers where counted."""
     if not isinstance(budget_doc, dict):
         raise SuiteError(f"{where}: [budget] must be a table with {', '.join(_BUDGET_KEYS)}")
     _unknown(budget_doc, _BUDGET_KEYS, f"{where} [budget]")
@@ -503,7 +484,55 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
     for k in ("wall_s", "step_s", "cpu_s", "prepare_s"):  # 60 and 60.0 must give the same scenario digest
         if k in budget_doc:
             budget_doc = {**budget_doc, k: float(budget_doc[k])}
-    budget = Budget(**budget_doc)
+    return Budget(**budget_doc)
+
+
+def _family(fd: Any, n: int, where: str, path: str) -> Family:
+    """The ``n``-th ``[[family]]`` table (from 0), checked against its generator's parameters."""
+    from .registry import TERRAINS
+
+    fwhere = f"{where} [[family]] #{n + 1}"
+    _unknown(fd, _FAMILY_KEYS, fwhere)
+    for req in ("name", "generator", "targets", "seeds"):
+        if req not in fd:
+            raise SuiteError(f"{fwhere}: missing key {req!r}")
+    fname = fd["name"]
+    if not isinstance(fname, str) or not fname or "/" in fname:
+        raise SuiteError(f"{fwhere}: name must be a non-empty string without '/', got {fname!r}")
+    fwhere = f"{where} family {fname!r}"
+    try:
+        gen = TERRAINS.get(fd["generator"])
+    except EarthbenchError as exc:
+        raise SuiteError(f"{fwhere}: {exc}") from None
+    params = fd.get("params", {})
+    if not isinstance(params, dict):
+        raise SuiteError(f"{fwhere}: params must be a table")
+    params = _check_params(gen, params, fwhere, path)
+    fam = Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params,
+                 fd.get("soil"), fd.get("sensing"))
+    _check_realism(fam, fwhere)
+    return fam
+
+
+def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tuple[str, ...] = ()) -> Suite:
+    """Check and build a suite from TOML text; every error names the file and the key."""
+    where = path or "suite"
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SuiteError(f"{where} is not valid TOML: {exc}") from None
+    _unknown(doc, _TOP_KEYS, where)
+    name = doc.get("name", default_name)
+    if not isinstance(name, str) or not name or "/" in name:
+        raise SuiteError(f"{where}: 'name' must be a non-empty string without '/', got {name!r}")
+    track = doc.get("track", "backhoe")
+    if track not in TRACKS:
+        close = difflib.get_close_matches(str(track), TRACKS, n=1)
+        raise SuiteError(f"{where}: track {track!r} is not one of {', '.join(TRACKS)}" + (f"; did you mean {close[0]!r}?" if close else ""))
+    threshold = doc.get("success_threshold", DEFAULT_THRESHOLD)
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold <= 1:
+        raise SuiteError(f"{where}: success_threshold must be a number in (0, 1], got {threshold!r}")
+    budget = _budget(doc.get("budget", {}), where)
     prepare = doc.get("prepare", True)
     if not isinstance(prepare, bool):
         raise SuiteError(f"{where}: prepare must be true or false, got {prepare!r}")
@@ -516,29 +545,7 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
     fams_doc = doc.get("family", [] if "include" in doc else None)
     if not isinstance(fams_doc, list) or not (fams_doc or "include" in doc):
         raise SuiteError(f"{where}: a suite needs at least one [[family]] table or an include list")
-    families = []
-    for n, fd in enumerate(fams_doc):
-        fwhere = f"{where} [[family]] #{n + 1}"
-        _unknown(fd, _FAMILY_KEYS, fwhere)
-        for req in ("name", "generator", "targets", "seeds"):
-            if req not in fd:
-                raise SuiteError(f"{fwhere}: missing key {req!r}")
-        fname = fd["name"]
-        if not isinstance(fname, str) or not fname or "/" in fname:
-            raise SuiteError(f"{fwhere}: name must be a non-empty string without '/', got {fname!r}")
-        fwhere = f"{where} family {fname!r}"
-        try:
-            gen = TERRAINS.get(fd["generator"])
-        except EarthbenchError as exc:
-            raise SuiteError(f"{fwhere}: {exc}") from None
-        params = fd.get("params", {})
-        if not isinstance(params, dict):
-            raise SuiteError(f"{fwhere}: params must be a table")
-        params = _check_params(gen, params, fwhere, path)
-        fam = Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params,
-                     fd.get("soil"), fd.get("sensing"))
-        _check_realism(fam, fwhere)
-        families.append(fam)
+    families = [_family(fd, n, where, path) for n, fd in enumerate(fams_doc)]
     if "include" in doc:
         families.extend(_included_families(doc["include"], where, path, track, _stack + (name,)))
     if len({f.name for f in families}) != len(families):

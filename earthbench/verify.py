@@ -24,19 +24,19 @@ from __future__ import annotations
 import json
 import math
 import random
-import sqlite3
-import statistics
 import traceback
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
-from .errors import EarthbenchError, StoreError, UnknownNameError
+from .errors import EarthbenchError, UnknownNameError
+from .records import SpotCheck  # a record the store also reads; importable from here as before
 from .harness.steps import step_metrics
 from .store import METRIC_COLUMNS, Store, decompress, stored_steps
 from .suite import suite_digest
+from .plan import Plan
 from .world import Scenario
 
 #: Float round-off allowed between a stored figure and the re-judged one.
@@ -90,6 +90,44 @@ def rejudge(scenario: Scenario, plan_json: str, threshold: float, *,
         metrics.update(step_metrics(steps))
     return Judgement("ok" if verdict.valid else "invalid", metrics, tuple(v.to_dict() for v in verdict.violations))
 
+
+
+def time_ordered_prefixes(plan: Plan) -> Iterator[Plan]:
+    """Every proper prefix of a plan in the referee's time order (actions by start), longest first:
+    what a wrapper that stops a planner early could submit instead."""
+    order = sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n))
+    for k in range(len(order) - 1, -1, -1):
+        keep = set(order[:k])
+        yield Plan(tuple(a for n, a in enumerate(plan.actions) if n in keep), plan.predicted, plan.info)
+
+
+def prefix_violations(scenario: Scenario, plan: Plan, threshold: float) -> tuple[int, list[str]]:
+    """Check docs/metrics.md's promise on one plan: no valid prefix of a valid plan has a lower time
+    per target m³, a success the plan lacks, or a better :func:`~earthbench.scoring.run_order`.
+    Returns how many valid prefixes were judged and one line per prefix that breaks it (an invalid
+    prefix is never ranked, so it cannot rank better; an invalid plan's prefixes are only counted)."""
+    from .referee import judge
+    from .scoring import evaluate, run_order
+
+    m = evaluate(scenario, plan, judge(scenario, plan), threshold)
+    full = run_order(m["success"], m["time_per_target_m3"], m["volume_ratio"])
+    checked, broken = 0, []
+    for prefix in time_ordered_prefixes(plan):
+        verdict = judge(scenario, prefix)
+        if not verdict.valid:
+            continue
+        checked += 1
+        if not m["valid"]:
+            continue
+        mp = evaluate(scenario, prefix, verdict, threshold)
+        n = len(prefix.actions)
+        if mp["time_per_target_m3"] < m["time_per_target_m3"]:
+            broken.append(f"{n} actions: time per target m³ {mp['time_per_target_m3']:.6g} < {m['time_per_target_m3']:.6g}")
+        if mp["success"] and not m["success"]:
+            broken.append(f"{n} actions: a success where the plan fails")
+        if run_order(mp["success"], mp["time_per_target_m3"], mp["volume_ratio"]) < full:
+            broken.append(f"{n} actions: ranks before the plan")
+    return checked, broken
 
 # -- comparing stored figures with re-judged ones -----------------------------------------------
 
@@ -200,9 +238,8 @@ def _label(row: Any) -> str:
 
 def _check_suites(store: Store, audit: Audit) -> None:
     """Each stored suite version's digest, recomputed from its members and threshold."""
-    for s in store.db.execute("SELECT id, name, digest, threshold FROM suites ORDER BY id"):
-        members = [(m[0], m[1]) for m in store.db.execute(
-            "SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (s["id"],))]
+    for s in store.suite_versions():
+        members = [(m["scenario_id"], m["scenario_digest"]) for m in store.suite_members(s["id"])]
         got = suite_digest(members, s["threshold"])
         if got != s["digest"]:
             audit.broken.append(Finding(None, f"suite {s['name']}", f"the stored digest {s['digest'][:12]}… is not the one its "
@@ -213,12 +250,12 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
     """Each stored scenario by digest, or the reason it cannot be used (digest recomputed from the document)."""
     out: dict[str, Scenario | str] = {}
     for d in digests:
-        row = store.db.execute("SELECT doc FROM scenarios WHERE digest=?", (d,)).fetchone()
-        if row is None:
+        blob = store.scenario_blob(d)
+        if blob is None:
             out[d] = f"its scenario {d[:12]}… is not stored"
             continue
         try:
-            sc = Scenario.from_text(decompress(row[0]))
+            sc = Scenario.from_text(decompress(blob))
         except Exception as exc:  # noqa: BLE001 - an edited document of any kind is a finding, not a crash
             out[d] = f"its stored scenario document cannot be read ({type(exc).__name__}: {str(exc)[:120]})"
             continue
@@ -232,11 +269,9 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
     result = Audit(str(store.path))
     _check_suites(store, result)
     if rows is None:
-        rows = store.db.execute("SELECT * FROM runs ORDER BY id").fetchall()
-    suites = {
-        (s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.db.execute("SELECT id, name, digest, threshold FROM suites")
-    }
-    members = {(m[0], m[1]) for m in store.db.execute("SELECT suite_id, scenario_digest FROM suite_scenarios")}
+        rows = store.runs()
+    suites = {(s["name"], s["digest"]): (s["id"], s["threshold"]) for s in store.suite_versions()}
+    members = store.memberships()
     scenarios = _scenarios(store, {r["scenario_digest"] for r in rows})
     result.scenarios = {d: sc for d, sc in scenarios.items() if isinstance(sc, Scenario)}
     for r in rows:
@@ -281,58 +316,16 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
 # -- spot re-timing -------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class SpotCheck:
-    """One planner's sample, rerun here: do its referee figures agree, how do its solve times compare?"""
-
-    planner: str
-    version: str
-    config_hash: str
-    run_ids: tuple[int, ...]
-    agree: int
-    ratios: tuple[float, ...]          #: solve time here / stored solve time, per run with both
-    disagreements: tuple[str, ...]
-    machine: str                        #: where the sample was rerun
-    stored_machines: tuple[str, ...]    #: where the stored runs had run
-    checked_at: str
-    cpu_ratios: tuple[float, ...] = ()  #: CPU time here / stored CPU time, per run with both
-    load_stored: tuple[float, ...] = ()  #: the 1-minute load averages recorded around the stored runs
-    load_here: tuple[float, ...] = ()    #: and around their reruns
-    steal: float | None = None           #: the largest CPU steal share of the reruns
-
-    @property
-    def n(self) -> int:
-        return len(self.run_ids)
-
-    @property
-    def ratio_median(self) -> float | None:
-        return statistics.median(self.ratios) if self.ratios else None
-
-    def line(self) -> str:
-        """One line: agreement, the re-timings as ratios (wall and CPU), and the load both were measured under."""
-        def ratios(name: str, r: tuple[float, ...]) -> str:
-            return f"{name} here / stored: median {statistics.median(r):.2f} ({min(r):.2f}–{max(r):.2f})" if r else ""
-
-        def load(values: tuple[float, ...]) -> str:
-            return f"{min(values):.2f}–{max(values):.2f}" if values else "not recorded"
-
-        timing = "; ".join(t for t in (ratios("solve wall time", self.ratios), ratios("CPU time", self.cpu_ratios)) if t)
-        context = (f" (load average {load(self.load_here)} here, {load(self.load_stored)} when stored"
-                   + (f"; CPU steal up to {100 * self.steal:.1f} % here" if self.steal else "") + ")")
-        return (f"{self.planner} {self.version}: {self.n} run(s) rerun on {self.machine} ({self.checked_at}); "
-                f"referee figures agree {self.agree}/{self.n}; " + (timing + context if timing else "no solve times to compare"))
-
-
 def machine_label(env: dict[str, Any] | Any) -> str:
     """A machine as readers know it: hostname, CPU model, cores."""
-    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a sqlite3.Row
+    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a stored row
     host, cpu, cores = get("hostname"), get("cpu_model"), get("cores")
     return f"{host or 'unknown host'} ({cpu or 'unknown CPU'}" + (f", {cores} cores)" if cores else ")")
 
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from .harness import PlannerRef
+    from .records import PlannerRef
 
     try:
         ref = PlannerRef.resolve(row["planner"], config)
@@ -354,7 +347,8 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .harness import Case, LocalExecutor
+    from .harness import LocalExecutor
+    from .records import Case
     from .harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:
@@ -372,15 +366,15 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
             raise VerifyError(f"run {r['id']} ({_label(r)}): {sc}")
         key = (r["planner"], r["planner_version"], r["config_hash"])
         if key not in refs:
-            cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
-            refs[key] = _ref_for(r, json.loads(cfg[0]) if cfg else {})
+            cfg = store.planner_config(r["planner_config_id"])
+            refs[key] = _ref_for(r, json.loads(cfg["config"]) if cfg else {})
         # re-timed as it was timed: with its planner's preparation when the run used one
         prepared = "prepare_s" in r.keys() and r["prepare_s"] is not None
         cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key], prepare=prepared))
     by_key = {c.key: r for c, r in zip(cases, sample)}
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
     here = machine_label(environment())
-    stored_env = {e["id"]: machine_label(e) for e in store.db.execute("SELECT id, hostname, cpu_model, cores FROM environments")}
+    stored_env = {e["id"]: machine_label(e) for e in store.environments()}
     now = datetime.now(UTC).isoformat(timespec="seconds")
     out = []
     for key in refs:
@@ -416,46 +410,10 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     return sorted(out, key=lambda s: (s.planner, s.version, s.config_hash))
 
 
-_SPOT_TABLE = """CREATE TABLE IF NOT EXISTS spot_checks (
-    id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, planner_version TEXT NOT NULL,
-    config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, ratios TEXT NOT NULL,
-    disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL)"""
-
-
-def record_spot_checks(store: Store, checks: Iterable[SpotCheck]) -> None:
-    """Keep a spot check in the store it sampled, so the leaderboard's stamp can show it (one transaction)."""
-    try:
-        with store.db:
-            store.db.execute("BEGIN IMMEDIATE")
-            store.db.execute(_SPOT_TABLE)
-            if "context" not in {r[1] for r in store.db.execute("PRAGMA table_info(spot_checks)")}:
-                store.db.execute("ALTER TABLE spot_checks ADD COLUMN context TEXT")  # CPU ratios and load (issue 35)
-            store.db.executemany(
-                "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
-                "disagreements, machine, stored_machines, context) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                [(c.checked_at, c.planner, c.version, c.config_hash, json.dumps(c.run_ids), c.agree, json.dumps(c.ratios),
-                  json.dumps(c.disagreements), c.machine, json.dumps(c.stored_machines),
-                  json.dumps({"cpu_ratios": c.cpu_ratios, "load_stored": c.load_stored, "load_here": c.load_here, "steal": c.steal}))
-                 for c in checks])
-    except sqlite3.OperationalError as exc:
-        raise StoreError(store._explain(exc)) from None
-
-
 def latest_spot_checks(store: Store) -> list[SpotCheck]:
-    """The most recent spot check of each planner version and configuration (none if never checked)."""
-    if not store.db.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='spot_checks'").fetchone():
-        return []
-    rows = store.db.execute(
-        "SELECT * FROM spot_checks WHERE id IN (SELECT MAX(id) FROM spot_checks GROUP BY planner, planner_version, config_hash) "
-        "ORDER BY planner, planner_version, config_hash").fetchall()
-    out = []
-    for r in rows:
-        ctx = json.loads(r["context"] or "{}") if "context" in r.keys() else {}
-        out.append(SpotCheck(r["planner"], r["planner_version"], r["config_hash"], tuple(json.loads(r["run_ids"])), r["agree"],
-                             tuple(json.loads(r["ratios"])), tuple(json.loads(r["disagreements"])), r["machine"],
-                             tuple(json.loads(r["stored_machines"])), r["checked_at"], tuple(ctx.get("cpu_ratios", ())),
-                             tuple(ctx.get("load_stored", ())), tuple(ctx.get("load_here", ())), ctx.get("steal")))
-    return out
+    """The most recent spot check of each planner version and configuration (none if never checked);
+    :meth:`Store.record_spot_checks` keeps them."""
+    return [SpotCheck(**fields) for fields in store.latest_spot_checks()]
 
 
 # -- suite identity and sealed draws ----------------------------------------------------------
@@ -466,7 +424,7 @@ def suite_versions(store: Store) -> list[Any]:
     from .identity import Version
 
     out = []
-    for s in store.db.execute("SELECT * FROM suites ORDER BY id"):
+    for s in store.suite_versions():
         keys = s.keys()
         out.append(Version(s["name"], s["digest"], str(store.path),
                            *(s[k] if k in keys else None for k in ("sealed_from", "public_digest", "commitment"))))
@@ -506,7 +464,7 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     except (SealError, EarthbenchError) as exc:
         out.problems.append(f"key for {key.name}: {exc}")
         return out
-    ver = store.db.execute("SELECT * FROM suites WHERE name=?", (sealed.name,)).fetchall()
+    ver = store.suite_versions(sealed.name)
     if not ver:
         out.problems.append(f"{store.path} holds no suite {sealed.name!r}: this key draws another store's board")
         return out
@@ -519,14 +477,15 @@ def check_seal(store: Store, key: Any) -> SealCheck:
         if "commitment" in keys and v["commitment"] != key.commitment:
             out.problems.append(f"suite {sealed.name!r} is stored with commitment {str(v['commitment'])[:12]}…, not the key's "
                                 f"{key.commitment[:12]}…")
-        for m in store.db.execute("SELECT scenario_id, scenario_digest FROM suite_scenarios WHERE suite_id=?", (v["id"],)):
-            if regenerated.get(m[0]) != m[1]:
-                out.problems.append(f"scenario {m[0]} is stored with digest {m[1][:12]}…, the key regenerates "
-                                    f"{str(regenerated.get(m[0], 'nothing'))[:12]}…")
+        for m in store.suite_members(v["id"]):
+            sid, digest = m["scenario_id"], m["scenario_digest"]
+            if regenerated.get(sid) != digest:
+                out.problems.append(f"scenario {sid} is stored with digest {digest[:12]}…, the key regenerates "
+                                    f"{str(regenerated.get(sid, 'nothing'))[:12]}…")
             else:
                 out.scenarios += 1
     digests = set(regenerated.values())
-    for r in store.db.execute("SELECT * FROM runs WHERE suite=? ORDER BY id", (sealed.name,)):
+    for r in store.runs(labelled=sealed.name):
         if r["scenario_digest"] in digests:
             out.run_rows.append(r)
         else:

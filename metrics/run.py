@@ -24,6 +24,17 @@ own charge; the loader's actions never overlap, a charge lasts at least ``min_ch
 A site with several loading machines (an excavator and a loader) can load in parallel: each
 machine ``i`` loads at most ``C_i / (t_i + t_d,i)`` m³ per second, so the bound is
 ``1 / Σ_i C_i / (t_i + t_d,i)``; with one machine it is that machine's bound above.
+
+``time_per_target_m3_lower_bound`` — the least time per target m³ (:func:`lower_bound_time_to_target`
+÷ the target) under every rule of today's referee, for the primary metric. It adds what a given
+scenario forces on the time to its target and the bound above leaves out: whole buckets (the
+target needs ``n = ⌈target / C_eff⌉`` loaded dumps, ``C_eff`` the bank m³ a bucket really holds:
+the capacity × the soil's fill factor on the realistic track), and the travel before the first
+dump when the truck starts out of dump reach of the excavator. It does **not** price the swing
+of each cycle: the referee lets the truck stand anywhere clear of the excavator, including on the
+ray to the contact (on the dig area beyond it, or between the base and a contact the arm reaches
+over), where a cycle swings 0 rad; ``tests/test_bound.py`` builds such a plan (docs/metrics.md,
+"What the geometry forces").
 """
 
 from __future__ import annotations
@@ -31,6 +42,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from earthbench.motion import ABS_TOL, RATE_TOL
 from earthbench.plan import Plan
 from earthbench.referee import Verdict
 from earthbench.scoring import time_per_target
@@ -59,6 +71,59 @@ def lower_bound_time_per_m3(scenario: Scenario) -> float:
     return 1.0 / sum(1.0 / b for b in bounds)
 
 
+def _buckets(target: float, capacity: float) -> int:
+    """The fewest loaded dumps after which the scoring rule (:func:`earthbench.scoring.time_to_target`,
+    with its slack) finds ``target`` loaded when each carries at most ``capacity``; float sums of
+    the digs may exceed a whole number of buckets by rounding, so a bucket counts 1e-9 fuller."""
+    n = max(1, math.ceil(target / capacity) - 1)
+    while not math.isfinite(scoring_time_to_target(((0.0, n * capacity * (1 + 1e-9)),), target)):
+        n += 1
+    return n
+
+
+def _first_dump_start(scenario: Scenario) -> float:
+    """The earliest start of the first loaded dump (s): the excavator digs once first (at least
+    the minimum stroke), and the truck must be within dump reach (centre distance ≤ ``reach_max``
+    + loading radius). Whatever gap ``G`` the two starting poses leave, the two machines close
+    it between them: the truck by driving ``L_t``, the excavator by ``L_e`` (its driving and its
+    dig never overlap), ``L_e + L_t ≥ G``. The start is at least ``max(L_e / v_e + t_s, L_t / v_t)``,
+    least over the split where both are equal."""
+    m = scenario.machines
+    exc, truck, p, q = m.excavator, m.truck, m.excavator_pose, m.truck_pose
+    assert exc is not None and p is not None
+    ts = exc.min_stroke_time
+    gap = math.hypot(q.x - p.x, q.y - p.y) - (exc.reach_max + truck.loading_radius + ABS_TOL)
+    ve, vt = exc.travel_speed * (1 + RATE_TOL), truck.travel_speed * (1 + RATE_TOL)
+    if gap <= 0 or gap / vt <= ts:
+        return ts
+    le = (gap / vt - ts) / (1 / ve + 1 / vt)  # the excavator's share where both take as long
+    return ts + le / ve
+
+
+def lower_bound_time_to_target(scenario: Scenario) -> float:
+    """The least time (s) after which any valid plan's truck holds the target.
+
+    One excavator: ``n = ⌈target / C_eff⌉`` loaded dumps, each after a dig of its own since the
+    dump before (the bucket is empty after a dump that did not fill the truck), the first
+    starting no earlier than :func:`_first_dump_start`:
+    ``S₁ + t_d + (n − 1)(t_s + t_d)``, less the referee's tolerance of ``ABS_TOL`` per action on
+    durations and overlaps. One loader: ``n (t_c + t_d)`` likewise. Both on one site: the
+    machines' rates add, ``target × lower_bound_time_per_m3``.
+    """
+    m, target = scenario.machines, scenario.task.target_volume
+    fill = scenario.soil.fill_factor if scenario.soil is not None else 1.0
+    if m.excavator is not None and m.loader is None:
+        e = m.excavator
+        n = _buckets(target, e.bucket_capacity * fill)
+        t = _first_dump_start(scenario) + e.min_dump_time + (n - 1) * (e.min_stroke_time + e.min_dump_time)
+        return max(t - 4 * n * ABS_TOL, 0.0)
+    if m.loader is not None and m.excavator is None:
+        lo = m.loader
+        n = _buckets(target, lo.bucket_capacity * fill)
+        return max(n * (lo.min_charge_time + lo.min_dump_time) - 4 * n * ABS_TOL, 0.0)
+    return target * lower_bound_time_per_m3(scenario)
+
+
 def time_to_target(verdict: Verdict, target: float) -> float:
     """End of the first dump after which the truck holds ``target`` m³ (s), ``inf`` if none does.
 
@@ -76,6 +141,7 @@ def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, 
     ttt = time_to_target(verdict, target)
     tpt = time_per_target(verdict.load_curve, target)
     bound = lower_bound_time_per_m3(scenario)
+    target_bound = lower_bound_time_to_target(scenario) / target
     fills = [d.fill for d in verdict.digs]
     pred = plan.predicted
     return {
@@ -89,6 +155,8 @@ def core_metrics(scenario: Scenario, plan: Plan, verdict: Verdict) -> dict[str, 
         "time_to_target_s": ttt,
         "time_per_target_m3": tpt,
         "time_per_target_m3_ratio": tpt / bound,
+        "time_per_target_m3_lower_bound": target_bound,
+        "time_per_target_m3_bound_ratio": tpt / target_bound,
         "time_per_m3": tpm,
         "time_per_m3_lower_bound": bound,
         "time_per_m3_ratio": tpm / bound,

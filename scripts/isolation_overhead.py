@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from earthbench.harness import build_cases, isolation, run_case
-from earthbench.harness.cases import PlannerRef
+from earthbench.records import PlannerRef
 from earthbench.registry import load_plugin_file
 from earthbench.suite import load_suite
 

@@ -58,6 +58,37 @@ def _wiggle(rng: np.random.Generator, y: np.ndarray, period: float, peak: float)
     return w * (peak / m) if m > 0 else w
 
 
+def _add_lumps(rng: np.random.Generator, z: np.ndarray, xs: np.ndarray, ys: np.ndarray, resolution: float,
+               toe: np.ndarray, run: float, strip: tuple[float, float], n: int, height: tuple[float, float],
+               width: tuple[float, float]) -> np.ndarray:
+    """Seeded Gaussian lumps and hollows (a third of them) on the face: centred on the face line
+    (``toe`` per row, ``run`` wide), anywhere along the dig ``strip`` (its south and north ends);
+    ``z`` is added to in place."""
+    for _ in range(n):
+        cy = rng.uniform(*strip)
+        j = min(max(int(cy / resolution), 0), len(ys) - 1)
+        cx = toe[j] + run * rng.uniform(-0.2, 1.2)
+        a = rng.uniform(*height) * (-1.0 if rng.uniform() < 1.0 / 3.0 else 1.0)
+        s = rng.uniform(*width)
+        z += a * np.outer(np.exp(-((ys - cy) ** 2) / (2 * s * s)), np.exp(-((xs - cx) ** 2) / (2 * s * s)))
+    return z
+
+
+def _check_reach(excavator: tuple[float, float, float], truck: tuple[float, float, float], toe0: float, strip_ok: bool) -> None:
+    """The nominal toe within the backhoe's reach (and a dig strip left in front of its pad), the
+    truck's loading circle within dump reach: otherwise no plan could be valid."""
+    ex, ey, _ = excavator
+    spec = ExcavatorSpec()
+    if not (spec.reach_min <= ex - toe0 <= spec.reach_max and strip_ok):
+        raise ScenarioError(
+            f"bench: the nominal toe lies {ex - toe0:.2f} m in front of the excavator, outside its reach "
+            f"{spec.reach_min}–{spec.reach_max} m; lower setback or height, or steepen face_angle"
+        )
+    d_truck = math.hypot(truck[0] - ex, truck[1] - ey)
+    if d_truck - TruckSpec().loading_radius > spec.reach_max:
+        raise ScenarioError(f"bench: the truck stands {d_truck:.2f} m from the excavator, beyond dump reach; move it closer")
+
+
 def bench(
     seed: int,
     target_volume: float = 4.0,
@@ -109,29 +140,13 @@ def bench(
     top = h0 * (1.0 + 0.1 * _wiggle(rng, ys, ly, 1.0))
     u = (xs[None, :] - toe[:, None]) / run
     z = top[:, None] * np.clip(u, 0.0, 1.0)
-
-    # Lumps and hollows on the face: centred on the face line, anywhere along the dig strip.
-    for _ in range(n_lumps):
-        cy = rng.uniform(ey - face_length / 2, ey + face_length / 2)
-        j = min(max(int(cy / resolution), 0), ny - 1)
-        cx = toe[j] + run * rng.uniform(-0.2, 1.2)
-        a = rng.uniform(*lump_height) * (-1.0 if rng.uniform() < 1.0 / 3.0 else 1.0)
-        s = rng.uniform(*lump_width)
-        z += a * np.outer(np.exp(-((ys - cy) ** 2) / (2 * s * s)), np.exp(-((xs - cx) ** 2) / (2 * s * s)))
-    z = np.clip(z, 0.0, None)
+    z = np.clip(_add_lumps(rng, z, xs, ys, resolution, toe, run, (ey - face_length / 2, ey + face_length / 2), n_lumps,
+                           lump_height, lump_width), 0.0, None)
 
     x_lo = max(toe0 - irregularity - 0.3, 0.0)
     x_hi = ex - 0.5  # the excavator's pad stays outside the dig area
     y_lo, y_hi = max(ey - face_length / 2, 0.0), min(ey + face_length / 2, ly)
-    spec = ExcavatorSpec()
-    if not (spec.reach_min <= ex - toe0 <= spec.reach_max and x_lo < x_hi):
-        raise ScenarioError(
-            f"bench: the nominal toe lies {ex - toe0:.2f} m in front of the excavator, outside its reach "
-            f"{spec.reach_min}–{spec.reach_max} m; lower setback or height, or steepen face_angle"
-        )
-    d_truck = math.hypot(truck[0] - ex, truck[1] - ey)
-    if d_truck - TruckSpec().loading_radius > spec.reach_max:
-        raise ScenarioError(f"bench: the truck stands {d_truck:.2f} m from the excavator, beyond dump reach; move it closer")
+    _check_reach(excavator, truck, toe0, x_lo < x_hi)
     return assemble_scenario(
         scenario_id or f"bench-s{seed}-v{target_volume:g}",
         Heightmap((0.0, 0.0), resolution, round_heights(z)),

@@ -52,7 +52,7 @@ def test_the_channels_into_the_harness_and_other_cases_are_shut(tmp_path):
     db = tmp_path / "hostile.db"
     before, _ = run(tmp_path, tiny_suite_toml("first", wall_s=10.0), ["t-fast"], FAULTY, db)
     planners = ["h-read-store", "h-read-mem", "h-rewrite-other", "h-forge-report", "h-tree-memory", "h-affinity"]
-    df, _ = run(tmp_path, one_core(tiny_suite_toml("hostile", wall_s=10.0, memory_mb=1024)), planners, HOSTILE, db)
+    df, _ = run(tmp_path, one_core(tiny_suite_toml("hostile", wall_s=60.0, memory_mb=1024)), planners, HOSTILE, db)
     assert df.reason.drop("t-fast").to_dict() == {
         "h-read-store": "ok", "h-read-mem": "ok", "h-rewrite-other": "ok", "h-forge-report": "ok",
         "h-tree-memory": "memory", "h-affinity": "ok",
@@ -166,7 +166,7 @@ def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypat
     them), the kernel still counts and enforces the budgets of the whole tree."""
     cg = isolation.support().cgroup
     monkeypatch.setattr(isolation, "support", lambda: isolation.Support(None, cg, ("no namespaces (test)",)))
-    df, _ = run(tmp_path, tiny_suite_toml("bare-cg", wall_s=10.0, memory_mb=1024), ["h-forge-report", "h-tree-memory"], HOSTILE)
+    df, _ = run(tmp_path, tiny_suite_toml("bare-cg", wall_s=60.0, memory_mb=1024), ["h-forge-report", "h-tree-memory"], HOSTILE)
     assert df.reason.to_dict() == {"h-forge-report": "ok", "h-tree-memory": "memory"}
     assert df.solve_cpu_s["h-forge-report"] >= 1.8 and df.peak_rss_mb["h-forge-report"] >= 290
     assert df.peak_rss_mb["h-tree-memory"] <= 1024 + 1

@@ -1,6 +1,6 @@
 """The wheel installs ``earthbench`` and the plugin packages under their own names — never a
 generic top-level ``planners``, ``terrains`` or ``metrics`` — with every sub-package, the
-suite files and the ``py.typed`` marker (docs/DESIGN.md §1)."""
+suite files, the page's assets and the ``py.typed`` marker (docs/DESIGN.md §1)."""
 
 from __future__ import annotations
 
@@ -40,3 +40,5 @@ def test_the_wheel_holds_every_package_suite_file_and_the_typed_marker(wheel_nam
     suites = {p.name for p in (ROOT / "terrains" / "suites").glob("*.toml")}
     assert suites and {f"earthbench_terrains/suites/{s}" for s in suites} <= wheel_names
     assert "earthbench/py.typed" in wheel_names
+    assets = {p.name for p in (ROOT / "earthbench" / "assets").iterdir() if p.suffix in (".css", ".js")}
+    assert assets and {f"earthbench/assets/{a}" for a in assets} <= wheel_names  # the page's style sheets and scripts

@@ -13,7 +13,7 @@ import pytest
 
 from earthbench.cli import main
 from earthbench.harness import LocalExecutor, build_cases, run_cases
-from earthbench.harness.cases import PlannerRef
+from earthbench.records import PlannerRef
 from earthbench.harness.prepare import PrepareError, ensure, find, prepare_key
 from earthbench.registry import load_plugin_file
 from earthbench.store import SCHEMA_VERSION, Store, load_runs

@@ -100,3 +100,30 @@ def test_bad_plugin_files_get_clear_errors(tmp_path, text, words):
         load_plugin_file(path)
     with pytest.raises(PluginError, match="not found"):
         load_plugin_file(tmp_path / "missing.py")
+
+
+def test_the_harness_and_a_case_process_import_a_plugin_file_under_one_name(tmp_path, forget):
+    """``--plugin FILE.py`` is imported in the harness (:func:`load_plugin_file`) and again in each
+    case's process (:func:`earthbench.harness.child.load_planner_class`): one module name both
+    times, the same in another process, and two files of one name in two folders never share it."""
+    import subprocess
+    import sys
+
+    from earthbench.harness.child import load_planner_class
+
+    body = ("from earthbench import Plan, Planner\n\n"
+            "class Same(Planner):\n    name = 'same-name-{n}'\n    def plan(self, scenario):\n        return Plan(actions=())\n")
+    files = []
+    for n in (1, 2):
+        (tmp_path / f"d{n}").mkdir()
+        files.append(tmp_path / f"d{n}" / "mine.py")
+        files[-1].write_text(body.format(n=n))
+    names = [registry.plugin_module_name(f) for f in files]
+    assert names[0] != names[1] and all(n.startswith("earthbench_plugin_mine_") for n in names)
+    forget.append("same-name-1")
+    assert load_plugin_file(files[0]) == ["same-name-1"]
+    assert PLANNERS.get("same-name-1").__module__ == names[0]
+    assert load_planner_class(str(files[0]), "same-name-1").__module__ == names[0]
+    again = subprocess.run([sys.executable, "-c", "import sys; from earthbench.registry import plugin_module_name; "
+                            "print(plugin_module_name(sys.argv[1]))", str(files[0])], capture_output=True, text=True, check=True)
+    assert again.stdout.strip() == names[0]  # str hashes differ between processes; this name does not

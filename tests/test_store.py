@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sqlite3
+from dataclasses import replace
 
 import pytest
 
@@ -153,12 +154,13 @@ def test_a_store_of_every_older_schema_version_is_brought_up_to_the_fresh_schema
         old.write_bytes(fresh.read_bytes())
         con = sqlite3.connect(old)
         for _, statements in reversed(MIGRATIONS[version - 1:]):
-            for stmt in statements:
+            for stmt in reversed(statements):  # undone last first
                 w = stmt.split()
                 if w[:2] == ["ALTER", "TABLE"] and w[3:5] == ["ADD", "COLUMN"]:
                     con.execute(f"ALTER TABLE {w[2]} DROP COLUMN {w[5]}")
                 elif w[:2] == ["CREATE", "TABLE"]:
-                    con.execute(f"DROP TABLE {w[2].split('(')[0]}")
+                    name = w[5] if w[2:5] == ["IF", "NOT", "EXISTS"] else w[2]
+                    con.execute(f"DROP TABLE {name.split('(')[0]}")
         con.execute(f"PRAGMA user_version = {version}")
         con.commit()
         con.close()
@@ -169,3 +171,34 @@ def test_a_store_of_every_older_schema_version_is_brought_up_to_the_fresh_schema
         Store(old).close()
         assert _columns(old) == want, f"a version-{version} store does not catch up to a fresh one"
         assert sqlite3.connect(old).execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+
+
+def test_a_spot_check_table_made_before_it_was_versioned_keeps_its_rows(tmp_path):
+    """``earthbench verify --sample`` created ``spot_checks`` itself before schema version 7, at
+    first without ``context``: such a store catches up without losing a check, and its checks
+    read back as they were written."""
+    from earthbench.verify import latest_spot_checks
+
+    path = tmp_path / "v6.db"
+    Store(path).close()
+    con = sqlite3.connect(path)
+    con.execute("DROP TABLE spot_checks")
+    con.execute("CREATE TABLE spot_checks (id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, "
+                "planner_version TEXT NOT NULL, config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, "
+                "ratios TEXT NOT NULL, disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL)")
+    con.execute("INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
+                "disagreements, machine, stored_machines) VALUES ('2026-01-01T00:00:00+00:00', 'greedy', '1', 'abc', '[1, 2]', "
+                "2, '[1.5, 0.5]', '[]', 'here', '[\"there\"]')")
+    con.execute("PRAGMA user_version = 6")
+    con.commit()
+    con.close()
+    with Store(path, read_only=True) as st:  # read as it is: no context, no CPU ratios
+        (old,) = latest_spot_checks(st)
+        assert (old.planner, old.run_ids, old.ratios, old.cpu_ratios, old.steal) == ("greedy", (1, 2), (1.5, 0.5), (), None)
+    with Store(path) as st:
+        assert latest_spot_checks(st) == [old]
+        st.record_spot_checks([replace(old, checked_at="2026-02-01T00:00:00+00:00", cpu_ratios=(1.25,), steal=0.01)])
+        (new,) = latest_spot_checks(st)
+    assert (new.checked_at, new.cpu_ratios, new.steal, new.ratios) == ("2026-02-01T00:00:00+00:00", (1.25,), 0.01, (1.5, 0.5))
+    Store(tmp_path / "fresh.db").close()
+    assert _columns(path)["spot_checks"] == _columns(tmp_path / "fresh.db")["spot_checks"]

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     planner = cls(**overrides)
     if cls.prepares():  # its preparation on this machine, if there is one (never run here: `earthbench prepare`)
-        from ..harness.cases import PlannerRef
+        from ..records import PlannerRef
         from ..harness.prepare import find
 
         found = find(PlannerRef.resolve(args.planner, overrides))

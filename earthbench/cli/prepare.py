@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
-    from ..harness.cases import PlannerRef
+    from ..records import PlannerRef
     from ..harness.prepare import PrepareError, ensure, find, forget, prepare_key
     from ..registry import PLANNERS
 

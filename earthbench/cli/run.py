@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         from ..progress import Progress
 
-        progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: run_id(store, case))
+        progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: store.run_id(case.key))
         planners = sorted({c.planner.name for c in cases})
         if not args.quiet:
             print(
@@ -193,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run; "
                   "run the same command again to resume", file=sys.stderr)
             return 130
-        enough = any_stored(store, cases, "success=1" if args.require_success else "reason='ok'")
+        enough = any_stored(store, cases, succeeded=args.require_success)
         db = "" if args.db == default_db() else f" --db {args.db}"
         if not args.quiet:
             print(f"\nnext: earthbench runs{db} --suite {suite.name} --reason invalid  (what failed, then --id N for one run)\n"
@@ -206,17 +206,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_id(store: Store, case: Any) -> int | None:
-    """The stored run of a case (its resume key), for the progress line's pointer to ``earthbench runs --id``."""
-    row = store.db.execute("SELECT id FROM runs WHERE scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?",
-                           case.key).fetchone()
-    return None if row is None else int(row[0])
-
-
-def any_stored(store: Store, cases: list[Any], where: str) -> bool:
-    """Whether any of ``cases`` has a stored run (by this command or before it) matching the SQL condition ``where``."""
-    keys = {tuple(r) for r in store.db.execute(
-        f"SELECT scenario_digest, planner, planner_version, config_hash FROM runs WHERE {where}")}
+def any_stored(store: Store, cases: list[Any], *, succeeded: bool) -> bool:
+    """Whether any of ``cases`` has a stored run (by this command or before it) that succeeded, or
+    without ``succeeded`` that ended ``ok`` (a valid plan)."""
+    keys = store.finished_keys(succeeded=True) if succeeded else store.finished_keys(reason="ok")
     return any(c.key in keys for c in cases)
 
 

@@ -9,7 +9,7 @@ import math
 import sys
 from typing import Any
 
-from ..harness import REASONS
+from ..records import REASONS
 from ..scoring import is_success, restate
 from ..store import Store, default_db
 
@@ -48,8 +48,7 @@ def labels_of(store: Store) -> dict[tuple[str, str], str]:
 
     from ..labels import config_labels
 
-    rows = store.db.execute("SELECT DISTINCT name, config_hash, config FROM planner_configs").fetchall()
-    return config_labels(pd.DataFrame([tuple(r) for r in rows], columns=["planner", "config_hash", "config"]))
+    return config_labels(pd.DataFrame(store.planner_configs(), columns=["planner", "config_hash", "config"]))
 
 
 def _values(r: Any, threshold: float | None, labels: dict[tuple[str, str], str] | None = None) -> dict[str, Any]:
@@ -96,8 +95,8 @@ def _show(store: Store, args: argparse.Namespace) -> int:
         print(f"earthbench: error: no run with id {args.id} in {args.db}", file=sys.stderr)
         return 2
     r = rows[0]
-    cfg = store.db.execute("SELECT config FROM planner_configs WHERE id=?", (r["planner_config_id"],)).fetchone()
-    env = store.db.execute("SELECT * FROM environments WHERE id=?", (r["environment_id"],)).fetchone()
+    cfg = store.planner_config(r["planner_config_id"])
+    env = store.environment(r["environment_id"])
     label = labels_of(store).get((r["planner"], r["config_hash"]), r["planner"])
     print(f"run {r['id']}: {r['scenario_id']} × {label} {r['planner_version']} (config {r['config_hash']})")
     print(f"  suite {r['suite']} ({r['suite_digest'][:12]}), scenario digest {r['scenario_digest'][:12]}")
@@ -111,7 +110,7 @@ def _show(store: Store, args: argparse.Namespace) -> int:
     print(f"  solve {_cell(r['solve_time_s'])} s wall, {_cell(r['solve_cpu_s'])} s CPU; start-up {_cell(r['startup_s'])} s; "
           f"peak RSS {_cell(r['peak_rss_mb'])} MB; cores {r['cores']}; {r['started_at']} → {r['finished_at']}")
     if cfg:
-        print(f"  config {cfg[0]}")
+        print(f"  config {cfg['config']}")
     if env:
         print(f"  machine {env['cpu_model']} ({env['cores']} cores), {env['os']}, Python {env['python']}, "
               f"commit {env['project_commit']}, plugin commit {env['plugin_commit']}")

@@ -91,7 +91,7 @@ def _suites_and_plans(store, keys, *, rejudge_all: bool) -> bool:
 
 
 def _spot(store, args: argparse.Namespace) -> bool:
-    from ..verify import record_spot_checks, spot_check
+    from ..verify import spot_check
 
     if not args.no_record:
         store.check_writable()
@@ -117,5 +117,5 @@ def _spot(store, args: argparse.Namespace) -> bool:
         for d in c.disagreements:
             print(f"  {c.planner} {c.version}: {d}")
     if not args.no_record:
-        record_spot_checks(store, checks)
+        store.record_spot_checks(checks)
     return any(c.disagreements for c in checks)

@@ -2,7 +2,8 @@
 
 Modules, each with one job:
 
-* :mod:`.cases` — :class:`PlannerRef`, :class:`Case`, :class:`CaseResult`, ``REASONS``;
+* :mod:`.cases` — :class:`~.cases.Prepared`, a planner's finished preparation; :class:`PlannerRef`, :class:`Case`,
+  :class:`CaseResult` and ``REASONS`` are :mod:`earthbench.records`'s, exported here too;
 * :mod:`.sandbox` — :func:`run_case`: one case in a fresh, supervised process tree;
 * :mod:`.child` — the bootstrap and the code that runs inside a case's process;
 * :mod:`.environment` — :func:`environment`: the machine and software stamp of a run;

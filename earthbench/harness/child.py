@@ -69,9 +69,9 @@ def load_planner_class(source: str, name: str) -> type:
     """
     if source.endswith(".py"):
         from earthbench.planner import Planner
-        from earthbench.registry import PLANNERS
+        from earthbench.registry import PLANNERS, plugin_module_name
 
-        mod_name = f"earthbench_plugin_{os.path.splitext(os.path.basename(source))[0]}"
+        mod_name = plugin_module_name(source)
         spec = importlib.util.spec_from_file_location(mod_name, source)
         if spec is None or spec.loader is None:
             raise ImportError(f"{source} is not an importable Python file")

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import PluginError
 from ..registry import PLANNERS
-from .cases import Case, PlannerRef
+from ..records import Case, PlannerRef
 from .local import Executor, LocalExecutor
 from .sandbox import CASE_TAG
 

@@ -34,7 +34,8 @@ from pathlib import Path
 
 from ..errors import EarthbenchError
 from ..world import Budget
-from .cases import Case, CaseResult, PlannerRef, Prepared, utc_now
+from ..records import Case, CaseResult, PlannerRef, utc_now
+from .cases import Prepared
 
 ENV = "EARTHBENCH_PREPARED"
 #: ``EARTHBENCH_PREPARE=off``: no preparation is run or used; cases run without their planner's

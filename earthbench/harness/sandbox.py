@@ -64,7 +64,8 @@ import psutil
 from . import isolation
 from ..errors import EarthbenchError
 from ..world import Budget
-from .cases import Case, CaseResult, Prepared, utc_now
+from ..records import Case, CaseResult, utc_now
+from .cases import Prepared
 from .child import BOOTSTRAP
 from . import load
 from .environment import environment

@@ -39,6 +39,8 @@ from earthbench.planner import Observation, Planner, closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
+from ..stability import margins
+
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
 PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
@@ -61,13 +63,16 @@ class GreedyConfig:
     max_actions: int = 2000
     closed_loop: bool = closed_loop_setting()
     """Replan after every dump from the observed terrain and truck load."""
+    scan_margin: float | None = None
+    """Metres kept above the undermining line for the scan's error; None: derived from the
+    observation (``planners/stability.py``: 0 on the exact track)."""
 
 
 class GreedyPlanner(Planner):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.1"
+    version = "1.2"
     tracks = ("backhoe",)
     Config = GreedyConfig
 
@@ -96,6 +101,7 @@ class _Greedy:
         self.dig_area = Polygon(sc.site.dig_area)
         shapely.prepare(self.dig_area)
         self.keep_outs = [Polygon(k) for k in sc.site.keep_outs]
+        self.margins = margins(sc, cfg.scan_margin)
         self.base: Pose = sc.machines.excavator_pose  # type: ignore[assignment]
         self.truck: Pose = sc.machines.truck_pose
         self.turn = 0.0
@@ -253,7 +259,8 @@ class _Greedy:
                    cells: PathCells) -> bool:
         """Whether the stroke along ``cells`` (its :func:`path_cells`) breaks the referee's
         undermining rule: the cut applied to the grid for the check, then its path put back."""
-        if level >= track_level:
+        margin = self.margins.undermining
+        if level >= track_level + margin:
             return False  # nothing is cut below the tracks' ground
         e = self.exc
         jj, ii, _ = cells
@@ -262,7 +269,7 @@ class _Greedy:
         cut = self.z[jj, ii] < before
         excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
         self.z[jj, ii] = before
-        return excess > -ABS_TOL
+        return excess > -max(ABS_TOL, margin)
 
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
         """Rows and columns of the grid holding every cell a stroke from ``contact`` may cut."""
@@ -405,7 +412,7 @@ class _Greedy:
             if move is None:
                 continue
             yaw = turn_drive_turn(self.base, key, 0.0, self.exc.travel_speed, self.exc.yaw_rate)[-1][3]
-            if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - 0.01:
+            if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - self.margins.tilt:
                 continue  # the referee's tilt rule
             self._drive_in_turn(key, *move)
             return True

@@ -9,6 +9,8 @@ nearest contour point is tried. Everything else — the contour, the charge mode
 takes whole cells up to its capacity with the referee's own cut), the two-arc routes to the
 truck and the return leg — is the shared machinery of :mod:`earthbench_planners.loader_cycle`, so the
 difference to ``singh-cannon-loader`` is only the choice of dig: no dig region, no scoring.
+The shared machinery also reads a scan (noise, offset, contour level, step margin) and the
+soil's class (fill, harder layer, slump) the same way for both planners.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ class GreedyLoader(CyclePlanner):
     """Nearest contour point to the truck, perpendicular entry; see the module docstring."""
 
     name = "greedy-loader"
-    version = "1.1"
+    version = "1.2"
     Config = GreedyLoaderConfig
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:

@@ -72,6 +72,7 @@ from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
 from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
+from ..stability import margins
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
 
 _EPS_T = 1e-6
@@ -124,6 +125,9 @@ class SinghCannonBackhoeConfig:
     max_digs: int = 1000
     closed_loop: bool = closed_loop_setting()
     """Replan every dig from the observed terrain and truck load."""
+    scan_margin: float | None = None
+    """Metres kept above the undermining line for the scan's error; None: derived from the
+    observation (``planners/stability.py``: 0 on the exact track)."""
 
 
 @dataclass(frozen=True)
@@ -158,7 +162,7 @@ class SinghCannonBackhoe(Planner):
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.2"
+    version = "1.3"
     tracks = ("backhoe",)
     Config = SinghCannonBackhoeConfig
 
@@ -215,6 +219,7 @@ class Session:
         shapely.prepare(self.area_inner)
         self.area_tol = self.area.buffer(ABS_TOL)
         self.keep_outs = [Polygon(k) for k in sc.site.keep_outs]
+        self.margins = margins(sc, cfg.scan_margin)
         self.keep_outs_pad = [k.buffer(1e-3) for k in self.keep_outs]
         for k in self.keep_outs + self.keep_outs_pad:
             shapely.prepare(k)
@@ -344,7 +349,7 @@ class Session:
         cut = self.z[jj, ii] < before
         excess = undermining_excess(self.terrain, self.z, e, base, track_level, jj[cut], ii[cut])
         self.z[window] = saved
-        return excess <= -ABS_TOL
+        return excess <= -max(ABS_TOL, self.margins.undermining)
 
     def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float) -> tuple[int, _Choice | None]:
         """The first region from ``start`` on with a feasible dig, and that dig."""
@@ -518,7 +523,7 @@ class Session:
             tried += 1
             path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
             pose = Pose(path[-1][1], path[-1][2], path[-1][3])
-            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - 0.01:
+            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - self.margins.tilt:
                 continue  # the referee's tilt rule
             regions = self.coarse_plan(pose, v_min)
             idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)

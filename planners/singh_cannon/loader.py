@@ -1,7 +1,9 @@
 """``singh-cannon-loader``: Singh and Cannon's coarse-to-fine wheel-loader planner (section 3.2).
 
-**Coarse planner** (Fig. 8). The pile's zero contour is the contour of the grid at
-``floor + contour_level`` (2 cm: where the terrain meets the floor). The contour point closest
+**Coarse planner** (Fig. 8). The pile's zero contour is the contour of the ground at
+``floor + level``: 2 cm on exact ground, where the terrain meets the floor; on a scan, the
+ground is :func:`~earthbench_planners.loader_cycle.read_scan` of it (smoothed, the floor's
+offset removed) and the level at least 5 smoothed σ of the scan's estimated noise. The contour point closest
 to the truck ``P*`` is located and the dig region is the part of the contour whose distance
 from ``P*`` lies in ``[d1, d2]`` (straight-line distance). Only one region is used, because the
 truck's pose fixes where digging pays; if no candidate in it is feasible, the region grows
@@ -32,9 +34,13 @@ and a forward arc, after backing straight out of the cut), with no collision wit
 the same way. Candidates within 0.25 m of one that failed are skipped.
 
 **Plan**: per bucket — approach (reverse, two arcs, straight in), charge (penetration chosen so
-the bucket takes whole cells up to its capacity, with the referee's cut model), reverse out and
-two arcs to the truck, dump; repeated until the target is loaded (the last bucket takes only
-what is still missing).
+the bucket takes whole cells up to its capacity, with the public cut model; with the soil's
+class, to the harder layer and no more than 85 % of the capacity, see
+:mod:`~earthbench_planners.loader_cycle`), reverse out and two arcs to the truck, dump; repeated
+until the target is loaded (the last bucket takes only what is still missing). When no
+candidate of the widened region is feasible for a full charge, the same search runs once for a
+half charge. Closed loop: one cycle per step, from the observed ground, sized with the yield
+the truck has reported so far.
 """
 
 from __future__ import annotations
@@ -90,7 +96,7 @@ class SinghCannonLoader(CyclePlanner):
     """Coarse dig region on the zero contour, refined by ξ·ψ·ζ; see the module docstring."""
 
     name = "singh-cannon-loader"
-    version = "1.1"
+    version = "1.2"
     Config = SinghCannonLoaderConfig
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:

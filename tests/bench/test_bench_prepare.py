@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pytest
 
-from earthbench.harness.cases import PlannerRef
+from earthbench.records import PlannerRef
 from earthbench.harness.prepare import find, forget, run
 from earthbench.world import Budget
 from earthbench_planners.stl_tamp import model
