@@ -380,24 +380,13 @@ class Replay:
                 f" but the move starts at ({x:.3f}, {y:.3f}, yaw {yaw:.3f})",
             )
         arc = arcs(p)
-        speed = arc["length"] / arc["dt"]
-        rate = np.abs(arc["dyaw"]) / arc["dt"]
-        k = int(np.argmax(speed))
-        if speed[k] > spec.travel_speed * (1 + RATE_TOL):
-            self.flag(
-                n,
-                "speed",
-                speed[k] - spec.travel_speed,
-                f"{a.machine} at {speed[k]:.4f} m/s along the arc between samples {k} and {k + 1}; limit {spec.travel_speed} m/s",
-            )
-        k = int(np.argmax(rate))
-        if rate[k] > spec.yaw_rate * (1 + RATE_TOL):
-            self.flag(
-                n,
-                "yaw_rate",
-                rate[k] - spec.yaw_rate,
-                f"{a.machine} turns at {rate[k]:.4f} rad/s between samples {k} and {k + 1}; limit {spec.yaw_rate} rad/s",
-            )
+        limits = (("speed", arc["length"] / arc["dt"], spec.travel_speed, "m/s", "at {:.4f} m/s along the arc"),
+                  ("yaw_rate", np.abs(arc["dyaw"]) / arc["dt"], spec.yaw_rate, "rad/s", "turns at {:.4f} rad/s"))
+        for rule, rates, limit, unit, doing in limits:
+            k = int(np.argmax(rates))
+            if rates[k] > limit * (1 + RATE_TOL):
+                self.flag(n, rule, rates[k] - limit,
+                          f"{a.machine} {doing.format(rates[k])} between samples {k} and {k + 1}; limit {limit} {unit}")
         k = int(np.argmax(arc["lateral"]))
         if arc["lateral"][k] > spec.chord_tolerance:
             self.flag(
