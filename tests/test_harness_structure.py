@@ -327,9 +327,6 @@ def test_the_records_keep_their_old_import_paths():
 LONG_FUNCTIONS = {
     ("planners/stl_tamp/model.py", "_build"): "the NLP builder: one problem's variables and constraints in order",
     ("planners/stl_tamp/guess.py", "build_guess"): "the NLP's initial guess, built in the order of its variables",
-    ("planners/stl_tamp/planner.py", "plan"): "not split yet: the planners are reworked on their own (issue 36)",
-    ("planners/stl_tamp/planner.py", "_local"): "not split yet: the planners are reworked on their own (issue 36)",
-    ("planners/stl_tamp/surface.py", "fit_rbf"): "not split yet: the planners are reworked on their own (issue 36)",
 }
 LONG = 80
 
