@@ -11,21 +11,10 @@ from typing import TYPE_CHECKING
 
 from .lazy import lazy_getattr
 
-#: Public name → the module that defines it, imported on first use: a case's process imports
+#: The public names, one list: type checkers read these imports as they are; at run time each
+#: is imported on first use (:func:`earthbench.lazy.lazy_getattr`), so a case's process imports
 #: only the world model, the plan format and what its planner uses, not the referee or the
 #: registry's entry-point machinery (importlib.metadata, email, zipfile). Issue 18's start-up goal.
-_EXPORTS = {
-    **dict.fromkeys(("EarthbenchError", "PlanFormatError", "PluginError", "ScenarioError", "StoreError", "SuiteError",
-                     "UnknownNameError"), "errors"),
-    **dict.fromkeys(("PLAN_SCHEMA", "Charge", "Dig", "Dump", "Move", "Plan", "Prediction"), "plan"),
-    **dict.fromkeys(("NoConfig", "Observation", "Planner"), "planner"),
-    **dict.fromkeys(("Verdict", "Violation", "judge"), "referee"),
-    **dict.fromkeys(("METRICS", "PLANNERS", "TERRAINS", "load_plugin_file", "register_planner"), "registry"),
-    **dict.fromkeys(("Budget", "ExcavatorSpec", "Heightmap", "LoaderSpec", "Machines", "Pose", "Scenario", "Sensing", "Site",
-                     "Soil", "Task", "TruckSpec"), "world"),
-    "observe": "sensing",
-}
-
 if TYPE_CHECKING:  # pragma: no cover
     from .errors import (
         EarthbenchError,
@@ -45,13 +34,4 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __version__ = "0.2.0"
 
-__all__ = [
-    "Budget", "Charge", "Dig", "Dump", "EarthbenchError", "ExcavatorSpec", "Heightmap", "LoaderSpec", "METRICS", "Machines",
-    "Move", "NoConfig", "Observation", "PLANNERS", "PLAN_SCHEMA", "Plan", "PlanFormatError", "Planner", "PluginError",
-    "Pose", "Prediction", "Scenario", "ScenarioError", "Sensing", "Site", "Soil", "StoreError", "SuiteError",
-    "TERRAINS", "Task", "TruckSpec", "UnknownNameError", "Verdict", "Violation", "judge", "load_plugin_file",
-    "observe", "register_planner",
-]
-
-
-__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())
+__getattr__ = lazy_getattr(globals())

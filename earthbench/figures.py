@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 
 from .plan import Charge, Dig, Dump, Move, Plan
 from .referee import Verdict
-from .replay import bucket_footprint, machine_paths, pose_at, replay
+from .playback import bucket_footprint, machine_paths, pose_at, replay
 from .world import Scenario
 
 _COLOURS = {"excavator": "tab:orange", "truck": "tab:blue", "loader": "tab:green"}

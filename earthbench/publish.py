@@ -21,7 +21,7 @@
   content-security policy hash, so no other script can run), tables that sort on a click,
   filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
   and wrap their headings to fit the window, links to the CSVs, the figures as ``data:`` URIs
-  and the replay viewer of :mod:`earthbench.replay`; no network resource. Every string from
+  and the replay viewer of :mod:`earthbench.playback`; no network resource. Every string from
   the store (and so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
@@ -100,7 +100,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     ``replays``: how many runs the page's replay viewer embeds (0: none);
     ``all_versions``: rank every stored version, not only each planner's latest.
     """
-    from .replay import pick_runs, viewer_section
+    from .playback import pick_runs, viewer_section
 
     out = Path(out)
     generated = generated or datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")

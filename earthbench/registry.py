@@ -10,6 +10,7 @@ Unknown names raise :class:`UnknownNameError` with the known names and close mat
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import inspect
@@ -18,6 +19,7 @@ import traceback
 from collections.abc import Callable, Iterator
 from importlib.metadata import entry_points
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Generic, TypeVar
 
 from .errors import PluginError, UnknownNameError
@@ -147,6 +149,18 @@ def plugin_module_name(path: str | Path) -> str:
     return f"earthbench_plugin_{p.stem}_{hashlib.sha256(str(p).encode()).hexdigest()[:8]}"
 
 
+def plugin_module(path: str | Path) -> tuple[ModuleType, Callable[[], None]]:
+    """A plugin file's module, named :func:`plugin_module_name` and entered in ``sys.modules``,
+    and the call that runs the file in it: the harness and every case process import a file so."""
+    mod_name = plugin_module_name(path)
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    if spec is None or spec.loader is None:
+        raise PluginError(f"{path} is not an importable Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = module
+    return module, functools.partial(spec.loader.exec_module, module)
+
+
 def load_plugin_file(path: str | Path) -> list[str]:
     """Import one Python file and register every named Planner subclass defined in it.
 
@@ -155,16 +169,12 @@ def load_plugin_file(path: str | Path) -> list[str]:
     p = Path(path)
     if not p.is_file():
         raise PluginError(f"plugin file {str(p)!r} not found")
-    mod_name = plugin_module_name(p)
-    spec = importlib.util.spec_from_file_location(mod_name, p)
-    if spec is None or spec.loader is None:
-        raise PluginError(f"{p} is not an importable Python file")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[mod_name] = module
+    module, run = plugin_module(p)
+    mod_name = module.__name__
     before = {n: PLANNERS.get(n) for n in PLANNERS.names()}
     origins = {n: PLANNERS.origin(n) for n in before}
     try:
-        spec.loader.exec_module(module)
+        run()
     except SystemExit as exc:  # a plugin must not end the process that loads it
         del sys.modules[mod_name]
         raise PluginError(

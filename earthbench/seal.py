@@ -29,25 +29,20 @@ every plan (``earthbench verify STORE --key FILE``).
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import hmac
 import json
 import math
 import os
-import secrets
 from dataclasses import dataclass
-from datetime import datetime, UTC
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .errors import EarthbenchError, read_document
+from .lazy import moved_getattr
 from .world import Heightmap, Machines, Pose, Scenario, Site
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .suite import Suite
 
 SEAL_SCHEMA = "earthbench.seal/1"
 KEY_BYTES = 32
@@ -143,36 +138,6 @@ class SealKey:
         return out
 
 
-def new_key(suite: Suite) -> tuple[SealKey, Suite]:
-    """A fresh random key for ``suite`` and the sealed suite it draws (its commitment computed)."""
-    draft = SealKey(suite.name, suite.digest, secrets.token_bytes(KEY_BYTES), created_at=datetime.now(UTC).isoformat(timespec="seconds"),
-                    path=str(Path(suite.path).resolve()) if suite.path else "")
-    return _complete(draft, suite)
-
-
-def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
-    """The sealed suite of ``key`` and the key with the commitment those scenarios give."""
-    probe = suite.sealed(key)
-    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios])
-    full = dataclasses.replace(key, commitment=c)
-    return full, suite.sealed(full, drawn=probe.scenarios)
-
-
-def open_sealed(suite: Suite, key: SealKey) -> Suite:
-    """The sealed suite ``key`` draws from ``suite``, after checking the key is for this suite
-    version and that its scenarios reproduce the key's commitment."""
-    if key.suite != suite.name:
-        raise SealError(f"the key was made for suite {key.suite!r}, not {suite.name!r}")
-    if key.suite_digest != suite.digest:
-        raise SealError(f"the key was made for suite {suite.name!r} digest {key.suite_digest[:12]}…, but the suite here has digest "
-                        f"{suite.digest[:12]}… (the suite changed); make a new key with `earthbench seal {suite.name}`")
-    full, sealed = _complete(key, suite)
-    if full.commitment != key.commitment:
-        raise SealError(f"the key file's commitment {key.commitment[:12]}… is not the one its key and suite give "
-                        f"({full.commitment[:12]}…): the key file was edited, or the generators changed")
-    return sealed
-
-
 # -- the site transform ----------------------------------------------------------------------------
 
 
@@ -242,3 +207,7 @@ class SiteTransform:
 def _tidy(v: float) -> float:
     """Round a transformed coordinate to 1e-9 m, so a sealed scenario has one digest on every machine."""
     return round(float(v), 9) + 0.0
+
+
+# moved to earthbench.suite after 0.2.0 (they draw a Suite; the seal no longer imports the suite)
+__getattr__ = moved_getattr(__name__, dict.fromkeys(("new_key", "open_sealed"), "earthbench.suite"))

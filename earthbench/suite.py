@@ -57,9 +57,11 @@ import difflib
 import hashlib
 import inspect
 import math
+import secrets
 import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from functools import cache, cached_property
 from importlib import resources
 from importlib.metadata import entry_points
@@ -68,7 +70,7 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .seal import TRANSFORMS, SealKey, SiteTransform, sealed_name
+from .seal import KEY_BYTES, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -224,6 +226,39 @@ class Suite:
     @property
     def _where(self) -> str:
         return f"suite {self.name!r}" + (f" ({self.path})" if self.path else "")
+
+
+# -- sealed draws (earthbench.seal holds the key and the site transform) -------------------------
+
+
+def new_key(suite: Suite) -> tuple[SealKey, Suite]:
+    """A fresh random key for ``suite`` and the sealed suite it draws (its commitment computed)."""
+    draft = SealKey(suite.name, suite.digest, secrets.token_bytes(KEY_BYTES), created_at=datetime.now(UTC).isoformat(timespec="seconds"),
+                    path=str(Path(suite.path).resolve()) if suite.path else "")
+    return _complete(draft, suite)
+
+
+def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
+    """The sealed suite of ``key`` and the key with the commitment those scenarios give."""
+    probe = suite.sealed(key)
+    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios])
+    full = dataclasses.replace(key, commitment=c)
+    return full, suite.sealed(full, drawn=probe.scenarios)
+
+
+def open_sealed(suite: Suite, key: SealKey) -> Suite:
+    """The sealed suite ``key`` draws from ``suite``, after checking the key is for this suite
+    version and that its scenarios reproduce the key's commitment."""
+    if key.suite != suite.name:
+        raise SealError(f"the key was made for suite {key.suite!r}, not {suite.name!r}")
+    if key.suite_digest != suite.digest:
+        raise SealError(f"the key was made for suite {suite.name!r} digest {key.suite_digest[:12]}…, but the suite here has digest "
+                        f"{suite.digest[:12]}… (the suite changed); make a new key with `earthbench seal {suite.name}`")
+    full, sealed = _complete(key, suite)
+    if full.commitment != key.commitment:
+        raise SealError(f"the key file's commitment {key.commitment[:12]}… is not the one its key and suite give "
+                        f"({full.commitment[:12]}…): the key file was edited, or the generators changed")
+    return sealed
 
 
 # -- finding suites -------------------------------------------------------------------------------

@@ -455,8 +455,8 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     of the draw is the regenerated one. Re-judging the draw's runs is :func:`audit`'s
     (on ``run_rows``); this is the cost sealing adds to verifying a store.
     """
-    from .seal import SealError, open_sealed
-    from .suite import public_suite
+    from .seal import SealError
+    from .suite import open_sealed, public_suite
 
     out = SealCheck(key.name)
     try:

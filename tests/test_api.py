@@ -66,7 +66,9 @@ def test_names_documented_in_0_1_still_import_with_a_warning(old, name, new):
 
 
 @pytest.mark.parametrize("old, new, name", [("earthbench.runner", "earthbench.harness", "run_suite"),
-                                            ("earthbench.dask_executor", "earthbench.harness.dask_executor", "DaskExecutor")])
+                                            ("earthbench.dask_executor", "earthbench.harness.dask_executor", "DaskExecutor"),
+                                            ("earthbench.replay", "earthbench.playback", "replay_data"),
+                                            ("earthbench.referee.replay", "earthbench.referee.state", "Replay")])
 def test_moved_modules_still_import_with_a_warning(old, new, name):
     code = (f"import warnings; warnings.simplefilter('always')\nfrom {old} import {name} as got\n"
             f"import {new} as m\nassert got is m.{name}")
@@ -127,3 +129,16 @@ def test_version_is_real_and_the_changelog_names_it(capsys):
     section = changelog[changelog.index(f"## {earthbench.__version__}"):]
     assert section.split("\n## ")[0].count("**Moves published results:**") == 1
     assert json.loads(json.dumps(earthbench.__version__))
+
+
+def test_the_package_face_exports_one_list():
+    """``earthbench`` and ``earthbench.harness`` name their exports once, in their
+    ``TYPE_CHECKING`` imports (:func:`earthbench.lazy.lazy_getattr`); ``__all__`` is that list."""
+    import earthbench.harness
+
+    assert set(earthbench.__all__) | {"__version__"} == set(PUBLIC["earthbench"])
+    assert {"LocalExecutor", "run_suite"} <= set(earthbench.harness.__all__)
+    for name in earthbench.harness.__all__:
+        assert getattr(earthbench.harness, name) is not None
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        earthbench.nothing  # noqa: B018

@@ -14,7 +14,7 @@ import pytest
 
 from earthbench import assets
 from earthbench.publish import html_page
-from earthbench.replay import SCRIPT
+from earthbench.playback import SCRIPT
 
 
 def _page() -> str:

@@ -28,10 +28,10 @@ from earthbench.identity import variant_name
 from earthbench.merge import MergeError, merge
 from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import score
-from earthbench.seal import SealError, SealKey, SiteTransform, new_key, open_sealed, public_name
+from earthbench.seal import SealError, SealKey, SiteTransform, public_name
 from earthbench.sensing import ANONYMOUS_ID, observe
 from earthbench.store import SCHEMA_VERSION, Store, load_runs
-from earthbench.suite import load_suite
+from earthbench.suite import load_suite, new_key, open_sealed
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "sealing_planners.py")
@@ -362,3 +362,13 @@ def test_the_gap_table_uses_the_boards_intervals_and_counts_a_run_short_of_the_t
     assert t["flagged"] and t["gap_lo"] > 0  # worse beyond doubt: stopping short never looks faster
     r = g.loc[("stopper", "success_rate")]
     assert r["public"] == 1.0 and 0.88 < r["public_lo"] < 0.89 and r["public_hi"] == 1.0
+
+
+def test_new_key_and_open_sealed_still_import_from_the_seal_with_a_warning():
+    """They moved to earthbench.suite (they draw a suite; the seal no longer imports it)."""
+    import earthbench.seal
+    import earthbench.suite
+
+    for name in ("new_key", "open_sealed"):
+        with pytest.warns(DeprecationWarning, match=rf"earthbench\.seal\.{name} moved to earthbench\.suite\.{name}"):
+            assert getattr(earthbench.seal, name) is getattr(earthbench.suite, name)

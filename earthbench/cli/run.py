@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     suite = load_suite(args.suite)
     if args.sealed:
-        from ..seal import SealKey, open_sealed
+        from ..seal import SealKey
+        from ..suite import open_sealed
 
         suite = open_sealed(suite, SealKey.read(args.sealed))
     if args.config:

@@ -21,8 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..seal import new_key
-    from ..suite import load_suite
+    from ..suite import load_suite, new_key
 
     suite = load_suite(args.suite)
     key, sealed = new_key(suite)

@@ -19,20 +19,9 @@ from typing import TYPE_CHECKING
 
 from ..lazy import lazy_getattr
 
-#: Public name → the module that defines it. Loaded on first use, so a case's process, which
-#: imports only :mod:`.child`, does not pay for the executors, psutil and concurrent.futures.
-_EXPORTS = {
-    "REASONS": "cases", "Case": "cases", "CaseResult": "cases", "PlannerRef": "cases",
-    "environment": "environment", "Executor": "local", "LocalExecutor": "local",
-    "RunReport": "orchestrate", "build_cases": "orchestrate", "run_cases": "orchestrate", "run_suite": "orchestrate",
-    "run_case": "sandbox", "SlotPool": "slots", "make_slots": "slots",
-}
-
-__all__ = [
-    "REASONS", "Case", "CaseResult", "Executor", "LocalExecutor", "PlannerRef", "RunReport", "SlotPool",
-    "build_cases", "environment", "make_slots", "run_case", "run_cases", "run_suite",
-]
-
+#: The public names, one list: imported on first use (:func:`earthbench.lazy.lazy_getattr`),
+#: so a case's process, which imports only :mod:`.child`, does not pay for the executors,
+#: psutil and concurrent.futures.
 if TYPE_CHECKING:  # pragma: no cover
     from .cases import REASONS, Case, CaseResult, PlannerRef
     from .environment import environment
@@ -42,4 +31,4 @@ if TYPE_CHECKING:  # pragma: no cover
     from .slots import SlotPool, make_slots
 
 
-__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())
+__getattr__ = lazy_getattr(globals())

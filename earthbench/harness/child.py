@@ -69,15 +69,11 @@ def load_planner_class(source: str, name: str) -> type:
     """
     if source.endswith(".py"):
         from earthbench.planner import Planner
-        from earthbench.registry import PLANNERS, plugin_module_name
+        from earthbench.registry import PLANNERS, plugin_module
 
-        mod_name = plugin_module_name(source)
-        spec = importlib.util.spec_from_file_location(mod_name, source)
-        if spec is None or spec.loader is None:
-            raise ImportError(f"{source} is not an importable Python file")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[mod_name] = module
-        spec.loader.exec_module(module)
+        module, run = plugin_module(source)
+        run()
+        mod_name = module.__name__
         for candidate in vars(module).values():
             if isinstance(candidate, type) and issubclass(candidate, Planner) and candidate.__module__ == mod_name \
                     and candidate.name == name:

@@ -14,7 +14,7 @@ re-deriving them:
 - :mod:`earthbench.cut` — the cut model (``apply_cut``, ``charge_cut``);
 - :mod:`earthbench.rules` — the predicates the rules are made of, which planners call too
   (footprints touching, the excavator's stand and undermining line, the loader's step);
-- :mod:`earthbench.referee.replay` — the rules all machines share: speed, yaw rate, heading,
+- :mod:`earthbench.referee.state` — the replay state and the rules all machines share: speed, yaw rate, heading,
   keep-out zones and the map's edge along the footprint's swept path, and clearance between
   machines checked along both swept paths at once;
 - :mod:`earthbench.referee.backhoe` — digs and dumps of the excavator (reach, depth, drag, dig
@@ -34,7 +34,7 @@ from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL
 from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Scenario
-from .replay import RULES, DigRecord, Replay, Verdict, Violation
+from .state import RULES, DigRecord, Replay, Verdict, Violation
 
 __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 

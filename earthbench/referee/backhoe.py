@@ -13,7 +13,7 @@ from ..plan import Dig, Dump
 from ..rules import track_level_and_tilt as _track_level_and_tilt
 from ..rules import undermining_excess as _undermining_excess
 from ..world import ExcavatorSpec, Pose
-from .replay import DigRecord, Replay
+from .state import DigRecord, Replay
 
 
 def dig(r: Replay, n: int, a: Dig) -> None:

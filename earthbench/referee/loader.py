@@ -22,7 +22,7 @@ from ..plan import Charge, Dump, Move
 from ..world import LoaderSpec, Pose
 from ..rules import loader_base_level as _loader_base_level
 from ..rules import wheel_step_excess as _wheel_step_excess
-from .replay import DigRecord, Replay
+from .state import DigRecord, Replay
 
 
 # -- rules ---------------------------------------------------------------------------------------

@@ -35,10 +35,11 @@ from shapely.geometry import LineString, Point, Polygon
 from earthbench.cut import apply_cut, cut_along, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
-from earthbench.planner import Observation, Planner, closed_loop_setting
+from earthbench.planner import closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
+from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
@@ -68,26 +69,24 @@ class GreedyConfig:
     observation (``planners/stability.py``: 0 on the exact track)."""
 
 
-class GreedyPlanner(Planner):
+class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
     version = "1.2"
-    tracks = ("backhoe",)
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
         return _Greedy(scenario, self.config).run()
 
-    def step(self, observation: Observation) -> Plan | None:
-        if observation.truck_full:
-            return None
-        g = _Greedy(observation.scenario, self.config)
-        g.t, g.turn, g.loaded = observation.t, observation.turn, observation.loaded
-        if observation.step == 0:
-            self._visited: set[tuple[float, float]] = set()
-        plan = g.run(self._visited, max_dumps=1)
-        return plan if plan.actions else None
+    def session(self, scenario: Scenario) -> _Greedy:
+        return _Greedy(scenario, self.config)
+
+    def _carry(self, session: _Greedy) -> set[tuple[float, float]]:
+        return set()  # the stations visited
+
+    def _one_dump(self, session: _Greedy, carried: set[tuple[float, float]]) -> Plan:
+        return session.run(carried, max_dumps=1)
 
 
 class _Greedy:

@@ -69,11 +69,10 @@ from earthbench.cut import apply_cut, cut_level
 from earthbench.world import Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, get_nlp, site_box, solve_counts
+from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
-from ..stl_tamp.surface import fit_rbf
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
     from ..stl_tamp.model import PhaseNLP
@@ -332,22 +331,17 @@ class SeparatePlanner(Planner):
         digs = list(digs) + [dataclasses.replace(digs[-1], volume=0.0)] * (c.m_local - len(digs))
         stl = StlTampPlanner(self._stl_config())
         shape = stl.local_shape(scenario)
-        nlp, _ = get_nlp(shape, scenario, box)
-        floor = scenario.site.floor if scenario.site.floor is not None else 0.0
-        t0 = time.perf_counter()
-        hw = c.local_fit_half
+        # the tasks are fixed, so the target and the weights on volume and η are 0 (fit_rbf's
+        # default solver, cvxpy: separate's fit has always used it)
+        lp = local_problem(scenario, st, area, shape, box, joints, fit_spacing=c.local_fit_spacing, fit_half=c.local_fit_half,
+                           fit_solver="cvxpy", vt=0.0, alpha=(c.alpha_u, c.alpha_t, 0.0, 0.0, c.alpha_term), goal=goal)
+        nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
+        trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        surf = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.local_fit_spacing,
-                       window=(cx - hw, cx + hw, cy - hw, cy + hw), shape=shape.terrain_shape, margin=0)
-        trace.fit_time_s += time.perf_counter() - t0
         # keep the truck where it is when it already serves this area's base (as stl-tamp does)
         d_now = math.hypot(st.truck.x - area.base[0], st.truck.y - area.base[1])
         reach_dt = exc.reach_max + trk.loading_radius - 0.4
         truck = (st.truck.x, st.truck.y) if exc.clearance + 0.8 <= d_now <= reach_dt else area.truck
-        s0 = st.s0
-        s0[4], s0[5] = joints
-        params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=0.0,
-                            alpha=(c.alpha_u, c.alpha_t, 0.0, 0.0, c.alpha_term), goal=goal, floor=floor)
         eta = self._fixed_eta(nlp, s0, params, digs, area, truck, surf, floor)
         seeds = self._seeds(digs, eta, area, truck, surf)
         # the arm's IK guess at the model's height of each contact after the earlier cuts (the

@@ -66,12 +66,13 @@ from shapely.geometry import LineString, Point, Polygon
 
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
-from earthbench.planner import Observation, Planner, closed_loop_setting
+from earthbench.planner import closed_loop_setting
 from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
 from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
+from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
 
@@ -158,33 +159,28 @@ class _Choice:
     swing: float
 
 
-class SinghCannonBackhoe(Planner):
+class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]"]):
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
     version = "1.3"
-    tracks = ("backhoe",)
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
         return Session(scenario, self.config).run()
 
-    def step(self, observation: Observation) -> Plan | None:
-        if observation.truck_full:
-            return None
-        s = Session(observation.scenario, self.config)
-        if observation.step == 0:
-            self._floor, self._depleted = s.floor, s.depleted
-        s.floor, s.depleted = self._floor, self._depleted
-        s.t = s.truck_ready = observation.t
-        s.turn, s.loaded = observation.turn, observation.loaded
-        plan = s.run(max_dumps=1)
-        return plan if plan.actions else None
-
     def session(self, scenario: Scenario) -> Session:
         """A planning session at the scenario's initial state, to call the coarse and refined
         planners step by step (tests, benchmarks, figures)."""
         return Session(scenario, self.config)
+
+    def _carry(self, session: Session) -> tuple[float, np.ndarray]:
+        return session.floor, session.depleted
+
+    def _one_dump(self, session: Session, carried: tuple[float, np.ndarray]) -> Plan:
+        session.floor, session.depleted = carried
+        session.truck_ready = session.t  # the truck waits from the observed time on
+        return session.run(max_dumps=1)
 
     def model(self) -> ForwardModel:
         return forward_model(self.config)

@@ -21,6 +21,7 @@
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -29,9 +30,9 @@ from shapely.geometry import Polygon
 
 from earthbench.rules import track_level_and_tilt
 from earthbench.world import Pose, Scenario
-from .surface import RbfSurface
+from .surface import RbfSurface, fit_rbf
 
-from .convert import TILT_MARGIN
+from .convert import TILT_MARGIN, SimState
 from .guess import PhaseSeed
 from .problem import Shape
 
@@ -54,6 +55,40 @@ def get_nlp(shape: Shape, scenario: Scenario, box: tuple[float, float, float, fl
     if not hit:
         _NLP_CACHE[key] = PhaseNLP(shape, scenario.machines.excavator, scenario.machines.truck, box)
     return _NLP_CACHE[key], hit
+
+
+@dataclass(frozen=True)
+class LocalProblem:
+    """One area's local NLP as ``stl-tamp`` and ``separate`` both set it up (step 4 above): the
+    process-wide NLP of the local shape, the surface fitted to the current grid around the area
+    (``fit_time_s``: the fit's seconds), the site's floor (0 without one), the start state with
+    the arm's joints where the last area left them, and the packed parameters."""
+
+    nlp: PhaseNLP
+    surf: RbfSurface
+    fit_time_s: float
+    floor: float
+    s0: np.ndarray
+    params: np.ndarray
+
+
+def local_problem(scenario: Scenario, st: SimState, area: Area, shape: Shape, box: tuple[float, float, float, float],
+                  joints: tuple[float, float], *, fit_spacing: float, fit_half: float, fit_solver: str, vt: float,
+                  alpha: tuple[float, float, float, float, float], goal: tuple[float, float]) -> LocalProblem:
+    """The local problem of ``area`` on the grid as it now is (``st.z``): a window fit of
+    ``±fit_half`` m at ``fit_spacing`` (``fit_solver``: :func:`~.surface.fit_rbf`'s), the
+    target ``vt``, the weights ``alpha`` and the terminal ``goal`` (the next area's base)."""
+    nlp, _ = get_nlp(shape, scenario, box)
+    floor = scenario.site.floor if scenario.site.floor is not None else 0.0
+    t0 = time.perf_counter()
+    cx, cy = area.centre
+    surf = fit_rbf(scenario.terrain.with_z(st.z), spacing=fit_spacing, window=(cx - fit_half, cx + fit_half, cy - fit_half, cy + fit_half),
+                   shape=shape.terrain_shape, margin=0, solver=fit_solver)
+    fit_time_s = time.perf_counter() - t0
+    s0 = st.s0
+    s0[4], s0[5] = joints
+    params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=vt, alpha=alpha, goal=goal, floor=floor)
+    return LocalProblem(nlp, surf, fit_time_s, floor, s0, params)
 
 
 @dataclass

@@ -31,6 +31,8 @@ from .hierarchy import (
     greedy_tour,
     in_box,
     level_stand,
+    LocalProblem,
+    local_problem,
     local_seeds,
     nearest_block,
     shared_truck_stand,
@@ -70,13 +72,12 @@ class Config(LocalNLPConfig):
     """Settings; defaults are the paper's values where it gives them (section V), but for two.
 
     Paper: S_l = 5 bucket areas with V_max = 1.0 m³ per area, L_drag = 1.0 m, d_dig = 0.4 m.
-    Departures (0.9.0, planners/stl_tamp/NOTES.md): m_l = 4 digs per local area (paper: 5), the fewest
-    0.28 m³ buckets that hold an area's V_max of 1.0 m³, and n = 8 motion steps per phase
-    (paper: 10), 3 of them before the contact. On the 40 scenarios of ``paper-extensive`` the
-    plans were as fast (time per target m³ 28.7 against 28.8, faster on 20 of 40) at two thirds
-    of the CPU. Not given in the paper (our choices): the weights α, the ε constants, the sigmoid
-    steepness k = 20 with the quadrature box widened by 3/k (planners/stl_tamp/NOTES.md calibration), the
-    STL sharpness β.
+    Departures: m_l = 4 digs per local area (paper: 5), the fewest 0.28 m³ buckets that hold an
+    area's V_max of 1.0 m³, and n = 8 motion steps per phase (paper: 10), 3 of them before the
+    contact: as fast plans at two thirds of the CPU. Not given in the paper (our choices): the
+    weights α, the ε constants, the sigmoid steepness k = 20 with the quadrature box widened by
+    3/k, the STL sharpness β. Why each setting has its value, with the measurements and the
+    versions that set it: planners/stl_tamp/NOTES.md, "Why the settings are what they are".
     """
 
     m_local: int = 4
@@ -94,17 +95,14 @@ class Config(LocalNLPConfig):
     eta_on: float = 0.25
     min_dig_volume: float = 0.02
     repair: float = 0.5
-    # where the machines stand for an area: the base base_offset beyond its centre toward the
-    # truck's side, the truck truck_offset from the base, turned truck_angle from straight behind
-    # it toward the excavator's start. 2.5 rad leaves a swing of about 37° between dig and dump:
-    # on seeds 0-4 of paper-extensive, bench and dem a median of 31.8 s/m³ against 35.2 (2.2 rad)
-    # and 39.1 (π/2, a quarter swing, until 0.4.0), all 40 plans valid.
     # the local problem's base ends phase 0 within stand_tol (m) of the area's level stand
-    # (hierarchy.level_stand): a stand the NLP picks freely can be too steep for the referee's tilt
-    # rule, and every dig from it is then refused (0.6.1: 37 of 70 phases on paper-extensive s4/5 m³)
+    # (hierarchy.level_stand): a stand the NLP picks freely can be too steep for the tilt rule
     stand_tol: float = 0.1
     base_offset: float = 4.0
     truck_offset: float = 5.0
+    # where the machines stand for an area: the base base_offset beyond its centre toward the
+    # truck's side, the truck truck_offset from the base, turned truck_angle from straight behind
+    # it toward the excavator's start (2.5 rad: a swing of about 37° between dig and dump)
     truck_angle: float = 2.5
     retime_moves: bool = True  # drive the NLP's paths as fast as the limits allow (convert.fastest_steps)
     fill_estimate: float = 0.85
@@ -120,22 +118,16 @@ class Config(LocalNLPConfig):
     # graph grows with the square of the phases, so fewer phases per window cost less per m³)
     global_window: tuple[float, float] = (12.0, 6.0)
     block_fill: float = 0.8
-    block_phases: int = 8  # 24 × 12 m / 16 m³, seed 0: 6 phases 20.3 CPU s, 33.4 s/m³; 8 phases 17.1 CPU s, 30.5 s/m³
-    # iteration caps only: no CPU- or wall-time cap, so machine load never changes a plan.
-    # 250 (0.8.0; 150 until 0.7.0, when 14 % of the local solves on paper-extensive at 7 m³ ended
-    # capped and a capped solve's retry restarted IPOPT from μ = 1: planners/stl_tamp/NOTES.md)
+    block_phases: int = 8
+    # iteration caps only: no CPU- or wall-time cap, so machine load never changes a plan
     max_iter: int = 250
-    global_max_iter: int = 1500  # paper-extensive global solves unconverged: 28 of 40 at 150 (0.2.0), 1 of 40 at 1500 (0.5.0)
-    # IPOPT's barrier update and stop (planners/stl_tamp/NOTES.md): a monotone μ from 1.0 solved on to tol,
-    # without the acceptable-level stop, ends most local solves Solve_Succeeded and gave the better
-    # plans (0.6.2: adaptive μ from 0.1, stopped at the acceptable level 1e-2 after 3 iterates;
-    # a monotone μ from 0.1 declared a feasible local problem of the tests infeasible)
+    global_max_iter: int = 1500
+    # IPOPT's barrier update: a monotone μ from 1.0, solved on to tol without the acceptable-level
+    # stop, ends most local solves Solve_Succeeded
     mu_strategy: str = "monotone"
     mu_init: float = 1.0
-    # the local solves leave each barrier subproblem at barrier_tol_factor·μ (IPOPT's default 10):
-    # 100 (0.8.0) ended 75 of 75 local solves Solve_Succeeded on paper-extensive 0-9 at 7 m³ with
-    # max_iter 250, in as many iterations as 150 had taken; the global solve keeps 10 (100 took
-    # 41 % more iterations there)
+    # the local solves leave each barrier subproblem at barrier_tol_factor·μ (IPOPT's default 10;
+    # the global solve keeps 10)
     barrier_tol_factor: float = 100.0
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks; past it the area is left undug) or "raise"
     max_fallbacks: int = 6  # at least this many, or max_fallback_share of the local solves so far (large sites)
@@ -259,14 +251,7 @@ class StlTampPlanner(Planner):
         t_start = time.perf_counter()
         self._use_prepared()
         c = self.config
-        if scenario.machines.excavator is None:
-            raise EarthbenchError("stl-tamp plans for a backhoe excavator; this scenario has none")
-        target = scenario.task.target_volume
-        holds = diggable_volume(scenario)
-        if target > holds:
-            raise TargetTooLargeError(
-                f"target {target:.3f} m³ exceeds the {holds:.3f} m³ the dig area holds above its floor; "
-                "lower task.target_volume or enlarge the site")
+        target = self._target(scenario)
         trace = Trace()
         st = SimState.start(scenario)
         exc = scenario.machines.excavator
@@ -296,19 +281,7 @@ class StlTampPlanner(Planner):
             v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
                                                              (c.block_phases - 1) * c.area_vmax)
             tour = greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3)
-            if c.global_layer and len(tour) > 1:
-                t0 = time.perf_counter()  # Algorithm 1, step 1: the surface function (of the window)
-                if len(blocks) == 1:
-                    surf_g = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.global_fit_spacing, solver="cholesky")
-                else:
-                    surf_g = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.global_fit_spacing, window=block,
-                                     shape=global_lattice(c.global_window, c.global_fit_spacing), solver="cholesky")
-                trace.fit_time_s += time.perf_counter() - t0
-                chosen, rec = self._global(scenario, st, surf_g, tour, v_block, side, box, block, len(blocks) > 1, trace)
-                trace.global_["used"] = True
-            else:  # nothing to choose between (paper-switch: the dig area is one local area)
-                chosen, rec = tour, {"used": False, "areas": len(tour)}
-            trace.global_["blocks"].append(rec)
+            chosen = self._choose(scenario, st, tour, v_block, side, box, block, len(blocks) > 1, trace)
             queue = list(chosen) + [a for a in tour if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
             got_block = 0.0
             while queue and remaining > c.volume_tol and got_block < v_block - c.volume_tol:
@@ -328,27 +301,47 @@ class StlTampPlanner(Planner):
                                        c.truck_angle)
         if len(trace.global_["blocks"]) == 1:  # one window: the record as before
             trace.global_ = dict(trace.global_["blocks"][0])
-        counts = solve_counts(trace.locals_)
-        plan = Plan(
-            actions=tuple(st.actions),
-            predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)),
-            info={
-                "planner": self.name,
-                "areas": n_areas,
-                "digs": st.digs,
-                "nlp_model_volume": predicted_model_volume,
-                "fit_time_s": trace.fit_time_s,
-                "build_time_s": trace.build_time_s,
-                "nlp_cache": trace.nlp_cache,
-                "fallbacks": trace.fallbacks,
-                "local_solves": counts,
-                "skipped": dict(conv.skips),
-                "global": trace.global_,
-                "local": trace.locals_,
-                "plan_time_s": time.perf_counter() - t_start,
-            },
-        )
-        return plan
+        info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
+                "fit_time_s": trace.fit_time_s, "build_time_s": trace.build_time_s, "nlp_cache": trace.nlp_cache,
+                "fallbacks": trace.fallbacks, "local_solves": solve_counts(trace.locals_), "skipped": dict(conv.skips),
+                "global": trace.global_, "local": trace.locals_, "plan_time_s": time.perf_counter() - t_start}
+        return Plan(actions=tuple(st.actions),
+                    predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)), info=info)
+
+    @staticmethod
+    def _target(scenario: Scenario) -> float:
+        """The target volume, once the scenario is known to be one stl-tamp can plan for."""
+        if scenario.machines.excavator is None:
+            raise EarthbenchError("stl-tamp plans for a backhoe excavator; this scenario has none")
+        target = scenario.task.target_volume
+        holds = diggable_volume(scenario)
+        if target > holds:
+            raise TargetTooLargeError(
+                f"target {target:.3f} m³ exceeds the {holds:.3f} m³ the dig area holds above its floor; "
+                "lower task.target_volume or enlarge the site")
+        return target
+
+    def _choose(self, scenario: Scenario, st: SimState, tour: list[Area], v_block: float, side: float,
+                box: tuple[float, float, float, float], block: tuple[float, float, float, float], windowed: bool,
+                trace: Trace) -> list[Area]:
+        """Algorithm 1, steps 1–3 for one window (``block``; ``windowed``: the site has several):
+        the areas its global problem chooses, or the tour itself when there is nothing to choose
+        between (paper-switch: the dig area is one local area); the record goes to ``trace``."""
+        c = self.config
+        if c.global_layer and len(tour) > 1:
+            t0 = time.perf_counter()  # Algorithm 1, step 1: the surface function (of the window)
+            if not windowed:
+                surf_g = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.global_fit_spacing, solver="cholesky")
+            else:
+                surf_g = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.global_fit_spacing, window=block,
+                                 shape=global_lattice(c.global_window, c.global_fit_spacing), solver="cholesky")
+            trace.fit_time_s += time.perf_counter() - t0
+            chosen, rec = self._global(scenario, st, surf_g, tour, v_block, side, box, block, windowed, trace)
+            trace.global_["used"] = True
+        else:
+            chosen, rec = tour, {"used": False, "areas": len(tour)}
+        trace.global_["blocks"].append(rec)
+        return chosen
 
     def _ipopt_options(self, local: bool = True) -> dict[str, Any]:
         """IPOPT's settings; the local solves' barrier subproblems end at ``barrier_tol_factor``·μ
@@ -421,61 +414,24 @@ class StlTampPlanner(Planner):
         c, exc = self.config, scenario.machines.excavator
         t_wall = time.perf_counter()
         shape = self.local_shape(scenario)
-        nlp, _ = get_nlp(shape, scenario, box)
-        floor = scenario.site.floor if scenario.site.floor is not None else 0.0
-        # terrain parameter: a fit of the current grid around the area (the digs so far included)
-        t0 = time.perf_counter()
-        hw = c.local_fit_half
-        cx, cy = area.centre
-        surf = fit_rbf(scenario.terrain.with_z(st.z), spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                       shape=shape.terrain_shape, margin=0, solver=c.local_fit_solver)
-        trace.fit_time_s += time.perf_counter() - t0
         # a small remainder is still planned as (at least) a bucket of work: the conversion then
         # bisects the real dig's depth to take exactly what is missing
         v_local = min(max(remaining, c.min_local_target * exc.bucket_capacity), vmax)
+        # terrain parameter: a fit of the current grid around the area (the digs so far included)
+        lp = local_problem(scenario, st, area, shape, box, joints, fit_spacing=c.local_fit_spacing, fit_half=c.local_fit_half,
+                           fit_solver=c.local_fit_solver, vt=v_local,
+                           alpha=(c.alpha_u, c.alpha_t, c.alpha_v, c.alpha_eta, c.alpha_term), goal=goal)
+        nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
+        trace.fit_time_s += lp.fit_time_s
+        cx, cy = area.centre
         # phase 0 places the truck for this area (it drives while the excavator relocates): the
         # guess takes it to the area's stand, the NLP moves it under clearance and dump reach
         truck = area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
-        s0 = st.s0
-        s0[4], s0[5] = joints
-        params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=v_local,
-                            alpha=(c.alpha_u, c.alpha_t, c.alpha_v, c.alpha_eta, c.alpha_term), goal=goal, floor=floor)
         seeds = settle_contacts(nlp, s0, seeds, floor, params)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
-        half = math.hypot(cx - area.px, cy - area.py) + 0.5
-        cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
-        stand = (area.base[0], area.base[1], c.stand_tol)
-
-        def solve(w: np.ndarray) -> Solution:
-            return nlp.solve(params, w, cbox, max_iter=c.max_iter, accept_feasible=c.accept_feasible,
-                             options=self._ipopt_options(), stand=stand)
-
-        sol = solve(w0)
-        n_iter, t_solve = sol.iterations, sol.solve_time_s
-        retry = None
-        start = w0
-        if not sol.success and c.retry:
-            # one more solve: on from the last iterate when IPOPT only ran out of iterations or
-            # time, else from another start (Fig. 6's: every phase seeded as a dig)
-            if sol.status.startswith("Maximum_"):
-                w1, retry = sol.info["w"], "continued"
-            else:
-                seeds = local_seeds(area, c.m_local, c.m_local, exc.bucket_width, exc.max_drag_length, surf, 1.0, truck)
-                seeds = settle_contacts(nlp, s0, seeds, floor, params)
-                w1, retry = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params), "every phase a dig"
-            sol2 = solve(w1)
-            n_iter, t_solve, retry = n_iter + sol2.iterations, t_solve + sol2.solve_time_s, f"{retry}: {sol2.status}"
-            if sol2.success:
-                sol, start = sol2, w1
-        if sol.success and c.reseed:
-            w1 = nlp.reseed(sol, start, params, c.eta_on)
-            if w1 is not None:  # one bounded restart out of the disjunction trap (see PhaseNLP.reseed)
-                sol2 = solve(w1)
-                n_iter, t_solve = n_iter + sol2.iterations, t_solve + sol2.solve_time_s
-                if sol2.success and float(np.sum(sol2.V)) > float(np.sum(sol.V)):
-                    sol = sol2
+        sol, n_iter, t_solve, retry = self._solve_local(lp, exc, area, truck, box, w0)
         trace.add_build(nlp)
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
@@ -509,6 +465,48 @@ class StlTampPlanner(Planner):
         rec["wall_s"] = time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
+
+    def _solve_local(self, lp: LocalProblem, exc: ExcavatorSpec, area: Area, truck: tuple[float, float],
+                     box: tuple[float, float, float, float], w0: np.ndarray) -> tuple[Solution, int, float, str | None]:
+        """The local NLP solved from ``w0`` with its contacts kept near the area and its stand near
+        the area's level stand: retried once if it fails (``retry``), restarted once out of the
+        disjunction trap if it succeeds (``reseed``). Returns the solution kept, the iterations
+        and solve seconds of every solve, and how the retry went (None: no retry)."""
+        c, nlp, params, s0, floor, surf = self.config, lp.nlp, lp.params, lp.s0, lp.floor, lp.surf
+        cx, cy = area.centre
+        half = math.hypot(cx - area.px, cy - area.py) + 0.5
+        cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
+        stand = (area.base[0], area.base[1], c.stand_tol)
+
+        def solve(w: np.ndarray) -> Solution:
+            return nlp.solve(params, w, cbox, max_iter=c.max_iter, accept_feasible=c.accept_feasible,
+                             options=self._ipopt_options(), stand=stand)
+
+        sol = solve(w0)
+        n_iter, t_solve = sol.iterations, sol.solve_time_s
+        retry = None
+        start = w0
+        if not sol.success and c.retry:
+            # one more solve: on from the last iterate when IPOPT only ran out of iterations or
+            # time, else from another start (Fig. 6's: every phase seeded as a dig)
+            if sol.status.startswith("Maximum_"):
+                w1, retry = sol.info["w"], "continued"
+            else:
+                seeds = local_seeds(area, c.m_local, c.m_local, exc.bucket_width, exc.max_drag_length, surf, 1.0, truck)
+                seeds = settle_contacts(nlp, s0, seeds, floor, params)
+                w1, retry = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params), "every phase a dig"
+            sol2 = solve(w1)
+            n_iter, t_solve, retry = n_iter + sol2.iterations, t_solve + sol2.solve_time_s, f"{retry}: {sol2.status}"
+            if sol2.success:
+                sol, start = sol2, w1
+        if sol.success and c.reseed:
+            w1 = nlp.reseed(sol, start, params, c.eta_on)
+            if w1 is not None:  # one bounded restart out of the disjunction trap (see PhaseNLP.reseed)
+                sol2 = solve(w1)
+                n_iter, t_solve = n_iter + sol2.iterations, t_solve + sol2.solve_time_s
+                if sol2.success and float(np.sum(sol2.V)) > float(np.sum(sol.V)):
+                    sol = sol2
+        return sol, n_iter, t_solve, retry
 
     def _emit(self, st: SimState, conv: Converter, nlp, sol: Solution, remaining: float,
               depths: np.ndarray | None = None) -> float:

@@ -165,25 +165,9 @@ def fit_rbf(
     if spacing <= 0 or sigma_factor <= 0 or regularization < 0:
         raise ScenarioError("fit_rbf needs spacing > 0, sigma_factor > 0 and regularization ≥ 0")
     t0 = time.perf_counter()
-    xs, ys = terrain.cell_centres()
-    z = terrain.z
-    if window is not None:
-        xmin, xmax, ymin, ymax = window
-        ix = np.nonzero((xs >= xmin) & (xs <= xmax))[0]
-        iy = np.nonzero((ys >= ymin) & (ys <= ymax))[0]
-        if ix.size < 2 or iy.size < 2:
-            raise ScenarioError(f"fit window {window} holds fewer than 2×2 cells of the terrain")
-        xs, ys = xs[ix], ys[iy]
-        z = z[np.ix_(iy, ix)]
+    xs, ys, z = _fitted_cells(terrain, window)
     sigma = sigma_factor * spacing
-    if shape is None:
-        nx = int(math.ceil((xs[-1] - xs[0]) / spacing)) + 1 + 2 * margin
-        ny = int(math.ceil((ys[-1] - ys[0]) / spacing)) + 1 + 2 * margin
-    else:
-        ny, nx = int(shape[0]), int(shape[1])
-    # centre the lattice on the fitted cells
-    x0 = 0.5 * (xs[0] + xs[-1]) - 0.5 * (nx - 1) * spacing
-    y0 = 0.5 * (ys[0] + ys[-1]) - 0.5 * (ny - 1) * spacing
+    nx, ny, x0, y0 = _lattice(xs, ys, spacing, margin, shape)
     cx = x0 + spacing * np.arange(nx)
     cy = y0 + spacing * np.arange(ny)
     ax = _basis_1d(xs, cx, sigma)  # (cells_x, nx)
@@ -196,21 +180,8 @@ def fit_rbf(
 
     chol = scipy.linalg.cholesky(gram, lower=False)  # gram = Rᵀ R
     c = scipy.linalg.solve_triangular(chol, rhs, trans="T")
-    if solver == "cvxpy":
-        import cvxpy as cp
-
-        w = cp.Variable(nx * ny)
-        prob = cp.Problem(cp.Minimize(cp.sum_squares(chol @ w - c)))
-        prob.solve(solver=cp.CLARABEL)
-        if prob.status not in ("optimal", "optimal_inaccurate") or w.value is None:
-            raise ScenarioError(f"the surface fit did not solve (cvxpy status {prob.status})")
-        weights = np.asarray(w.value).reshape(ny, nx)
-        status = prob.status
-    elif solver == "cholesky":
-        weights = scipy.linalg.solve_triangular(chol, c).reshape(ny, nx)
-        status = "direct"
-    else:
-        raise ScenarioError(f"unknown fit solver {solver!r}; use 'cvxpy' or 'cholesky'")
+    weights, status = _least_squares(chol, c, solver)
+    weights = weights.reshape(ny, nx)
     fitted = ay @ weights @ ax.T
     err = fitted - z
     return RbfSurface(
@@ -224,3 +195,51 @@ def fit_rbf(
         fit_time_s=time.perf_counter() - t0,
         info={"solver": solver, "status": status, "n_cells": int(n_cells), "n_bases": int(nx * ny)},
     )
+
+
+def _fitted_cells(terrain: Heightmap, window: tuple[float, float, float, float] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cell centres (x, y) and heights :func:`fit_rbf` fits: all, or those inside ``window``."""
+    xs, ys = terrain.cell_centres()
+    z = terrain.z
+    if window is not None:
+        xmin, xmax, ymin, ymax = window
+        ix = np.nonzero((xs >= xmin) & (xs <= xmax))[0]
+        iy = np.nonzero((ys >= ymin) & (ys <= ymax))[0]
+        if ix.size < 2 or iy.size < 2:
+            raise ScenarioError(f"fit window {window} holds fewer than 2×2 cells of the terrain")
+        xs, ys = xs[ix], ys[iy]
+        z = z[np.ix_(iy, ix)]
+    return xs, ys, z
+
+
+def _lattice(xs: np.ndarray, ys: np.ndarray, spacing: float, margin: int,
+             shape: tuple[int, int] | None) -> tuple[int, int, float, float]:
+    """(nx, ny, x0, y0) of the basis lattice, centred on the fitted cells: ``margin`` nodes
+    beyond them on every side, or the fixed ``shape = (ny, nx)``."""
+    if shape is None:
+        nx = int(math.ceil((xs[-1] - xs[0]) / spacing)) + 1 + 2 * margin
+        ny = int(math.ceil((ys[-1] - ys[0]) / spacing)) + 1 + 2 * margin
+    else:
+        ny, nx = int(shape[0]), int(shape[1])
+    x0 = 0.5 * (xs[0] + xs[-1]) - 0.5 * (nx - 1) * spacing
+    y0 = 0.5 * (ys[0] + ys[-1]) - 0.5 * (ny - 1) * spacing
+    return nx, ny, x0, y0
+
+
+def _least_squares(chol: np.ndarray, c: np.ndarray, solver: str) -> tuple[np.ndarray, str]:
+    """The weights w minimising ‖R w − c‖² (``chol`` = R, the Cholesky factor of the normal
+    equations) with ``solver``, and its status."""
+    import scipy.linalg
+
+    if solver == "cvxpy":
+        import cvxpy as cp
+
+        w = cp.Variable(chol.shape[1])
+        prob = cp.Problem(cp.Minimize(cp.sum_squares(chol @ w - c)))
+        prob.solve(solver=cp.CLARABEL)
+        if prob.status not in ("optimal", "optimal_inaccurate") or w.value is None:
+            raise ScenarioError(f"the surface fit did not solve (cvxpy status {prob.status})")
+        return np.asarray(w.value), prob.status
+    if solver == "cholesky":
+        return scipy.linalg.solve_triangular(chol, c), "direct"
+    raise ScenarioError(f"unknown fit solver {solver!r}; use 'cvxpy' or 'cholesky'")

@@ -33,9 +33,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
-from earthbench.seal import SealKey, new_key, open_sealed
+from earthbench.seal import SealKey
 from earthbench.store import Store
-from earthbench.suite import load_suite
+from earthbench.suite import load_suite, new_key, open_sealed
 from earthbench.verify import check_seal
 
 #: Runs a board of every built-in backhoe planner stores for one sealed draw of ``standard``.
