@@ -37,9 +37,7 @@ every plan valid under R can exceed r × that bound on the scenario.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import sqlite3
 import sys
 from collections import Counter
 
@@ -54,18 +52,23 @@ from earthbench.referee import judge
 from earthbench.rules import track_level_and_tilt, undermining_excess
 from earthbench.scoring import evaluate
 from earthbench.referee.replay import Replay
-from earthbench.store import decompress
+from earthbench.store import Store, decompress
 from earthbench.world import Pose, Scenario
 
 #: Area (m²) below which two shapes count as touching, not overlapping (a footprint edge on the dig area's edge).
 TOUCH = 1e-4
 
 
-def _scenario(con: sqlite3.Connection, digest: str, cache: dict[str, Scenario]) -> Scenario:
+def _scenario(store: Store, digest: str, cache: dict[str, Scenario]) -> Scenario:
     if digest not in cache:
-        (doc,) = con.execute("SELECT doc FROM scenarios WHERE digest = ?", (digest,)).fetchone()
-        cache[digest] = Scenario.from_dict(json.loads(decompress(doc)))
+        cache[digest] = store.scenario(digest)
     return cache[digest]
+
+
+def _maps(store: Store, suite: str) -> list[tuple[str, str, str, float]]:
+    """(scenario digest, id, family, target) of each scenario run under ``suite``, by id."""
+    seen = {(r["scenario_digest"], r["scenario_id"], r["family"], float(r["target_volume"])) for r in store.runs(labelled=suite)}
+    return sorted(seen, key=lambda k: k[1])
 
 
 def _truck_polygon(sc: Scenario, x: float, y: float, yaw: float) -> Polygon:
@@ -104,17 +107,17 @@ def audit_plan(sc: Scenario, plan: Plan) -> dict[str, object]:
 
 
 def cmd_plans(args: argparse.Namespace) -> None:
-    con = sqlite3.connect(f"file:{args.store}?mode=ro", uri=True)
+    store = Store(args.store, read_only=True)
     cache: dict[str, Scenario] = {}
-    rows = con.execute("SELECT id, suite, scenario_digest, planner, planner_version, reason, plan FROM runs "
-                       "WHERE plan IS NOT NULL AND (suite = ? OR suite LIKE ?) ORDER BY id", (args.suite, args.suite + "~%")).fetchall()
+    rows = [(r["id"], r["suite"], r["scenario_digest"], r["planner"], r["planner_version"], r["reason"], r["plan"])
+            for r in store.runs() if r["plan"] is not None and (r["suite"] == args.suite or r["suite"].startswith(args.suite + "~"))]
     moved: Counter[tuple[str, str]] = Counter()
     valid: Counter[tuple[str, str]] = Counter()
     breaches: dict[tuple[str, str], Counter[str]] = {}
     swing_by: dict[tuple[str, str], list[float]] = {}
     for rid, suite, digest, planner, version, reason, blob in rows:
         key = (planner, version)
-        sc = _scenario(con, digest, cache)
+        sc = _scenario(store, digest, cache)
         out = audit_plan(sc, Plan.from_json(decompress(blob)))
         swing_by.setdefault(key, []).extend(out["swings"])  # type: ignore[arg-type]
         c = breaches.setdefault(key, Counter())
@@ -205,9 +208,8 @@ def least_swing(sc: Scenario, c: np.ndarray, strict: bool, alphas: np.ndarray) -
 
 
 def cmd_forced(args: argparse.Namespace) -> None:
-    con = sqlite3.connect(f"file:{args.store}?mode=ro", uri=True)
-    rows = con.execute("SELECT DISTINCT r.scenario_digest, r.scenario_id, r.family, r.target_volume FROM runs r "
-                       "WHERE r.suite = ? ORDER BY r.scenario_id", (args.suite,)).fetchall()
+    store = Store(args.store, read_only=True)
+    rows = _maps(store, args.suite)
     if args.family:
         rows = [r for r in rows if r[2] == args.family]
     if args.largest:  # the soil with no forced swing does not depend on the target: the largest one per map decides
@@ -221,7 +223,7 @@ def cmd_forced(args: argparse.Namespace) -> None:
     alphas = np.radians(np.arange(0, 91, 5))
     gains, per_family = [], Counter()
     for digest, sid, family, target in rows:
-        sc = _scenario(con, digest, cache)
+        sc = _scenario(store, digest, cache)
         pts, vol = _contacts(sc, args.spacing)
         keep = vol > 1e-6
         pts, vol = pts[keep], vol[keep]
@@ -328,13 +330,12 @@ def witness_plan(sc: Scenario, spread_deg: float) -> Plan:
 
 
 def cmd_witness(args: argparse.Namespace) -> None:
-    con = sqlite3.connect(f"file:{args.store}?mode=ro", uri=True)
-    rows = con.execute("SELECT DISTINCT scenario_digest, scenario_id, target_volume FROM runs WHERE suite = ? AND family = ? "
-                       "ORDER BY scenario_id", (args.suite, args.family)).fetchall()
+    store = Store(args.store, read_only=True)
+    rows = [(digest, sid, target) for digest, sid, family, target in _maps(store, args.suite) if family == args.family]
     cache: dict[str, Scenario] = {}
     ratios = []
     for digest, sid, target in rows:
-        sc = _scenario(con, digest, cache)
+        sc = _scenario(store, digest, cache)
         plan = witness_plan(sc, args.spread)
         v = judge(sc, plan)
         m = evaluate(sc, plan, v)
