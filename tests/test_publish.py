@@ -94,6 +94,28 @@ def test_csvs_match_the_store(board, db):
     assert g.loc["greedy", "solve_time_p90"] == pytest.approx(np.percentile(runs[runs.planner == "greedy"].solve_time_s, 90))
 
 
+def test_tables_and_page_show_the_ratio_to_each_bound(board, db):
+    """Each table has a "× target bound" column beside "× lower bound" (issue 39), its text the
+    configuration's median ratio to the scenario's lower bound per target m³; the page's run table
+    shows each run's ratio to both bounds."""
+    md = (board.out / "README.md").read_text()
+    main_table = md.split("### Breakdowns")[0]
+    head = next(line for line in main_table.splitlines() if line.startswith("| Rank"))
+    cols = [c.strip() for c in head.strip("|").split("|")]
+    assert cols.index("× target bound") == cols.index("× lower bound") + 1
+    greedy = next(line for line in main_table.splitlines() if re.match(r"\| \d+=? \| greedy \|", line))
+    cell = [c.strip() for c in greedy.strip("|").split("|")][cols.index("× target bound")]
+    runs = load_runs(db)
+    ok = runs[(runs.planner == "greedy") & (runs.reason == "ok")]
+    assert (ok["time_per_target_m3_bound_ratio"] >= 1.0).all()
+    assert cell.split(" ")[0] == f"{ok['time_per_target_m3_bound_ratio'].median():.2f}"
+    page = html.unescape((board.out / "index.html").read_text())
+    runs_table = page.split('class="sortable runs"')[1]
+    assert "× lower bound</th>" in runs_table and "× target bound</th>" in runs_table
+    ratio = float(ok["time_per_target_m3_bound_ratio"].iloc[0])
+    assert f'data-v="{ratio!r}">{ratio:.3g}</td>' in runs_table
+
+
 def test_html_is_self_contained_and_escaped(board):
     page = (board.out / "index.html").read_text()
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:|//)""", page)

@@ -76,6 +76,8 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                  + (f"; {r['short_of_target']} short" if r["short_of_target"] else ""), r["time_per_target_m3_median"]),
                 ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
                                           r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
+                ("× target bound", ci_text(r["time_per_target_m3_bound_ratio_median"], r["time_per_target_m3_bound_ratio_lo"],
+                                           r["time_per_target_m3_bound_ratio_hi"], ".2f"), r["time_per_target_m3_bound_ratio_median"]),
                 ("Time per m³, s (median)", number_text(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
                 ("Solve CPU s (median)", ci_text(r["solve_cpu_median"], r["solve_cpu_lo"], r["solve_cpu_hi"], ".2f"),
                  r["solve_cpu_median"]),
@@ -327,7 +329,9 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         "stored / scenarios in the suite; success rate over the suite's scenarios (a scenario without a run is a "
         "failure); volume ratio and overshoot beyond the target over valid runs; time per target m³ (the end of "
         "the dump that reached the target, divided by the target; ∞ for a run short of it, and \"N short\" counts "
-        "those) over valid runs, with its ratio to the scenario's lower bound; time per m³ (makespan / loaded volume); "
+        "those) over valid runs, with its ratio to the scenario's lower bound per m³ (× lower bound) "
+        "and to its lower bound per target m³ (× target bound: whole buckets and the travel before the first dump "
+        "counted); time per m³ (makespan / loaded volume); "
         "solve CPU time (ranked) and wall time over all runs; counts of each failure. Every run: [runs.csv](runs.csv); "
         "these tables: [summary.csv](summary.csv); sortable page: [index.html](index.html).",
         "",
