@@ -26,7 +26,7 @@ import math
 import random
 import traceback
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
@@ -36,6 +36,7 @@ from .records import SpotCheck  # a record the store also reads; importable from
 from .harness.steps import step_metrics
 from .store import METRIC_COLUMNS, Store, decompress, stored_steps
 from .suite import suite_digest
+from .plan import Plan
 from .world import Scenario
 
 #: Float round-off allowed between a stored figure and the re-judged one.
@@ -89,6 +90,44 @@ def rejudge(scenario: Scenario, plan_json: str, threshold: float, *,
         metrics.update(step_metrics(steps))
     return Judgement("ok" if verdict.valid else "invalid", metrics, tuple(v.to_dict() for v in verdict.violations))
 
+
+
+def time_ordered_prefixes(plan: Plan) -> Iterator[Plan]:
+    """Every proper prefix of a plan in the referee's time order (actions by start), longest first:
+    what a wrapper that stops a planner early could submit instead."""
+    order = sorted(range(len(plan.actions)), key=lambda n: (plan.actions[n].t_start, n))
+    for k in range(len(order) - 1, -1, -1):
+        keep = set(order[:k])
+        yield Plan(tuple(a for n, a in enumerate(plan.actions) if n in keep), plan.predicted, plan.info)
+
+
+def prefix_violations(scenario: Scenario, plan: Plan, threshold: float) -> tuple[int, list[str]]:
+    """Check docs/metrics.md's promise on one plan: no valid prefix of a valid plan has a lower time
+    per target m³, a success the plan lacks, or a better :func:`~earthbench.scoring.run_order`.
+    Returns how many valid prefixes were judged and one line per prefix that breaks it (an invalid
+    prefix is never ranked, so it cannot rank better; an invalid plan's prefixes are only counted)."""
+    from .referee import judge
+    from .scoring import evaluate, run_order
+
+    m = evaluate(scenario, plan, judge(scenario, plan), threshold)
+    full = run_order(m["success"], m["time_per_target_m3"], m["volume_ratio"])
+    checked, broken = 0, []
+    for prefix in time_ordered_prefixes(plan):
+        verdict = judge(scenario, prefix)
+        if not verdict.valid:
+            continue
+        checked += 1
+        if not m["valid"]:
+            continue
+        mp = evaluate(scenario, prefix, verdict, threshold)
+        n = len(prefix.actions)
+        if mp["time_per_target_m3"] < m["time_per_target_m3"]:
+            broken.append(f"{n} actions: time per target m³ {mp['time_per_target_m3']:.6g} < {m['time_per_target_m3']:.6g}")
+        if mp["success"] and not m["success"]:
+            broken.append(f"{n} actions: a success where the plan fails")
+        if run_order(mp["success"], mp["time_per_target_m3"], mp["volume_ratio"]) < full:
+            broken.append(f"{n} actions: ranks before the plan")
+    return checked, broken
 
 # -- comparing stored figures with re-judged ones -----------------------------------------------
 

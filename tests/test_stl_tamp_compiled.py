@@ -31,6 +31,11 @@ def prepared(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("compiled")
     mp = pytest.MonkeyPatch()
     mp.setenv(nlp_cache.ENV, str(tmp / "nlp"))
+    # split every function of more than 300 instructions into pieces of 50 statements, 4 to a
+    # file, as the real shapes' large functions are
+    mp.setattr(compiled, "SPLIT_ABOVE", 300)
+    mp.setattr(compiled, "PART_STATEMENTS", 50)
+    mp.setattr(compiled, "PART_FILE_STATEMENTS", 200)
     folder = tmp / "prepared"
     summary = Small().prepare(folder, jobs=2)
     yield folder, summary
@@ -99,3 +104,22 @@ def test_without_a_compiler_the_preparation_compiles_nothing(tmp_path, monkeypat
     monkeypatch.setattr(compiled, "compiler", lambda: None)
     summary = Small().prepare(tmp_path / "none", jobs=1)
     assert summary["nlps"] == {} and "no C compiler" in summary["note"]
+
+
+def test_split_keeps_every_statement_in_order_over_a_work_array():
+    import casadi as ca
+
+    x = ca.SX.sym("x", 3)
+    e = x[0]
+    for i in range(40):
+        e = ca.sin(e * x[1] + x[2] * i)
+    f = ca.Function("f", [x], [e, e * x[0]])
+    cg = ca.CodeGenerator("f.c", {"with_header": False})
+    cg.add(f)
+    pieces = compiled.split(cg.dump(), "pre", statements=10, per_file=20)
+    assert pieces is not None and len(pieces) >= 3
+    main, parts = pieces[0], "".join(pieces[1:])
+    calls = [ln.strip() for ln in main.splitlines() if ln.strip().startswith("pre_part")]
+    assert calls == [f"pre_part{j}(arg, res, w);" for j in range(len(calls))]
+    assert "a0" not in parts.replace("casadi_", "") and "w[0]" in parts
+    assert compiled.split("int main(void) { return 0; }", "pre") is None  # not CasADi's form: compiled whole

@@ -273,7 +273,7 @@ class SeparatePlanner(Planner):
 
     name = "separate"
     #: 0.4.3: ties in the tour and in the rule's highest point broken in the site's own frame
-    #: (:func:`site_frame`), and stl-tamp 0.10.1's rounding-proof tiling; plans on the public
+    #: (:func:`site_frame`), and stl-tamp 0.10.2's rounding-proof tiling; plans on the public
     #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.
     version = "0.4.3"
     tracks = ("backhoe",)

@@ -13,17 +13,21 @@ their names, so nothing is differentiated or deserialized in the case.
 
 The compiled code computes what the virtual machine computes, operation for operation: no
 ``-march``, no fast-math and ``-ffp-contract=off`` (no fused multiply-adds), so the values are
-the same to the bit and so are the plans. The flags per function: ``-O1`` when its instruction
-count is below :data:`O1_LIMIT`, else ``-O0`` (gcc's time and memory at ``-O1`` grow faster than
-the code on a straight-line function of half a million operations: the global Hessian took 25 s
-and 2.6 GB at ``-O0``, 212 s and 3.4 GB at ``-O1``), and ``-O0`` for the function evaluated
-once per solve (:data:`ONCE`).
+the same to the bit and so are the plans. A function of more than :data:`SPLIT_ABOVE`
+instructions is split (:func:`split`) into pieces of :data:`PART_STATEMENTS` statements over a
+work array, in C files compiled at ``-O1`` one by one (0.10.1): gcc's time and memory grow faster
+than the code on one straight-line function of half a million operations (the 8-phase global
+Hessian took 25 s and 2.6 GB at ``-O0``, 212 s and 3.4 GB at ``-O1``, so 0.10.0 compiled it at
+``-O0``, where it evaluated 2.5× slower than split at ``-O1`` and took 13 % of a plan's CPU). The
+rest: ``-O1``, or ``-O0`` for a function evaluated at most a few times per solve (:data:`ONCE`)
+and, whole, for one above :data:`O1_LIMIT` that could not be split.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -43,11 +47,13 @@ NAMES = SOLVER_NAMES + HELPER_NAMES
 #: Flags every compilation shares: position-independent code whose arithmetic is the virtual
 #: machine's (no fused multiply-adds, no fast-math, no -march).
 BASE_FLAGS = ("-fPIC", "-ffp-contract=off", "-fno-fast-math")
-#: Instructions above which a function is compiled at -O0 (see the module's docstring).
+#: Instructions above which a function that could not be split is compiled at -O0 (see the
+#: module's docstring).
 O1_LIMIT = 250_000
-#: Evaluated once per solve (the multipliers of the parameters) or never (the oracle, which
-#: only tells ``nlpsol`` where the others are): not worth -O1's compile time.
-ONCE = ("nlp_grad", "nlp")
+#: Evaluated once per solve (the multipliers of the parameters), a few times per area (the
+#: helpers, for guesses and checks) or never (the oracle, which only tells ``nlpsol`` where the
+#: others are): not worth -O1's compile time.
+ONCE = ("nlp_grad", "nlp", *HELPER_NAMES)
 #: This module's code, part of a library's name: other flags or layout, another library.
 _SOURCE = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:8]
 
@@ -84,6 +90,62 @@ def library(folder: Path, name: str) -> Path:
     return folder / f"{name}.{_SOURCE}.so"
 
 
+#: A function of more than this many instructions is split (:func:`split`): its statements become
+#: functions of :data:`PART_STATEMENTS` over a work array, C files of at most
+#: :data:`PART_FILE_STATEMENTS` of them, each compiled at ``-O1`` on its own (about 0.2 GB in gcc).
+SPLIT_ABOVE = 20_000
+PART_STATEMENTS = 2_000
+PART_FILE_STATEMENTS = 30_000
+_F0 = "static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {\n"
+_END = "  return 0;\n}\n"
+_LOCAL = re.compile(r"\ba(\d+)\b")
+
+
+def split(source: str, prefix: str, statements: int = PART_STATEMENTS,
+          per_file: int = PART_FILE_STATEMENTS) -> list[str] | None:
+    """CasADi's C for one SX function (one straight-line ``casadi_f0`` over scalar locals
+    ``a0…``) as several C files: the first is the original with ``f0``'s body replaced by calls, in
+    order, to functions of at most ``statements`` of its statements each, the rest hold those
+    functions, about ``per_file`` statements a file; the locals become a work array that the
+    function's ``_work`` asks its caller for. The statements are the same, in the same order, so
+    the values are the same to the bit; a compiler handles the pieces in a fraction of the time and
+    memory a single function of half a million statements takes it (and can optimise them). None
+    when ``source`` is not of that form (then it is compiled whole)."""
+    head, found, rest = source.partition(_F0)
+    body, end, tail = rest.partition(_END)
+    if not found or not end or "casadi_f1" in source:
+        return None
+    lines = body.splitlines()
+    decls = [ln for ln in lines if ln.startswith("  casadi_real ")]
+    stmts = [ln for ln in lines if not ln.startswith("  casadi_real ")]
+    names = [nm.strip() for ln in decls for nm in ln[len("  casadi_real "):].rstrip(";").split(",")]
+    if not stmts or any(not (ln.startswith("  a") or ln.startswith("  if (res[")) for ln in stmts) \
+            or any(not re.fullmatch(r"a\d+", nm) for nm in names):
+        return None
+    n_w = max(int(nm[1:]) for nm in names) + 1 if names else 0
+    work = ("  if (sz_w) *sz_w = 0;\n", "  if (sz_w) *sz_w = 0*sizeof(casadi_real);\n")
+    if any(tail.count(w) != 1 for w in work):
+        return None
+    tail = tail.replace(work[0], f"  if (sz_w) *sz_w = {n_w};\n").replace(work[1], f"  if (sz_w) *sz_w = {n_w}*sizeof(casadi_real);\n")
+    stmts = [_LOCAL.sub(lambda m: f"w[{int(m.group(1))}]", ln) for ln in stmts]  # a00012 is w[12], not octal
+    parts = [stmts[i:i + statements] for i in range(0, len(stmts), statements)]
+    sig = "(const casadi_real** arg, casadi_real** res, casadi_real* w)"
+    names_p = [f"{prefix}_part{j}" for j in range(len(parts))]
+    main = (head + "".join(f"void {nm}{sig};\n" for nm in names_p) + "\n" + _F0
+            + "".join(f"  {nm}(arg, res, w);\n" for nm in names_p) + _END + tail)
+    step = max(1, per_file // statements)  # functions a file
+    out = [main]
+    for f in range(0, len(parts), step):
+        # the generated helpers (casadi_sq, …) get this file's own prefix and its exported
+        # ones (casadi_version, …) are static here: no clash at the link
+        text = (f"#define CASADI_CODEGEN_PREFIX\n#define CODEGEN_PREFIX {prefix}_file{f}_\n"
+                "#define CASADI_SYMBOL_EXPORT static\n" + head)
+        for j in range(f, min(f + step, len(parts))):
+            text += f"\nvoid {names_p[j]}{sig} {{\n" + "\n".join(parts[j]) + "\n}\n"
+        out.append(text)
+    return out
+
+
 def solver_functions(fns: dict[str, Any]) -> dict[str, Any]:
     """The oracle and the functions an IPOPT ``nlpsol`` of ``fns`` evaluates, by CasADi's names:
     the NLP's own derivatives (``hess_lag``, ``jac_g``, ``grad_f``) under the names the solver
@@ -99,10 +161,10 @@ def solver_functions(fns: dict[str, Any]) -> dict[str, Any]:
 def build(fns: dict[str, Any], folder: Path, name: str, *, jobs: int = 1,
           log: Callable[[str], None] | None = None) -> dict[str, float]:
     """Compile the functions of one built NLP (``fns``, as :meth:`~.model.PhaseNLP._build` keys
-    them) into ``folder`` as one library named ``name``: each function is its own C file, the
-    files compile ``jobs`` at a time, then one link. Returns each function's compile seconds.
-    Raises RuntimeError naming the function when the compiler fails. A library already there
-    is kept (same name, same code)."""
+    them) into ``folder`` as one library named ``name``: each function is its own C file (a large
+    one several, :func:`split`), the files compile ``jobs`` at a time, then one link. Returns each
+    function's compile seconds (its files' sum). Raises RuntimeError naming the function when the
+    compiler fails. A library already there is kept (same name, same code)."""
     cc = compiler()
     if cc is None:
         raise RuntimeError("no C compiler (set $CC or install gcc): stl-tamp's NLPs cannot be compiled")
@@ -112,34 +174,46 @@ def build(fns: dict[str, Any], folder: Path, name: str, *, jobs: int = 1,
     todo = {**solver_functions(fns), **{k: fns[k] for k in HELPER_NAMES}}
     work = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=folder))
     try:
-        sources = {}
+        units: list[tuple[str, Path, tuple[str, ...]]] = []  # (function, C file, flags)
         for k, fn in todo.items():  # code generation is quick and holds the GIL: one after the other
-            c_name = f"stl_tamp_{name}_{k}.c"  # a C identifier, whatever the key starts with
-            cg = ca.CodeGenerator(c_name, {"with_header": False})
+            stem = f"stl_tamp_{name}_{k}"  # a C identifier, whatever the key starts with
+            cg = ca.CodeGenerator(stem + ".c", {"with_header": False})
             cg.add(fn)
             cg.generate(str(work) + os.sep)
-            sources[k] = work / c_name
+            text = (work / (stem + ".c")).read_text()
+            pieces = split(text, stem, PART_STATEMENTS, PART_FILE_STATEMENTS) if fn.n_instructions() > SPLIT_ABOVE else None
+            if pieces is None:
+                units.append((k, work / (stem + ".c"), flags(k, fn)))
+                continue
+            level = "-O0" if k in ONCE else "-O1"
+            for i, piece in enumerate(pieces):
+                (work / f"{stem}_{i}.c").write_text(piece)
+                units.append((k, work / f"{stem}_{i}.c", (level, *BASE_FLAGS)))
 
-        def one(k: str) -> tuple[str, float]:
+        def one(unit: tuple[str, Path, tuple[str, ...]]) -> tuple[str, float]:
+            k, src, fl = unit
             t0 = time.perf_counter()
-            res = subprocess.run([cc, "-c", *flags(k, todo[k]), str(sources[k]), "-o", str(work / f"{k}.o")],
-                                 capture_output=True, text=True)
+            res = subprocess.run([cc, "-c", *fl, str(src), "-o", str(src.with_suffix(".o"))], capture_output=True, text=True)
             if res.returncode != 0:
                 raise RuntimeError(f"{cc} failed on {name}.{k}: {res.stderr.strip()[-500:]}")
             dt = time.perf_counter() - t0
             if log is not None:
-                log(f"compiled {name}.{k} ({todo[k].n_instructions()} instructions) in {dt:.1f} s")
+                log(f"compiled {src.name} ({fl[0]}) in {dt:.1f} s")
             return k, dt
 
-        order = sorted(todo, key=lambda k: -todo[k].n_instructions())  # the largest first
-        # a function above O1_LIMIT (a global Hessian: 2.6 GB in gcc at -O0) compiles alone, the
-        # rest jobs at a time: two at once held 3.5 GB in the preparation's cgroup
-        alone = [k for k in order if todo[k].n_instructions() > O1_LIMIT]
-        took = dict(one(k) for k in alone)
+        units.sort(key=lambda u: -u[1].stat().st_size)  # the largest first
+        # a function that could not be split and is above O1_LIMIT compiles alone (a whole global
+        # Hessian: 2.6 GB in gcc at -O0), the rest jobs at a time
+        alone = [u for u in units if u[2][0] == "-O0" and todo[u[0]].n_instructions() > O1_LIMIT
+                 and u[1].name == f"stl_tamp_{name}_{u[0]}.c"]
+        took: dict[str, float] = {}
+        for k, dt in [one(u) for u in alone]:
+            took[k] = took.get(k, 0.0) + dt
         with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-            took.update(pool.map(one, [k for k in order if k not in alone]))
+            for k, dt in pool.map(one, [u for u in units if u not in alone]):
+                took[k] = took.get(k, 0.0) + dt
         tmp = work / "lib.so"
-        res = subprocess.run([cc, "-shared", *[str(work / f"{k}.o") for k in order], "-o", str(tmp), "-lm"],
+        res = subprocess.run([cc, "-shared", *[str(u[1].with_suffix(".o")) for u in units], "-o", str(tmp), "-lm"],
                              capture_output=True, text=True)
         if res.returncode != 0:
             raise RuntimeError(f"{cc} failed to link {name}: {res.stderr.strip()[-500:]}")
