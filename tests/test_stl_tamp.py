@@ -316,3 +316,23 @@ def test_ipopt_runs_on_one_blas_thread(local_setup):
     with open("/proc/self/maps") as f:
         paths = sorted({ln.split()[-1] for ln in f if "libcasadi-tp-openblas" in ln})
     assert paths and all(ctypes.CDLL(p).openblas_get_num_threads() == 1 for p in paths)
+
+
+@pytest.mark.parametrize(("turns", "mirror", "shift"), [(0, False, (-40.05, -44.95)), (0, False, (-49.95, 27.3)), (1, True, (37.35, 9.95))])
+def test_candidate_areas_do_not_depend_on_where_the_site_lies(turns, mirror, shift):
+    """A sealed draw moves the site (earthbench.seal.SiteTransform); the same site far from the
+    origin must tile into the same areas. Up to stl-tamp 0.10.0 a 12 m map measured 11.999999999999998 m
+    there and lost a row of tiles (17 areas became 12 or 14), and a one-tile dig area lost its tile."""
+    from earthbench.seal import SiteTransform
+    from earthbench.suite import load_suite
+
+    sc = load_suite("smoke").scenarios[0]
+    moved = SiteTransform(turns, mirror, shift).apply(sc)
+    c, sep = StlTampPlanner().config, SeparatePlanner()
+
+    def estimates(s):  # on separate's 2 m tiles (stl-tamp's own side leaves a margin on this map)
+        areas = candidate_areas(s, s.terrain.z, sep.side(s), c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
+        return sorted(round(a.estimate, 9) for a in areas)
+
+    assert len(estimates(sc)) >= 12
+    assert estimates(moved) == estimates(sc)

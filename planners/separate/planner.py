@@ -69,7 +69,7 @@ from earthbench.cut import apply_cut, cut_level
 from earthbench.world import Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts
+from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts, truck_side
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
@@ -150,7 +150,8 @@ def area_box(area: Area, side: float) -> tuple[float, float, float, float]:
 
 def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float, float], base: tuple[float, float],
               *, count: int, drag: float, width: float, depth: float, floor: float | None, capacity: float,
-              reach: tuple[float, float], min_yield: float = 0.0) -> list[RuleDig]:
+              reach: tuple[float, float], min_yield: float = 0.0,
+              frame: tuple[tuple[float, float], tuple[float, float]] = ((1.0, 0.0), (0.0, 1.0))) -> list[RuleDig]:
     """The rule's ``count`` digs in the area ``box`` served from ``base`` (Fig. 5b).
 
     Each dig: the highest cell centre ``h`` of the area (on the grid after the previous digs,
@@ -160,7 +161,10 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
     ``base``, and whose dig still takes at least ``min_yield`` m³. Without that last condition a
     high point the bucket never reaches (it fills before the drag ends, as on a bench's crest)
     stays the highest, and every later dig repeats the same contact for less and less.
-    Returns [] when no cell qualifies.
+    Returns [] when no cell qualifies. Cells of equal height (heights are whole 0.1 mm, and a cut
+    leaves a level floor) go to the one least along ``frame``'s second axis, then its first
+    (:func:`site_frame`: the same cell on a turned or mirrored site; the default frame is the
+    map's rows, the order up to 0.4.2).
     """
     z = np.array(z, dtype=float, copy=True)
     xs, ys = terrain.cell_centres()
@@ -190,7 +194,7 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
         # cut level is the contact's height minus the depth), so the next highest is taken
         while usable.any():
             heights = np.where(usable, z[np.ix_(iy, ix)], -np.inf)
-            j, i = np.unravel_index(int(np.argmax(heights)), heights.shape)
+            j, i = _highest(heights, X, Y, frame)
             contact = (float(cxs[j, i]), float(cys[j, i]))
             d = depth
             if floor is not None:
@@ -209,24 +213,68 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
     return out
 
 
-def nearest_order(areas: list[Area], start: tuple[float, float]) -> list[Area]:
-    """Areas in nearest-neighbour order of their nominal bases from ``start``."""
+def _highest(heights: np.ndarray, X: np.ndarray, Y: np.ndarray,
+             frame: tuple[tuple[float, float], tuple[float, float]]) -> tuple[int, int]:
+    """(row, column) of the highest cell; a tie to the cell least along the frame's second axis, then its first."""
+    top = np.argwhere(heights == heights.max())
+    if len(top) == 1:
+        return int(top[0][0]), int(top[0][1])
+    (ax, ay), (bx, by) = frame
+    j, i = min(((int(j), int(i)) for j, i in top),
+               key=lambda c: (round(float(X[c] * bx + Y[c] * by), 6), round(float(X[c] * ax + Y[c] * ay), 6)))
+    return j, i
+
+
+def nearest_order(areas: list[Area], start: tuple[float, float],
+                  frame: tuple[tuple[float, float], tuple[float, float]] = ((1.0, 0.0), (0.0, 1.0))) -> list[Area]:
+    """Areas in nearest-neighbour order of their nominal bases from ``start``.
+
+    On a square tiling several bases often lie at the same distance. Ties go to the area whose
+    centre is least along ``frame``'s first axis, then least along its second: :func:`site_frame`
+    makes that the site's own frame, so a turned or mirrored site is toured the same way.
+    (Up to 0.4.2 the tie went to the first tile in x-then-y order of the map: the tour swept
+    along the loading edge on the public suites' layout and across it, up to 25 % slower, on
+    turned or mirrored sites; the distances are rounded to 1 µm so that the coordinates of a
+    shifted site do not break ties by rounding either.)
+    """
+    (ax, ay), (bx, by) = frame
     left = list(areas)
     out: list[Area] = []
     pos = start
+
+    def key(a: Area, pos: tuple[float, float]) -> tuple[float, float, float]:
+        d = math.hypot(a.base[0] - pos[0], a.base[1] - pos[1])
+        return (round(d, 6), round(a.centre[0] * ax + a.centre[1] * ay, 6), round(a.centre[0] * bx + a.centre[1] * by, 6))
+
     while left:
-        k = min(range(len(left)), key=lambda a: (math.hypot(left[a].base[0] - pos[0], left[a].base[1] - pos[1]), a))
+        k = min(range(len(left)), key=lambda i: key(left[i], pos))
         a = left.pop(k)
         out.append(a)
         pos = a.base
     return out
 
 
+def site_frame(scenario: Scenario) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The site's own axes: the lateral one (along the loading edge, toward the excavator's
+    start: :func:`~.hierarchy.candidate_areas`'s) and the one toward the truck's side
+    (:func:`~.hierarchy.truck_side`). On the public suites' layout they are +x and +y."""
+    ux, uy = truck_side(scenario)
+    tx, ty = -uy, ux
+    xmin, xmax, ymin, ymax = site_box(scenario)
+    ep = scenario.machines.excavator_pose
+    if (ep.x - 0.5 * (xmin + xmax)) * tx + (ep.y - 0.5 * (ymin + ymax)) * ty < 0:
+        tx, ty = -tx, -ty
+    return (tx, ty), (ux, uy)
+
+
 class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
-    version = "0.4.2"
+    #: 0.4.3: ties in the tour and in the rule's highest point broken in the site's own frame
+    #: (:func:`site_frame`), and stl-tamp 0.10.2's rounding-proof tiling; plans on the public
+    #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.
+    version = "0.4.3"
     tracks = ("backhoe",)
     Config = Config
 
@@ -243,7 +291,7 @@ class SeparatePlanner(Planner):
         tiles = candidate_areas(scenario, zz, self.side(scenario), c.dig_depth, c.m_local * exc.bucket_capacity,
                                 c.base_offset, c.truck_offset, c.truck_angle)
         start = scenario.machines.excavator_pose
-        return nearest_order(tiles, (start.x, start.y))
+        return nearest_order(tiles, (start.x, start.y), site_frame(scenario))
 
     def side(self, scenario: Scenario) -> float:
         """W_local, or less where the dig area is narrower (:func:`~.hierarchy.fitting_side`)."""
@@ -257,7 +305,7 @@ class SeparatePlanner(Planner):
                          depth=min(c.dig_depth, exc.max_cut_depth), floor=scenario.site.floor,
                          capacity=exc.bucket_capacity,
                          reach=(exc.reach_min + c.reach_margin, exc.reach_max - c.reach_margin),
-                         min_yield=c.rule_min_fill * exc.bucket_capacity)
+                         min_yield=c.rule_min_fill * exc.bucket_capacity, frame=site_frame(scenario))
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:

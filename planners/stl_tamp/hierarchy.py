@@ -210,6 +210,10 @@ def truck_side(scenario: Scenario) -> tuple[float, float]:
     return (1.0 if dx >= 0 else -1.0, 0.0)
 
 
+#: How far (m, and in tiles) rounding may move a tile's edge past the dig area's and still count as inside.
+TILE_TOL = 1e-9
+
+
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
                     truck_offset: float, truck_angle: float = 0.0) -> list[Area]:
     """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
@@ -223,9 +227,12 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
     ux, uy = truck_side(scenario)
     floor = scenario.site.floor if scenario.site.floor is not None else float(z.min())
     xs, ys = t.cell_centres()
-    poly = Polygon(scenario.site.dig_area)
-    nxa = max(int(math.floor((xmax - xmin) / side)), 1)
-    nya = max(int(math.floor((ymax - ymin) / side)), 1)
+    # the tiles' count and containment tolerate rounding (TILE_TOL): a dig area exactly k tiles
+    # wide, or exactly one tile wide, away from the origin (a sealed draw's shifted site) gave
+    # widths of 11.999999999999998 m and tile edges one ulp outside it, and lost a row or its only tile
+    poly = Polygon(scenario.site.dig_area).buffer(TILE_TOL, join_style="mitre")
+    nxa = max(int(math.floor((xmax - xmin) / side + TILE_TOL)), 1)
+    nya = max(int(math.floor((ymax - ymin) / side + TILE_TOL)), 1)
     ox = xmin + 0.5 * ((xmax - xmin) - nxa * side)
     oy = ymin + 0.5 * ((ymax - ymin) - nya * side)
     out = []

@@ -156,10 +156,15 @@ class StlTampPlanner(Planner):
     unchanged); the version moves because the code path and the solve times do. 0.10.1: the
     large functions (the global Hessians above all) compiled in pieces at ``-O1`` instead of whole
     at ``-O0``; the same values to the bit, so the same plans, in less CPU.
+
+    0.10.2: the candidate areas' tiling tolerates rounding (:data:`.hierarchy.TILE_TOL`): on a
+    site far from the origin (a sealed draw's shifted site) a dig area exactly k tiles wide lost
+    a row of tiles, and paper-switch's one-tile dig area its only tile (an empty plan). The
+    public suites' areas, hence their plans, are unchanged.
     """
 
     name = "stl-tamp"
-    version = "0.10.1"
+    version = "0.10.2"
     tracks = ("backhoe",)
     Config = Config
 
