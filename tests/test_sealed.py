@@ -308,6 +308,25 @@ def test_the_gap_is_sealed_minus_public_and_a_planner_outside_the_public_interva
     assert (g["draws"] == 1).all()
 
 
+def test_a_public_sample_without_spread_flags_no_chance_failure_but_a_real_drop_is_flagged():
+    """Public volume ratios all 1 have a bootstrap interval of no width; four sealed failures in
+    220 (the 0.2.0 board's stl-tamp) are not evidence of a gap (Fisher p = 0.31), forty are."""
+    def runs(name: str, sealed_failures: int) -> pd.DataFrame:
+        pub = _runs(name, "s", [True] * 110, [30.0] * 110)
+        sea = _runs(name, "s~sealed-aaaaaaaaaaaa", [True] * (220 - sealed_failures) + [False] * sealed_failures, [30.0] * 220)
+        sea["volume_ratio"] = [1.0] * (220 - sealed_failures) + [0.55] * sealed_failures
+        return pd.concat([pub, sea], ignore_index=True)
+
+    members = pd.DataFrame({"suite": ["s"] * 110 + ["s~sealed-aaaaaaaaaaaa"] * 220,
+                            "scenario_digest": [f"s-{i}" for i in range(110)] + [f"s~sealed-aaaaaaaaaaaa-{i}" for i in range(220)]})
+    g = gap_table(pd.concat([runs("chance", 4), runs("drop", 40)], ignore_index=True), members).set_index(["planner", "metric"])
+    chance, drop = g.loc[("chance", "volume_ratio")], g.loc[("drop", "volume_ratio")]
+    assert chance["public_lo"] == chance["public_hi"] == 1.0 and chance["sealed_hi"] < chance["public_lo"]  # the intervals are disjoint
+    assert not chance["flagged"] and not g.loc[("chance", "success_rate"), "flagged"]
+    assert g.loc[("chance", "success_rate"), "p_value"] == pytest.approx(0.31, abs=0.01)
+    assert drop["flagged"] and g.loc[("drop", "success_rate"), "flagged"] and drop["p_value"] < 0.01
+
+
 def test_bad_key_files_are_one_line_errors(tmp_path):
     for text in ("not json", json.dumps({"schema": "earthbench.seal/1", "suite": "x"}), json.dumps([1])):
         p = tmp_path / "k"
