@@ -3,7 +3,7 @@
 A board republished from new runs should say which planners' plans moved. The referee's figures
 of a plan (makespan, loaded volume, digs, dumps, validity) identify it well enough for that: two
 plans with all of them equal on a scenario are, for the board, the same plan. Runs are paired by
-suite, scenario digest and planner (each side's latest version of the planner), so a board
+suite, scenario digest and planner (each side's latest version of the planner, as its board ranks it), so a board
 remade after a version bump shows whether the new version's plans are the old ones.
 
     python scripts/plans_against_board.py --db standard.db --csv leaderboard/runs.csv --suite standard
@@ -20,6 +20,8 @@ import sys
 import numpy as np
 import pandas as pd
 
+from earthbench.aggregate import latest_versions
+from earthbench.board.selection import shown_runs
 from earthbench.store import load_runs
 
 #: The referee's figures compared, and how close floats must be (both sides are the referee's output).
@@ -28,9 +30,9 @@ RTOL = 1e-9
 
 
 def latest(runs: pd.DataFrame) -> pd.DataFrame:
-    """Each planner's runs of its latest version (the version of its most recent run)."""
-    last = runs.sort_values("id").groupby("planner")["planner_version"].last()
-    return runs[runs["planner_version"] == runs["planner"].map(last)]
+    """Each planner's runs of its latest version, chosen as a board chooses it."""
+    runs = runs.assign(planner_version=runs["planner_version"].astype(str))
+    return shown_runs(runs, latest_versions(runs))
 
 
 def same(a: pd.Series, b: pd.Series) -> pd.Series:
