@@ -148,10 +148,16 @@ def area_box(area: Area, side: float) -> tuple[float, float, float, float]:
     return (cx - side / 2, cx + side / 2, cy - side / 2, cy + side / 2)
 
 
+#: Two unit axes of the plane (the first, then the second), in which ties between cells and areas are broken.
+Frame = tuple[tuple[float, float], tuple[float, float]]
+#: The map's own axes (+x, +y): the tie order of 0.4.2 and earlier, and the site frame of the public layout.
+MAP_FRAME: Frame = ((1.0, 0.0), (0.0, 1.0))
+
+
 def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float, float], base: tuple[float, float],
               *, count: int, drag: float, width: float, depth: float, floor: float | None, capacity: float,
               reach: tuple[float, float], min_yield: float = 0.0,
-              frame: tuple[tuple[float, float], tuple[float, float]] = ((1.0, 0.0), (0.0, 1.0))) -> list[RuleDig]:
+              frame: Frame = MAP_FRAME) -> list[RuleDig]:
     """The rule's ``count`` digs in the area ``box`` served from ``base`` (Fig. 5b).
 
     Each dig: the highest cell centre ``h`` of the area (on the grid after the previous digs,
@@ -214,7 +220,7 @@ def rule_digs(terrain: Heightmap, z: np.ndarray, box: tuple[float, float, float,
 
 
 def _highest(heights: np.ndarray, X: np.ndarray, Y: np.ndarray,
-             frame: tuple[tuple[float, float], tuple[float, float]]) -> tuple[int, int]:
+             frame: Frame) -> tuple[int, int]:
     """(row, column) of the highest cell; a tie to the cell least along the frame's second axis, then its first."""
     top = np.argwhere(heights == heights.max())
     if len(top) == 1:
@@ -226,7 +232,7 @@ def _highest(heights: np.ndarray, X: np.ndarray, Y: np.ndarray,
 
 
 def nearest_order(areas: list[Area], start: tuple[float, float],
-                  frame: tuple[tuple[float, float], tuple[float, float]] = ((1.0, 0.0), (0.0, 1.0))) -> list[Area]:
+                  frame: Frame = MAP_FRAME) -> list[Area]:
     """Areas in nearest-neighbour order of their nominal bases from ``start``.
 
     On a square tiling several bases often lie at the same distance. Ties go to the area whose
@@ -254,7 +260,7 @@ def nearest_order(areas: list[Area], start: tuple[float, float],
     return out
 
 
-def site_frame(scenario: Scenario) -> tuple[tuple[float, float], tuple[float, float]]:
+def site_frame(scenario: Scenario) -> Frame:
     """The site's own axes: the lateral one (along the loading edge, toward the excavator's
     start: :func:`~.hierarchy.candidate_areas`'s) and the one toward the truck's side
     (:func:`~.hierarchy.truck_side`). On the public suites' layout they are +x and +y."""
