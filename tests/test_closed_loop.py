@@ -7,6 +7,7 @@ end with the right reason and say what was wrong, and no case may stop the suite
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -153,8 +154,41 @@ def test_stl_tamp_in_receding_horizon():
     from earthbench.registry import PLANNERS
     from earthbench.suite import load_suite
 
+    from earthbench_planners.stl_tamp.hierarchy import site_layout
+
     sc = max(load_suite("quick").scenarios, key=lambda s: s.task.target_volume)
     plan = run_closed_loop(PLANNERS.get("stl-tamp")(closed_loop=True), sc)
     verdict = judge(sc, plan)
-    assert verdict.valid and verdict.loaded_volume >= 0.9 * sc.task.target_volume
+    # it goes on until the truck holds the target: a sliver short has no time to the target
+    assert verdict.valid and verdict.loaded_volume >= sc.task.target_volume * (1 - 1e-9)
     assert len(plan.info["steps"]) >= 2  # more than one local area, each planned from what the one before left
+    ux, uy = site_layout(sc).toward_truck  # every area faces the first step's loading side
+    assert all(math.cos(a.heading) * ux + math.sin(a.heading) * uy > 0 for a in plan.actions if a.kind == "dig")
+
+
+@pytest.mark.slow
+def test_stl_tamp_in_receding_horizon_keeps_its_sides_when_the_truck_moves():
+    """A later step faces the loading side of the first, wherever the truck now stands: read
+    again from the truck's new stand, the areas turned to the far side of the site (0.10.2)."""
+    import dataclasses
+
+    from earthbench.planner import Observation
+    from earthbench.registry import PLANNERS
+    from earthbench_planners.stl_tamp.hierarchy import site_box, site_layout
+    from earthbench_terrains.rbf import rbf
+
+    sc = rbf(0, 4.0, n_bases=14)
+    planner = PLANNERS.get("stl-tamp")(closed_loop=True)
+    first = planner.step(Observation(sc))
+    assert first is not None and first.actions
+    xmin, xmax, ymin, ymax = site_box(sc)
+    tp = sc.machines.truck_pose  # the truck driven across the site's centre
+    moved = dataclasses.replace(sc, machines=dataclasses.replace(
+        sc.machines, truck_pose=dataclasses.replace(tp, x=xmin + xmax - tp.x, y=ymin + ymax - tp.y)))
+    assert site_layout(moved) != site_layout(sc)
+    t_end = max(a.t_end for a in first.actions)
+    second = planner.step(Observation(moved, step=1, t=t_end, loaded=first.predicted.volume))
+    assert second is not None
+    ux, uy = site_layout(sc).toward_truck
+    digs = [a for a in second.actions if a.kind == "dig"]
+    assert digs and all(math.cos(a.heading) * ux + math.sin(a.heading) * uy > 0 for a in digs)

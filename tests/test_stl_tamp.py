@@ -19,7 +19,7 @@ from earthbench_planners.separate.planner import SeparatePlanner
 from earthbench_planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
 from earthbench_planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
-from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
+from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box, site_layout
 from earthbench_planners.stl_tamp.model import tip_position
 from earthbench_planners.stl_tamp.problem import inverse_kinematics
 from earthbench_terrains.rbf import rbf
@@ -336,3 +336,28 @@ def test_candidate_areas_do_not_depend_on_where_the_site_lies(turns, mirror, shi
 
     assert len(estimates(sc)) >= 12
     assert estimates(moved) == estimates(sc)
+
+
+def test_areas_keep_the_first_layout_wherever_the_machines_stand():
+    """Closed loop, the truck and the excavator move between steps; the areas (their drag
+    heading, stand and truck stand) face the first step's sides (receding.Horizon.layout), not
+    sides read again from where the machines now stand, which turned them around the site."""
+    sc = rbf(0, 4.0, n_bases=14)
+    pl = StlTampPlanner()
+    c = pl.config
+    xmin, xmax, ymin, ymax = site_box(sc)
+    cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
+    m = sc.machines
+    moved = dataclasses.replace(sc, machines=dataclasses.replace(
+        m, truck_pose=dataclasses.replace(m.truck_pose, x=2 * cx - m.truck_pose.x, y=2 * cy - m.truck_pose.y),
+        excavator_pose=dataclasses.replace(m.excavator_pose, x=2 * cx - m.excavator_pose.x, y=2 * cy - m.excavator_pose.y)))
+    first = site_layout(sc)
+    assert site_layout(moved) != first  # read again, the sides turn
+
+    def faces(scenario, layout=None):
+        areas = candidate_areas(scenario, sc.terrain.z, pl.area_side(sc), c.dig_depth, c.area_vmax, c.base_offset,
+                                c.truck_offset, c.truck_angle, layout)
+        return [(a.centre, a.psi, a.base, a.truck) for a in areas]
+
+    assert faces(sc) and faces(moved, first) == faces(sc)
+    assert faces(moved) != faces(sc)

@@ -210,21 +210,45 @@ def truck_side(scenario: Scenario) -> tuple[float, float]:
     return (1.0 if dx >= 0 else -1.0, 0.0)
 
 
+@dataclass(frozen=True)
+class Layout:
+    """How the areas face: the loading side (``toward_truck``, the drag direction) and the lateral
+    axis signed toward the side the excavator starts on. Read once from a run's first state:
+    closed loop, the truck and the excavator move, and axes read again from where they stand
+    turned the areas (and their stands) to another side of the site between steps."""
+
+    toward_truck: tuple[float, float]
+    toward_start: tuple[float, float]
+
+
+def site_layout(scenario: Scenario) -> Layout:
+    """The :class:`Layout` of ``scenario``'s machines where they stand."""
+    xmin, xmax, ymin, ymax = site_box(scenario)
+    ux, uy = truck_side(scenario)
+    tx, ty = -uy, ux
+    ep = scenario.machines.excavator_pose
+    if (ep.x - 0.5 * (xmin + xmax)) * tx + (ep.y - 0.5 * (ymin + ymax)) * ty < 0:
+        tx, ty = -tx, -ty
+    return Layout((ux, uy), (tx, ty))
+
+
 #: How far (m, and in tiles) rounding may move a tile's edge past the dig area's and still count as inside.
 TILE_TOL = 1e-9
 
 
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
-                    truck_offset: float, truck_angle: float = 0.0) -> list[Area]:
+                    truck_offset: float, truck_angle: float = 0.0, layout: Layout | None = None) -> list[Area]:
     """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
 
     The base sits ``base_offset`` beyond the area's centre toward the truck's side; the truck
     ``truck_offset`` from the base, turned by ``truck_angle`` from straight behind it toward the
     excavator's starting side (π/2: beside the base, a quarter swing from the area instead of a
-    half swing; the excavator tours away from its start, so the truck stays out of its way)."""
+    half swing; the excavator tours away from its start, so the truck stays out of its way).
+    ``layout``: the sides to face (default: :func:`site_layout` of ``scenario``)."""
     t = scenario.terrain
     xmin, xmax, ymin, ymax = site_box(scenario)
-    ux, uy = truck_side(scenario)
+    lay = layout or site_layout(scenario)
+    (ux, uy), (tx, ty) = lay.toward_truck, lay.toward_start
     floor = scenario.site.floor if scenario.site.floor is not None else float(z.min())
     xs, ys = t.cell_centres()
     # the tiles' count and containment tolerate rounding (TILE_TOL): a dig area exactly k tiles
@@ -237,10 +261,6 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
     oy = ymin + 0.5 * ((ymax - ymin) - nya * side)
     out = []
     psi = math.atan2(uy, ux)  # drag toward the base, i.e. toward the loading side
-    tx, ty = -uy, ux  # lateral axis, signed toward the excavator's start
-    ep = scenario.machines.excavator_pose
-    if (ep.x - 0.5 * (xmin + xmax)) * tx + (ep.y - 0.5 * (ymin + ymax)) * ty < 0:
-        tx, ty = -tx, -ty
     dx_t = math.cos(truck_angle) * ux + math.sin(truck_angle) * tx
     dy_t = math.cos(truck_angle) * uy + math.sin(truck_angle) * ty
     for a in range(nxa):

@@ -161,10 +161,17 @@ class StlTampPlanner(Planner):
     site far from the origin (a sealed draw's shifted site) a dig area exactly k tiles wide lost
     a row of tiles, and paper-switch's one-tile dig area its only tile (an empty plan). The
     public suites' areas, hence their plans, are unchanged.
+
+    0.10.3: closed loop only (:mod:`.receding`): the areas face the first step's sides for the
+    whole run (read again from the truck's new stand, they turned to another side of the site and
+    the excavator drove around it), and each step asks for the missing volume corrected by the
+    yield the truck has reported so far, until the truck holds the target (the open loop's
+    ``volume_tol`` left runs a sliver short, which has no time to the target). Open-loop plans
+    are 0.10.2's.
     """
 
     name = "stl-tamp"
-    version = "0.10.2"
+    version = "0.10.3"
     tracks = ("backhoe",)
     Config = Config
 

@@ -9,6 +9,16 @@ one, up to :data:`TRIES`, when it yields nothing), and that area's actions are t
 next step re-solves the remaining areas on the terrain the referee left, warm-started from the
 previous solution: the areas it chose and did not dig yet lead the new tour, in its order, so
 the global problem's initial guess is the previous plan's tail. Areas that yielded nothing are not chosen again.
+The areas face the sides of the first step (:class:`~.hierarchy.Layout`) in every step, as the
+open-loop plan's face the scenario's: read again from where the truck stands after each area,
+they turned to another side of the site and sent the excavator around it (0.10.2).
+
+The volume model is corrected by what the truck reports: each step asks its local problem for
+the missing volume divided by the ratio loaded so far ÷ the model's volume of the steps so far
+(:meth:`Horizon.ask`), so a soil that fills the bucket less than the model expects is met by
+larger digs in the area at hand, not by a tail of short steps. The run ends when the truck holds
+the target, not within the open loop's ``volume_tol`` of it: short of the target by any amount,
+a run has no time to it (docs/metrics.md).
 
 Only the planner's own functions are called (:meth:`StlTampPlanner._global`,
 :meth:`StlTampPlanner._local` and :mod:`.hierarchy`); nothing of the open-loop path changes.
@@ -26,6 +36,7 @@ from .surface import fit_rbf
 from .convert import Converter, SimState
 from .hierarchy import (
     Area,
+    Layout,
     Trace,
     candidate_areas,
     global_blocks,
@@ -34,11 +45,17 @@ from .hierarchy import (
     in_box,
     nearest_block,
     site_box,
+    site_layout,
 )
 
 
 #: Areas of one solution tried in a step before it gives up (each costs a local solve).
 TRIES = 3
+#: The observed yield ratio is trusted within these bounds (a first area's ratio can be noise).
+YIELD_BOUNDS = (0.5, 1.5)
+#: What a step asks for beyond the corrected missing volume: a share of it, and at least this
+#: many m³, so that the scan's noise does not leave the truck a sliver short.
+ASK_MARGIN, ASK_MIN = 0.05, 0.05
 
 
 @dataclass
@@ -49,22 +66,34 @@ class Horizon:
     done: list[tuple[float, float]] = field(default_factory=list)  # centres of areas that yielded nothing
     joints: tuple[float, float] = (0.3, -1.5)
     trace: Trace = field(default_factory=Trace)
+    layout: Layout | None = None  # the first step's sides, kept for the run
+    modelled: float = 0.0  # the model's volume of the steps executed so far (m³)
+
+    def ask(self, observation: Observation) -> float:
+        """The model volume a step plans for: the missing volume over the yield observed so far
+        (truck-reported ÷ modelled), with :data:`ASK_MARGIN` and :data:`ASK_MIN`."""
+        ratio = observation.loaded / self.modelled if self.modelled > 0 and observation.loaded > 0 else 1.0
+        ratio = min(max(ratio, YIELD_BOUNDS[0]), YIELD_BOUNDS[1])
+        return max(observation.remaining / ratio * (1 + ASK_MARGIN), observation.remaining + ASK_MIN)
 
 
 def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     """One receding-horizon step of ``planner`` (a :class:`~.planner.StlTampPlanner`); None when done."""
     c, sc = planner.config, observation.scenario
     exc = sc.machines.excavator
-    remaining = observation.remaining
-    if remaining <= c.volume_tol or observation.truck_full:
+    if observation.remaining <= 0.0 or observation.truck_full:
         return None
+    remaining = h.ask(observation)
     st = SimState.start(sc)
     st.t, st.turn, st.loaded = observation.t, observation.turn, observation.loaded
     side = planner.area_side(sc)
     box = site_box(sc)
     conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
                      retime=c.retime_moves)
-    areas = [a for a in candidate_areas(sc, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
+    if h.layout is None:
+        h.layout = site_layout(sc)
+    areas = [a for a in candidate_areas(sc, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset,
+                                        c.truck_angle, h.layout)
              if all(math.dist(a.centre, d) > side / 2 for d in h.done)]
     if not areas:
         return None
@@ -95,6 +124,7 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
         h.done.append(area.centre)
     if not st.actions:
         return None
+    h.modelled += got
     return Plan(tuple(st.actions), Prediction(volume=got), {"planner": planner.name, "area": list(area.centre)})
 
 
