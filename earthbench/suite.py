@@ -345,7 +345,9 @@ def _seeds(value: Any, where: str) -> tuple[int, ...]:
         try:
             a, b = (int(x) for x in value.split("-"))
         except ValueError:
-            raise SuiteError(f"{where}: seeds {value!r} must be a list of integers or a range 'A-B' such as '0-9'") from None
+            hint = "a seed, a range 'A-B' such as '0-9', or a comma-separated list of both" if where == "--seeds" else \
+                "a list of integers or a range 'A-B' such as '0-9'"
+            raise SuiteError(f"{where}: seeds {value!r} must be {hint}") from None
         if b < a:
             raise SuiteError(f"{where}: seed range {value!r} is empty (end before start)")
         return tuple(range(a, b + 1))
@@ -357,11 +359,16 @@ def _seeds(value: Any, where: str) -> tuple[int, ...]:
 
 
 def parse_seed_range(text: str) -> tuple[int, ...]:
-    """``"3"`` or ``"0-9"`` → the seeds; used by ``earthbench run --seeds``."""
-    text = text.strip()
-    if text.isdigit():
-        return (int(text),)
-    return _seeds(text, "--seeds")
+    """``"3"``, ``"0-9"`` or a comma-separated list of both (``"2,4"``, ``"0-2,7"``) → the seeds;
+    used by ``earthbench run --seeds``."""
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        got = (int(part),) if part.isdigit() else _seeds(part, "--seeds")
+        if set(got) & set(out):
+            raise SuiteError(f"--seeds: {text!r} names a seed twice")
+        out += got
+    return tuple(out)
 
 
 def _targets(value: Any, where: str) -> tuple[float, ...]:

@@ -99,6 +99,11 @@ def test_suite_by_path(tmp_path):
 def test_seed_ranges():
     assert parse_seed_range("0-3") == (0, 1, 2, 3)
     assert parse_seed_range("7") == (7,)
+    assert parse_seed_range("2,4") == (2, 4) and parse_seed_range("0-2, 7") == (0, 1, 2, 7)
+    with pytest.raises(SuiteError, match="twice"):
+        parse_seed_range("0-3,2")
+    with pytest.raises(SuiteError, match="comma-separated"):
+        parse_seed_range("2;4")
     with pytest.raises(SuiteError):
         parse_seed_range("x")
 
