@@ -3,7 +3,7 @@
 A board republished from new runs should say which planners' plans moved. The referee's figures
 of a plan (makespan, loaded volume, digs, dumps, validity) identify it well enough for that: two
 plans with all of them equal on a scenario are, for the board, the same plan. Runs are paired by
-suite, scenario digest and planner (each side's latest version of the planner, as its board ranks it), so a board
+suite, scenario digest, planner and configuration (each side's latest version of the planner, as its board ranks it), so a board
 remade after a version bump shows whether the new version's plans are the old ones.
 
     python scripts/plans_against_board.py --db standard.db --csv leaderboard/runs.csv --suite standard
@@ -22,6 +22,7 @@ import pandas as pd
 
 from earthbench.aggregate import latest_versions
 from earthbench.board.selection import shown_runs
+from earthbench.labels import config_labels
 from earthbench.store import load_runs
 
 #: The referee's figures compared, and how close floats must be (both sides are the referee's output).
@@ -53,11 +54,15 @@ def main(argv: list[str] | None = None) -> int:
     new = latest(load_runs(args.db))
     old = latest(pd.read_csv(args.csv))
     new, old = new[new["suite"] == args.suite], old[old["suite"] == args.suite]
-    pairs = new.merge(old, on=["suite", "scenario_digest", "planner"], suffixes=("_new", "_old"))
-    for planner, g in pairs.groupby("planner", sort=True):
+    new, old = (r.assign(config_hash=r["config_hash"].astype(str)) for r in (new, old))
+    # one pair per configuration: a board can hold two of one planner (open and closed loop)
+    pairs = new.merge(old, on=["suite", "scenario_digest", "planner", "config_hash"], suffixes=("_new", "_old"))
+    names = config_labels(new)
+    for (planner, config), g in pairs.groupby(["planner", "config_hash"], sort=True):
         agree = pd.concat([same(g[f"{f}_new"], g[f"{f}_old"]) for f in FIGURES], axis=1).all(axis=1)
         v_new, v_old = g["planner_version_new"].iloc[0], g["planner_version_old"].iloc[0]
-        print(f"{planner} {v_new} against {v_old}: {int(agree.sum())}/{len(g)} scenarios with the same plan figures")
+        name = names.get((planner, config), planner)
+        print(f"{name} {v_new} against {v_old}: {int(agree.sum())}/{len(g)} scenarios with the same plan figures")
         for _, r in g[~agree].head(args.show).iterrows():
             print("   ", r["scenario_id_new"], "  ".join(f"{f} {r[f + '_old']}→{r[f + '_new']}" for f in FIGURES
                                                         if not same(pd.Series([r[f + '_new']]), pd.Series([r[f + '_old']])).all()))
