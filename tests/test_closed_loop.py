@@ -192,3 +192,32 @@ def test_stl_tamp_in_receding_horizon_keeps_its_sides_when_the_truck_moves():
     ux, uy = site_layout(sc).toward_truck
     digs = [a for a in second.actions if a.kind == "dig"]
     assert digs and all(math.cos(a.heading) * ux + math.sin(a.heading) * uy > 0 for a in digs)
+
+
+def test_stl_tamp_receding_asks_for_what_the_truck_reports_missing_and_takes():
+    """The volume a receding step plans for (receding.Horizon.ask): the missing volume over the
+    yield the truck has reported (loaded ÷ the model's volume so far), with a margin, and never
+    more than the truck surely still takes (its loose capacity over the class's largest swell)."""
+    import dataclasses
+
+    from earthbench.planner import Observation
+    from earthbench.soil import MATERIALS, nominal
+    from earthbench_planners.stl_tamp.receding import ASK_MARGIN, ASK_MIN, Horizon, room
+    from earthbench_terrains.rbf import rbf
+
+    sc = dataclasses.replace(rbf(0, 6.0, n_bases=14), soil=nominal("clay"))
+    h = Horizon()
+    assert h.ask(Observation(sc)) == pytest.approx(6.0 * (1 + ASK_MARGIN))  # nothing reported yet: the model as it is
+    h.modelled = 4.0  # the steps so far modelled 4 m³, the truck reports 3
+    ratio = 3.0 / 4.0
+    assert h.ask(Observation(sc, step=2, loaded=3.0)) == pytest.approx(3.0 / ratio * (1 + ASK_MARGIN))
+    near = Observation(sc, step=9, loaded=5.99)  # a sliver missing: at least ASK_MIN more
+    h.modelled = 5.99 / ratio
+    assert h.ask(near) >= 0.01 + ASK_MIN - 1e-12
+    capacity = sc.machines.truck.capacity / MATERIALS["clay"].swell[1]  # 7.41 bank m³ of clay, surely
+    full = Observation(dataclasses.replace(sc, task=dataclasses.replace(sc.task, target_volume=8.0)), step=9,
+                       loaded=capacity - 0.3)
+    h.modelled = full.loaded / ratio
+    assert room(full) == pytest.approx(0.3)
+    assert h.ask(full) == pytest.approx(0.3 / ratio)  # the target (8) is past what the truck takes
+    assert room(Observation(dataclasses.replace(sc, soil=None), loaded=3.0)) == pytest.approx(sc.machines.truck.capacity - 3.0)

@@ -18,7 +18,9 @@ the missing volume divided by the ratio loaded so far ÷ the model's volume of t
 (:meth:`Horizon.ask`), so a soil that fills the bucket less than the model expects is met by
 larger digs in the area at hand, not by a tail of short steps. The run ends when the truck holds
 the target, not within the open loop's ``volume_tol`` of it: short of the target by any amount,
-a run has no time to it (docs/metrics.md).
+a run has no time to it (docs/metrics.md). A step never asks for more than the truck surely
+still takes (:func:`room`): a step digs up to four buckets, and a bucket dug after the truck is
+full starts the next dig with material in it.
 
 Only the planner's own functions are called (:meth:`StlTampPlanner._global`,
 :meth:`StlTampPlanner._local` and :mod:`.hierarchy`); nothing of the open-loop path changes.
@@ -31,6 +33,7 @@ from dataclasses import dataclass, field
 
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation
+from earthbench.soil import MATERIALS
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
@@ -74,14 +77,25 @@ class Horizon:
         (truck-reported ÷ modelled), with :data:`ASK_MARGIN` and :data:`ASK_MIN`."""
         ratio = observation.loaded / self.modelled if self.modelled > 0 and observation.loaded > 0 else 1.0
         ratio = min(max(ratio, YIELD_BOUNDS[0]), YIELD_BOUNDS[1])
-        return max(observation.remaining / ratio * (1 + ASK_MARGIN), observation.remaining + ASK_MIN)
+        want = max(observation.remaining / ratio * (1 + ASK_MARGIN), observation.remaining + ASK_MIN)
+        return min(want, room(observation) / ratio)
+
+
+def room(observation: Observation) -> float:
+    """Bank m³ the truck surely still takes: its capacity counts loose m³, so it is divided by the
+    largest swell of the soil's class (the planner knows the class, not the site's value; a class
+    it does not know: the swell it is told)."""
+    sc = observation.scenario
+    known = MATERIALS.get(sc.soil.material) if sc.soil is not None else None
+    swell = known.swell[1] if known is not None else (sc.soil.swell if sc.soil is not None else 1.0)
+    return sc.machines.truck.capacity / swell - observation.loaded
 
 
 def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     """One receding-horizon step of ``planner`` (a :class:`~.planner.StlTampPlanner`); None when done."""
     c, sc = planner.config, observation.scenario
     exc = sc.machines.excavator
-    if observation.remaining <= 0.0 or observation.truck_full:
+    if observation.remaining <= 0.0 or observation.truck_full or room(observation) < ASK_MIN:
         return None
     remaining = h.ask(observation)
     st = SimState.start(sc)
