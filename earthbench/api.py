@@ -37,7 +37,7 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     # the judge, for metrics (a Verdict) and scripts; a planner calls the rules above, never the judge
     "earthbench.referee": ("Execution", "RULES", "Verdict", "Violation", "judge"),
     # the realistic track
-    "earthbench.soil": ("draw", "nominal", "slump"),
+    "earthbench.soil": ("MATERIALS", "Material", "draw", "nominal", "slump"),
     "earthbench.sensing": ("observe",),
     # metrics: a metric plugin is a callable (scenario, plan, verdict) -> dict; the scoring rule
     "earthbench.scoring": ("evaluate", "is_success", "run_order", "target_share", "time_per_target", "time_to_target"),
