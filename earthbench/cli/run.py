@@ -50,7 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="cases at once (default and maximum: floor(cores / budget cores))")
     p.add_argument("--rerun", action="store_true", help="run cases again even if they are stored, replacing their rows")
-    p.add_argument("--seeds", metavar="A-B", help="only scenarios with these seeds: a seed, a range or a comma-separated list, e.g. 3, 0-4 or 0-2,7")
+    p.add_argument("--seeds", metavar="A-B", help="only scenarios with these seeds: a seed, a range or a comma-separated list,"
+                   " e.g. 3, 0-4 or 0-2,7")
     p.add_argument("--sealed", metavar="KEYFILE",
                    help="run the suite's sealed draw of this key (`earthbench seal` made it; docs/sealed-evaluation.md)")
     p.add_argument("--quiet", action="store_true", help="no progress output, only the summary")
