@@ -166,8 +166,8 @@ class StlTampPlanner(Planner):
     whole run (read again from the truck's new stand, they turned to another side of the site and
     the excavator drove around it), and each step asks for the missing volume corrected by the
     yield the truck has reported so far, until the truck holds the target (the open loop's
-    ``volume_tol`` left runs a sliver short, which has no time to the target). Open-loop plans
-    are 0.10.2's.
+    ``volume_tol`` left runs a sliver short, which has no time to the target), and never more
+    than the truck surely takes. Open-loop plans are 0.10.2's.
     """
 
     name = "stl-tamp"

@@ -74,7 +74,8 @@ class Horizon:
 
     def ask(self, observation: Observation) -> float:
         """The model volume a step plans for: the missing volume over the yield observed so far
-        (truck-reported ÷ modelled), with :data:`ASK_MARGIN` and :data:`ASK_MIN`."""
+        (truck-reported ÷ modelled), with :data:`ASK_MARGIN` and :data:`ASK_MIN`, and never more
+        than :func:`room` at that yield."""
         ratio = observation.loaded / self.modelled if self.modelled > 0 and observation.loaded > 0 else 1.0
         ratio = min(max(ratio, YIELD_BOUNDS[0]), YIELD_BOUNDS[1])
         want = max(observation.remaining / ratio * (1 + ASK_MARGIN), observation.remaining + ASK_MIN)
