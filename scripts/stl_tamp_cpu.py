@@ -4,8 +4,9 @@ solves ended (planners/stl_tamp/NOTES.md).
     python scripts/stl_tamp_cpu.py SEEDS TARGET [key=value ...]   # e.g. 0-9 7 max_iter=150
     python scripts/stl_tamp_cpu.py 0-9 7 --ipopt-local '{"perturb_dec_fact": 0.6}' --ipopt-global '{"mu_init": 0.1}'
     python scripts/stl_tamp_cpu.py 0-9 7 --fresh --side-by-side DIR   # uncompiled vs prepared in DIR
+    python scripts/stl_tamp_cpu.py 0-2 256 --suite scale --fresh --side-by-side DIR
 
-Plans ``paper-extensive``'s scenarios of TARGET m³ for SEEDS (``a-b``) one after another in this
+Plans the scenarios of TARGET m³ of ``paper-extensive`` (or ``--suite``) for SEEDS (``a-b``) one after another in this
 process (the first plan also pays the solvers' construction), each timed with
 ``time.process_time``; one JSON line per plan, then a summary line. ``key=value`` overrides a
 field of stl-tamp's ``Config``; ``--ipopt-local`` and ``--ipopt-global`` (JSON objects) add IPOPT
@@ -67,13 +68,14 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--ipopt-local", type=json.loads, default={}, metavar="JSON")
     ap.add_argument("--ipopt-global", type=json.loads, default={}, metavar="JSON")
     ap.add_argument("--prepared", metavar="DIR")
+    ap.add_argument("--suite", default="paper-extensive")
     ap.add_argument("--fresh", action="store_true")
     ap.add_argument("--side-by-side", metavar="DIR")
     args = ap.parse_args(argv)
     target, kw = args.target, parse_config(args.settings, StlTampPlanner)
     planner = with_ipopt(args.ipopt_local, args.ipopt_global) if args.ipopt_local or args.ipopt_global else StlTampPlanner
     rows = []
-    for n, sc in enumerate(s for s in load_suite("paper-extensive").select(parse_seed_range(args.seeds))
+    for n, sc in enumerate(s for s in load_suite(args.suite).select(parse_seed_range(args.seeds))
                            if abs(s.task.target_volume - target) <= 1e-6):
         if args.side_by_side:
             runs = {}
@@ -99,8 +101,9 @@ def main(argv: list[str]) -> None:
           f"({counts['succeeded'] / max(1, sum(counts.values())):.0%} succeeded)")
     if args.side_by_side:
         old = statistics.median(r["old_cpu_s"] for r in rows)
+        paired = statistics.median(r["cpu_s"] / r["old_cpu_s"] for r in rows)
         print(f"side by side: CPU per plan median {old:.2f} s uncompiled, {statistics.median(r['cpu_s'] for r in rows):.2f} s "
-              f"prepared; same plan {sum(r['same_plan'] for r in rows)}/{len(rows)}")
+              f"prepared (paired ratio, median {paired:.3f}); same plan {sum(r['same_plan'] for r in rows)}/{len(rows)}")
 
 
 if __name__ == "__main__":

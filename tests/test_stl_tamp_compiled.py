@@ -46,7 +46,7 @@ def prepared(tmp_path_factory):
 @needs_cc
 def test_compiled_functions_evaluate_as_the_virtual_machine(prepared):
     folder, summary = prepared
-    key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
+    key = model.nlp_key(SHAPE, ExcavatorSpec(), TruckSpec())
     assert summary["nlps"]["small"]["key"] == key
     assert set(summary["nlps"]["small"]["compile_s"]) == set(compiled.NAMES)
     model.use_prepared(None)
@@ -93,11 +93,23 @@ def test_an_nlp_without_its_compiled_library_is_loaded_as_before(prepared, tmp_p
 
     folder = tmp_path / "partial"
     shutil.copytree(prepared[0], folder)
-    key = nlp_cache.key(SHAPE, ExcavatorSpec(), TruckSpec())
+    key = model.nlp_key(SHAPE, ExcavatorSpec(), TruckSpec())
     compiled.library(folder, key).unlink()
     model.use_prepared(folder)
     assert model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(), BOX).cache == "hit"  # the preparation filled the cache too
     assert compiled.load(folder, key) is None
+
+
+@needs_cc
+def test_the_nlps_prepared_for_the_benchmarks_truck_serve_a_truck_of_any_size(prepared):
+    """No constraint reads the truck's capacity, so the ``scale`` ladder's larger trucks load the
+    prepared NLP (they had solved uncompiled); anything else of the truck is still its own NLP."""
+    folder, _ = prepared
+    model.use_prepared(folder)
+    assert model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(capacity=320.0), BOX).cache == "compiled"
+    other = model.PhaseNLP(SHAPE, ExcavatorSpec(), TruckSpec(loading_radius=1.5), BOX)
+    assert other.cache != "compiled"
+    assert np.isnan(other.truck.capacity)  # what the NLP's constraints could read: nothing
 
 
 def test_without_a_compiler_the_preparation_compiles_nothing(tmp_path, monkeypatch):

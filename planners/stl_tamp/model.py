@@ -45,6 +45,7 @@ processes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -74,10 +75,23 @@ def prepared_dir() -> Path | None:
     return _PREPARED[0]
 
 
+def nlp_truck(truck: TruckSpec) -> TruckSpec:
+    """The truck as an NLP sees it: without its capacity, which no constraint reads (the planner
+    caps what it asks for at the truck's room). NaN, so a constraint that read it would fail
+    loudly; left out of the key, so the NLPs prepared for the benchmark's truck serve a truck of
+    any size (the ``scale`` ladder's 20–320 m³ ones)."""
+    return dataclasses.replace(truck, capacity=math.nan)
+
+
+def nlp_key(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> str:
+    """The name of an NLP in the disk cache and in the preparation's folder."""
+    return nlp_cache.key(shape, exc, nlp_truck(truck))
+
+
 def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> tuple[str, dict[str, Any]]:
     """The key and the built (uncompiled) functions of an NLP, from the disk cache or built here;
     what the preparation compiles."""
-    name = nlp_cache.key(shape, exc, truck)
+    name = nlp_key(shape, exc, truck)
     path = nlp_cache.load(name)
     fns = _unpack(path) if path is not None else None
     if fns is None:
@@ -165,7 +179,7 @@ class PhaseNLP:
         self.site_box = site_box
         # the built functions: compiled in the planner's preparation (compiled), else from the
         # disk cache when this NLP was built before (nlp_cache), else built here
-        name = nlp_cache.key(shape, exc, truck)  # the site's box only bounds g (below)
+        name = nlp_key(shape, exc, truck)  # the site's box only bounds g (below)
         self.key = name
         fns = compiled.load(prepared_dir(), name)
         if fns is not None:
@@ -195,7 +209,7 @@ class PhaseNLP:
 
     def _setup(self, shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> None:
         """The sizes and layouts of the shape (what :meth:`_build` and the solves read)."""
-        self.shape, self.exc, self.truck = shape, exc, truck
+        self.shape, self.exc, self.truck = shape, exc, nlp_truck(truck)
         sh = shape
         m1, n = sh.phases + 1, sh.steps
         self.m1, self.n = m1, n
