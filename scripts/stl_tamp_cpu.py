@@ -6,16 +6,18 @@ solves ended (planners/stl_tamp/NOTES.md).
     python scripts/stl_tamp_cpu.py 0-9 7 --fresh --side-by-side DIR   # uncompiled vs prepared in DIR
     python scripts/stl_tamp_cpu.py 0-2 256 --suite scale --fresh --side-by-side DIR
 
-Plans the scenarios of TARGET m³ of ``paper-extensive`` (or ``--suite``) for SEEDS (``a-b``) one after another in this
-process (the first plan also pays the solvers' construction), each timed with
-``time.process_time``; one JSON line per plan, then a summary line. ``key=value`` overrides a
+Plans the scenarios of TARGET m³ of ``paper-extensive`` (or ``--suite``) for SEEDS (``a-b``) one
+after another in this process (the first plan also pays the solvers' construction), each timed
+with ``time.process_time``; one JSON line per plan, then a summary line. ``key=value`` overrides a
 field of stl-tamp's ``Config``; ``--ipopt-local`` and ``--ipopt-global`` (JSON objects) add IPOPT
 options to the local or the global solves, for experiments that are no setting of the planner.
 ``--prepared DIR`` plans with the NLPs compiled in DIR (``earthbench prepare stl-tamp`` prints
 the folder); ``--fresh`` forgets the process's NLPs before each plan, so every plan pays what a
 case's fresh process pays (the NLPs' load); ``--side-by-side DIR`` plans each scenario twice in
 turn, without and with DIR (alternating which goes first), and reports both CPU times and
-whether the two plans' actions are the same (their digests).
+whether the two plans' actions are the same (their digests). The uncompiled side is the current
+code without its preparation, not 0.9.0's own: ``scripts/versions_side_by_side.py`` compares
+two installs.
 """
 
 from __future__ import annotations
