@@ -5,6 +5,7 @@ solves ended (planners/stl_tamp/NOTES.md).
     python scripts/stl_tamp_cpu.py 0-9 7 --ipopt-local '{"perturb_dec_fact": 0.6}' --ipopt-global '{"mu_init": 0.1}'
     python scripts/stl_tamp_cpu.py 0-9 7 --fresh --side-by-side DIR   # uncompiled vs prepared in DIR
     python scripts/stl_tamp_cpu.py 0-2 256 --suite scale --fresh --side-by-side DIR
+    python scripts/stl_tamp_cpu.py 0-9 7 --prepared DIR --fresh --start neighbour
 
 Plans the scenarios of TARGET m³ of ``paper-extensive`` (or ``--suite``) for SEEDS (``a-b``) one
 after another in this process (the first plan also pays the solvers' construction), each timed
@@ -17,7 +18,8 @@ case's fresh process pays (the NLPs' load); ``--side-by-side DIR`` plans each sc
 turn, without and with DIR (alternating which goes first), and reports both CPU times and
 whether the two plans' actions are the same (their digests). The uncompiled side is the current
 code without its preparation, not 0.9.0's own: ``scripts/versions_side_by_side.py`` compares
-two installs.
+two installs. ``--start neighbour`` starts each local solve after the first from the previous
+area's solution moved rigidly onto the new area (an experiment, planners/stl_tamp/NOTES.md).
 """
 
 from __future__ import annotations
@@ -25,10 +27,13 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import statistics
 import sys
 import time
 from typing import Any
+
+import numpy as np
 
 from earthbench.cli import parse_config
 from earthbench.referee import judge
@@ -43,6 +48,52 @@ def with_ipopt(local_opts: dict[str, Any], global_opts: dict[str, Any]) -> type[
     class Planner(StlTampPlanner):
         def _ipopt_options(self, local: bool = True) -> dict[str, Any]:
             return {**super()._ipopt_options(local), **(local_opts if local else global_opts)}
+
+    return Planner
+
+
+def moved_start(nlp: Any, params: np.ndarray, s0: np.ndarray, guess: np.ndarray, prev_area: Any, prev: Any,
+                area: Any) -> np.ndarray:
+    """A local start whose dig phases are ``prev``'s, turned by the change of drag heading and
+    moved from ``prev_area``'s stand to ``area``'s; phase 0 (the relocation) and the parked
+    truck are the IK guess's, each phase's model volume its ``V``."""
+    X, U, ph, slack = nlp.unpack(guess, s0)
+    d = area.psi - prev_area.psi
+    c, s = math.cos(d), math.sin(d)
+
+    def move(x: float, y: float) -> tuple[float, float]:
+        x, y = x - prev_area.base[0], y - prev_area.base[1]
+        return c * x - s * y + area.base[0], s * x + c * y + area.base[1]
+
+    n = nlp.n
+    for k in range(n + 1, nlp.N + 1):
+        X[k, 3:6] = prev.X[k, 3:6]
+        X[k, 0], X[k, 1] = move(prev.X[k, 0], prev.X[k, 1])
+        X[k, 2] = prev.X[k, 2] + d
+        X[k, 6:9] = X[n, 6:9]
+    U[n:] = prev.U[n:]
+    U[n:, 5:7] = 0.0  # the truck stays parked after phase 0
+    for i in range(1, nlp.m1):
+        ph["px"][i], ph["py"][i] = move(prev.px[i], prev.py[i])
+        ph["psi"][i] = prev.psi[i] + d
+        ph["eta"][i], ph["dtm"][i], ph["dtw"][i] = prev.eta[i], prev.dtm[i], prev.dtw[i]
+    ph["V"][1:] = np.clip(nlp.evaluate(nlp.pack_w(X, U, ph, slack), params)["volumes"], 0.0, nlp.shape.vmax)
+    return nlp.pack_w(X, U, ph, slack)
+
+
+def with_neighbour_start(base: type[StlTampPlanner]) -> type[StlTampPlanner]:
+    """``base`` whose local solves after the first start from the previous area's solution."""
+
+    class Planner(base):  # type: ignore[misc,valid-type]
+        last: tuple[Any, Any] | None = None
+
+        def _solve_local(self, lp: Any, exc: Any, area: Any, truck: Any, box: Any, w0: np.ndarray) -> Any:
+            if self.last is not None and self.last[1].X.shape[0] == lp.nlp.N + 1:
+                w0 = moved_start(lp.nlp, lp.params, lp.s0, w0, *self.last, area)
+            out = super()._solve_local(lp, exc, area, truck, box, w0)
+            if out[0].success:
+                self.last = (area, out[0])
+            return out
 
     return Planner
 
@@ -73,9 +124,12 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--suite", default="paper-extensive")
     ap.add_argument("--fresh", action="store_true")
     ap.add_argument("--side-by-side", metavar="DIR")
+    ap.add_argument("--start", choices=("guess", "neighbour"), default="guess")
     args = ap.parse_args(argv)
     target, kw = args.target, parse_config(args.settings, StlTampPlanner)
     planner = with_ipopt(args.ipopt_local, args.ipopt_global) if args.ipopt_local or args.ipopt_global else StlTampPlanner
+    if args.start == "neighbour":
+        planner = with_neighbour_start(planner)
     rows = []
     for n, sc in enumerate(s for s in load_suite(args.suite).select(parse_seed_range(args.seeds))
                            if abs(s.task.target_volume - target) <= 1e-6):
