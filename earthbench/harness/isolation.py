@@ -194,15 +194,25 @@ def _plugin_files(path: str) -> str:
     return top or path
 
 
+#: Where STL-TAMP's cache of built NLPs is (planners/stl_tamp/nlp_cache.py reads the same variable).
+NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"
+
+
+def nlp_cache_setting() -> str:
+    """``$EARTHBENCH_NLP_CACHE`` as a case is given it: ``off``, or the cache's resolved path
+    (the case has no ``HOME`` of the user's to find the default under)."""
+    env = os.environ.get(NLP_CACHE_ENV, "").strip()
+    if env.lower() == "off":
+        return "off"
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.realpath(os.path.expanduser(env) if env else os.path.join(base, "earthbench", "nlp"))
+
+
 def _nlp_cache() -> str | None:
     """STL-TAMP's cache of built NLPs, read-only: a case uses what is there and cannot change it
     for another case (it is filled outside the sandbox; see docs/isolation.md)."""
-    env = os.environ.get("EARTHBENCH_NLP_CACHE", "").strip()
-    if env.lower() == "off":
-        return None
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    path = os.path.realpath(os.path.expanduser(env) if env else os.path.join(base, "earthbench", "nlp"))
-    return path if os.path.isdir(path) else None
+    path = nlp_cache_setting()
+    return path if path != "off" and os.path.isdir(path) else None
 
 
 @functools.lru_cache(maxsize=1)
