@@ -18,7 +18,8 @@ _NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"  # earthbench_planners.stl_tamp.nlp_cach
 
 #: The test planners' own settings, given to their cases by name (a case gets no other variable
 #: of the harness's environment: earthbench.harness.sandbox.PASSED_VARS).
-_TEST_VARS = "EARTHBENCH_TEST_PIDDIR,EARTHBENCH_TEST_PIDFILE,EARTHBENCH_TEST_NAP,EARTHBENCH_TEST_RESULT_MB"
+_TEST_VARS = ("EARTHBENCH_TEST_PIDDIR,EARTHBENCH_TEST_PIDFILE,EARTHBENCH_TEST_NAP,EARTHBENCH_TEST_RESULT_MB,"
+              "EARTHBENCH_TEST_VICTIM")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -241,13 +241,16 @@ class JobOutcome:
 
 
 def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *, writable: str,
-            stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> JobOutcome:
+            stop: threading.Event | None = None, startup_s: float = STARTUP_S,
+            watch: Callable[[], str] | None = None) -> JobOutcome:
     """Run a non-case job (``job`` is its specification, with ``"job"`` naming it) in a fresh,
     fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one input once
-    it is ready; ``writable`` is the folder it may write. Only a ``prepare`` job exists (:mod:`.prepare`)."""
+    it is ready; ``writable`` is the folder it may write; ``watch`` (called every second while it
+    runs) says why to end it, e.g. its folder is over its disk budget. Only a ``prepare`` job
+    exists (:mod:`.prepare`)."""
     o, tail, label = _run_fenced(job, payload, tuple(cores), budget, what="a preparation",
                                  visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,),
-                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s)
+                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s, watch=watch)
     return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
                       tail, label)
 
@@ -273,7 +276,7 @@ def _run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], bu
         tag = TAG_PREFIX + secrets.token_hex(8)
         env = _child_env(len(cores), tag, "/tmp" if fences.bwrap else tmp)
         env["TMPDIR"] = "/tmp" if fences.bwrap else tempfile.gettempdir()
-        fsize = int(getattr(budget, "prepare_disk_mb", 0)) * 2**20 if prepare else 0
+        fsize = budget.prepare_disk_mb * 2**20 if prepare else 0
         argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
                 "0" if fences.bwrap else str(os.getpid()), str(fsize)]
         fence = isolation.Fence(
