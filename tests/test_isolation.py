@@ -171,3 +171,25 @@ def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypat
     assert df.solve_cpu_s["h-forge-report"] >= 1.8 and df.peak_rss_mb["h-forge-report"] >= 290
     assert df.peak_rss_mb["h-tree-memory"] <= 1024 + 1
     assert set(df.isolation) == {f"cgroup-{cg}"}
+
+
+def test_no_variable_of_the_harness_reaches_a_case(tmp_path, monkeypatch):
+    """A secret of the harness's environment, its HOME, OLDPWD and working folders: none reach a
+    case (which sends back all it was given, in its plan's info and in its log)."""
+    secret = "s3cr3t-" + os.urandom(8).hex()
+    monkeypatch.setenv("EARTHBENCH_PUBLISH_TOKEN", secret)
+    monkeypatch.setenv("OLDPWD", str(tmp_path / "where-the-operator-was"))
+    df, db = run(tmp_path, tiny_suite_toml("env"), ["h-env-leak"], HOSTILE)
+    assert df.reason["h-env-leak"] == "ok", df.error["h-env-leak"]
+    with Store(db) as store:
+        info = json.loads(store.plan_json(int(df.id["h-env-leak"])))["info"]
+        tail = df.log_tail["h-env-leak"]
+    env = info["env"]
+    assert secret not in json.dumps(info) and secret not in tail
+    assert "OLDPWD" not in env and env.get("PWD") in (None, info["cwd"]) and env.get("HOME") != os.environ.get("HOME"), env
+    assert "where-the-operator-was" not in tail
+    if isolation.support().full:  # nothing of the host's paths with the harness's pid either
+        import re
+
+        assert env["HOME"] == "/tmp" and info["cwd"] == "/tmp"
+        assert not [k for k, v in env.items() if re.search(rf"(?<![0-9a-z]){os.getpid()}(?![0-9a-z])", v)], env
