@@ -160,6 +160,54 @@ def test_a_plugin_file_sees_itself_not_the_folder_it_sits_in(tmp_path):
     assert df.reason["h-peek-folder"] == "ok", df.error["h-peek-folder"]
 
 
+SIBLINGS = '''
+import os
+from earthbench import Plan, Planner
+
+
+class Siblings(Planner):
+    """A script-registered planner that imports a module and a package beside it, inside its case."""
+
+    name = "h-siblings"
+
+    def plan(self, scenario):
+        import helper_mod
+        from helper_pkg import VALUE
+
+        here = sorted(os.listdir(os.path.dirname(os.path.abspath(__file__))))
+        return Plan(info={"helper": helper_mod.VALUE, "pkg": VALUE, "here": here})
+'''
+
+
+def test_a_plugin_file_imports_its_sibling_modules_but_sees_nothing_else_beside_it(tmp_path):
+    plugin = tmp_path / "siblings.py"
+    plugin.write_text(SIBLINGS)
+    (tmp_path / "helper_mod.py").write_text("VALUE = 1\n")
+    (tmp_path / "helper_pkg").mkdir()
+    (tmp_path / "helper_pkg" / "__init__.py").write_text("VALUE = 2\n")
+    (tmp_path / "notes.toml").write_text("[budget]\n")
+    df, db = run(tmp_path, tiny_suite_toml("siblings"), ["h-siblings"], str(plugin), tmp_path / "earthbench.db")
+    assert df.reason["h-siblings"] == "ok", df.error["h-siblings"]
+    with Store(db) as store:
+        info = json.loads(store.plan_json(int(df.id["h-siblings"])))["info"]
+    assert (info["helper"], info["pkg"]) == (1, 2)
+    if isolation.support().bwrap:  # the modules, not the store beside them nor anything else
+        assert info["here"] == ["helper_mod.py", "helper_pkg", "siblings.py"]
+
+
+def test_a_run_refuses_a_store_its_cases_could_read(tmp_path):
+    """A plugin inside a package folder sees the whole package: a store in it is refused, saying why."""
+    from earthbench.errors import StoreError
+
+    pkg = tmp_path / "mypkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    plugin = pkg / "siblings.py"
+    plugin.write_text(SIBLINGS)
+    with pytest.raises(StoreError, match=r"lies inside .*mypkg, which the cases of .* can read; keep the store out"):
+        run(tmp_path, tiny_suite_toml("exposed"), ["h-siblings"], str(plugin), pkg / "earthbench.db")
+
+
 @pytest.mark.skipif(isolation.support().cgroup is None, reason=isolation.describe())
 def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypatch):
     """Where user namespaces are not allowed but cgroups are (e.g. root in a container without

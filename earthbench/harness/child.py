@@ -71,6 +71,9 @@ def load_planner_class(source: str, name: str) -> type:
         from earthbench.planner import Planner
         from earthbench.registry import PLANNERS, plugin_module
 
+        folder = os.path.dirname(os.path.realpath(source))
+        if folder not in sys.path:  # its sibling modules, as for a script (the case sees them: docs/isolation.md)
+            sys.path.insert(0, folder)
         module, run = plugin_module(source)
         run()
         mod_name = module.__name__

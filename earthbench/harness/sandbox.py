@@ -529,7 +529,7 @@ class _Supervisor:
             if self.o.done is not None:
                 break
         if self.o.done is not None and chunk and not self.o.fault:
-            self.o.fault = f"the case wrote on its message pipe after its result: {_clip(bytes(chunk[:120]))}"
+            self.o.fault = f"the case wrote on its message pipe after its result: {bytes(chunk[:40])!r}"
             return eof
         self.buf += chunk
         start = 0
@@ -549,7 +549,7 @@ class _Supervisor:
             else:
                 self._handle(line)
                 if self.o.done is not None and len(self.buf) > start and not self.o.fault:
-                    self.o.fault = f"the case wrote on its message pipe after its result: {_clip(bytes(self.buf[start:start + 120]))}"
+                    self.o.fault = f"the case wrote on its message pipe after its result: {bytes(self.buf[start:start + 40])!r}"
         del self.buf[:start]
         self.scanned = max(0, self.scanned - start)
         if eof and self.buf.strip() and not self.o.fault:
