@@ -139,6 +139,9 @@ def ensure(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, 
     if not ref.prepares or os.environ.get(SWITCH, "").strip().lower() == "off":
         return None
     key = prepare_key(ref)
+    found = find(ref)  # a finished folder appears whole (renamed into place): no lock needed to use it
+    if found is not None:
+        return found
     with _LOCKS_LOCK:
         lock = _LOCKS.setdefault(key, threading.Lock())
     with lock, _key_lock(key, ref, stop, log):
@@ -250,7 +253,11 @@ def _run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
         doc = {"key": key, "planner": ref.name, "version": ref.version, "config_hash": ref.config_hash,
                "machine": machine_stamp(), "started_at": started, "wall_s": o.wall_s or 0.0,
                "cpu_s": o.cpu_s or 0.0, "peak_rss_mb": o.peak_rss_mb, "summary": json.loads(o.done["summary"])}
-        _seal(out, what, disk, budget.prepare_disk_mb, json.dumps(doc, indent=1, sort_keys=True).encode())
+        try:
+            _seal(out, what, disk, budget.prepare_disk_mb, json.dumps(doc, indent=1, sort_keys=True).encode())
+        except OSError as exc:  # e.g. a folder it made unreadable: refused like any other
+            raise PrepareError(f"{what} left what the harness cannot check ({exc.strerror}: {exc.filename}); "
+                               "it was not used") from None
         if final.exists() or final.is_symlink():  # `run` of a key already prepared: replace it
             old = Path(_tmp_dir(root(), key + ".old"))
             os.rename(final, old / "prev")
@@ -365,7 +372,8 @@ def _remove(folder: Path) -> None:
         os.fchmod(dfd, 0o700)
         for entry in os.scandir(dfd):
             if entry.is_dir(follow_symlinks=False):
-                try:
+                try:  # a folder (not a link: no process of the job is left to swap it) the job made 0000
+                    os.chmod(entry.name, 0o700, dir_fd=dfd)
                     fd = os.open(entry.name, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=dfd)
                 except OSError:
                     continue
