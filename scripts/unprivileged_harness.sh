@@ -11,7 +11,9 @@ set -euo pipefail
 EB_USER=${EB_USER:-65534}
 name=earthbench-delegated-$$
 dirs=()
+home=""
 cleanup() {
+  [ -n "$home" ] && rm -rf "$home"
   for d in "${dirs[@]}"; do
     for s in "$d"/*/; do [ -d "$s" ] && rmdir "$s" 2>/dev/null || true; done
     rmdir "$d" 2>/dev/null || true
@@ -31,7 +33,7 @@ for c in memory cpuset cpuacct freezer pids; do
   fi
   chown -R "$EB_USER:$EB_USER" "$d"
 done
-home=$(mktemp -d /tmp/earthbench-unprivileged.XXXXXX)
+home=$(mktemp -d "${TMPDIR:-/tmp}/earthbench-unprivileged.XXXXXX")
 chown "$EB_USER:$EB_USER" "$home"
 DIRS="${dirs[*]}" EB_BIND=${EB_BIND:-} EB_USER=$EB_USER HOME_DIR=$home unshare -m --propagation private bash -c '
   set -e

@@ -241,3 +241,54 @@ def test_no_variable_of_the_harness_reaches_a_case(tmp_path, monkeypatch):
 
         assert env["HOME"] == "/tmp" and info["cwd"] == "/tmp"
         assert not [k for k, v in env.items() if re.search(rf"(?<![0-9a-z]){os.getpid()}(?![0-9a-z])", v)], env
+
+
+UNPRIVILEGED = r'''
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from helpers import tiny_suite_toml
+from earthbench.harness import build_cases, isolation, run_case
+from earthbench.registry import load_plugin_file
+from earthbench.suite import parse_suite
+load_plugin_file(sys.argv[2])
+out = {"isolation": isolation.describe()}
+for name in ("h-forge-report", "h-tree-memory", "h-env-leak"):
+    (case,), _ = build_cases(parse_suite(tiny_suite_toml("u", wall_s=60.0, memory_mb=1024)), [name], plugins=[sys.argv[2]])
+    r = run_case(case, (0,))
+    out[name] = [r.reason, r.solve_cpu_s, r.peak_rss_mb, r.isolation]
+print(json.dumps(out))
+'''
+
+
+def _hidden_folder(path: str) -> str:
+    """The folder under the first ancestor of ``path`` that other users cannot enter ('' if none)."""
+    parts = Path(path).parts
+    for i in range(1, len(parts) - 1):
+        if not os.stat(Path(*parts[:i + 1])).st_mode & 0o001:
+            return str(Path(*parts[:i + 2]))
+    return ""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(os.getuid() != 0 or isolation.support().cgroup != "v1" or not isolation.support().bwrap,
+                    reason="needs root to delegate a cgroup v1 subtree, and user namespaces")
+def test_an_unprivileged_harness_keeps_the_fences(tmp_path):
+    """As ``nobody`` owning a delegated cgroup subtree (docs/isolation.md "Without root"), the
+    harness has every fence: the kernel's CPU figure, not the forged one; the memory budget of
+    the whole tree; an allow-listed environment."""
+    import shutil
+    import subprocess
+    import sys
+
+    if not (shutil.which("setpriv") and shutil.which("unshare")):
+        pytest.skip("needs setpriv and unshare (util-linux)")
+    script = Path(__file__).resolve().parents[1] / "scripts" / "unprivileged_harness.sh"
+    env = {**os.environ, "EB_BIND": _hidden_folder(os.path.realpath(sys.executable))}
+    out = subprocess.run([str(script), sys.executable, "-c", UNPRIVILEGED, str(Path(__file__).parent), HOSTILE],
+                         capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["isolation"] == "isolation: namespaces+cgroup-v1"
+    assert got["h-forge-report"][0] == "ok" and got["h-forge-report"][1] >= 1.8 and got["h-forge-report"][2] >= 290
+    assert got["h-tree-memory"][0] == "memory" and got["h-tree-memory"][2] <= 1024 + 1
+    assert got["h-env-leak"][0] == "ok" and {g[3] for k, g in got.items() if k != "isolation"} == {"namespaces+cgroup-v1"}
