@@ -2,7 +2,7 @@
 
 ``earthbench run`` does the same before the planner's first case when the folder is missing;
 this command runs it on its own (e.g. to time it, or before a run on a busy machine), under a
-suite's ``[budget] prepare_s`` and ``prepare_memory_mb`` (``--suite``; default: their defaults).
+suite's ``[budget] prepare_s``, ``prepare_memory_mb`` and ``prepare_disk_mb`` (``--suite``; default: their defaults).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("planner", help="planner name (see `earthbench list planners`)")
     add_plugin_arg(p)
     add_config_arg(p)
-    p.add_argument("--suite", metavar="SUITE", help="take prepare_s and prepare_memory_mb (and cores) from this suite's budget")
+    p.add_argument("--suite", metavar="SUITE", help="take the prepare_* limits (and cores) from this suite's budget")
     p.add_argument("--again", action="store_true", help="run it again even if this machine has it")
     return p
 
