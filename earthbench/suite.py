@@ -28,6 +28,7 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     max_steps = 1000                 # optional: the closed-loop step cap
     prepare_s = 1800                 # optional: a planner's preparation (s; docs/DESIGN.md §6)
     prepare_memory_mb = 4096         # optional: its memory
+    prepare_disk_mb = 2048           # optional: its folder's size on disk (MB)
     [[family]]
     name = "rbf14"
     generator = "rbf"
@@ -521,7 +522,7 @@ def _budget(budget_doc: Any, where: str) -> Budget:
         raise SuiteError(f"{where} [budget]: cores must be an integer, got {budget_doc['cores']!r}")
     if "memory_mb" in budget_doc and not isinstance(budget_doc["memory_mb"], int):
         raise SuiteError(f"{where} [budget]: memory_mb must be an integer, got {budget_doc['memory_mb']!r}")
-    for k in ("max_steps", "prepare_memory_mb"):
+    for k in ("max_steps", "prepare_memory_mb", "prepare_disk_mb"):
         if k in budget_doc and not isinstance(budget_doc[k], int):
             raise SuiteError(f"{where} [budget]: {k} must be an integer, got {budget_doc[k]!r}")
     for k in ("wall_s", "step_s", "cpu_s", "prepare_s"):  # 60 and 60.0 must give the same scenario digest

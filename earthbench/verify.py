@@ -368,7 +368,7 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .harness import LocalExecutor
+    from .harness import LocalExecutor, isolation
     from .records import Case
     from .harness.environment import environment  # the package attribute is the submodule once it is loaded
 
@@ -393,6 +393,9 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
         prepared = "prepare_s" in r.keys() and r["prepare_s"] is not None
         cases.append(Case(r["suite"], r["suite_digest"], r["threshold"], sc, refs[key], prepare=prepared))
     by_key = {c.key: r for c, r in zip(cases, sample)}
+    exposed = isolation.store_exposure(str(store.path), (c.planner.source for c in cases))
+    if exposed:  # no case may read the store it is re-timed against (docs/isolation.md)
+        raise VerifyError(exposed)
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
     here = machine_label(environment())
     stored_env = {e["id"]: machine_label(e) for e in store.environments()}

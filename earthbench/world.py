@@ -390,7 +390,7 @@ class Budget:
     bounds one step and ``max_steps`` the number of steps (docs/DESIGN.md §6); ``cpu_s`` bounds
     the CPU seconds of the case's whole process tree, counted by the kernel (docs/isolation.md).
     The step limits and ``cpu_s`` are left out of the JSON at their defaults, so scenarios keep
-    their digests. ``prepare_s`` and ``prepare_memory_mb`` bound a planner's scenario-blind
+    their digests. ``prepare_s``, ``prepare_memory_mb`` and ``prepare_disk_mb`` bound a planner's scenario-blind
     preparation, run once per machine before its first case (docs/DESIGN.md §6 "Preparation");
     left out at their defaults too.
     """
@@ -404,6 +404,8 @@ class Budget:
     cpu_s: float | None = _later(None)
     prepare_s: float = _later(1800.0)
     prepare_memory_mb: int = _later(4096)
+    #: Disk a preparation's folder may take (MB; docs/isolation.md "Disk").
+    prepare_disk_mb: int = _later(2048)
 
 
 def _number(value: Any, where: str, *, lo: float | None = None, hi: float | None = None,

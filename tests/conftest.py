@@ -16,9 +16,17 @@ from helpers import block_scenario, dig_dump_plan
 _NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"  # earthbench_planners.stl_tamp.nlp_cache.ENV
 
 
+#: The test planners' own settings, given to their cases by name (a case gets no other variable
+#: of the harness's environment: earthbench.harness.sandbox.PASSED_VARS).
+_TEST_VARS = ("EARTHBENCH_TEST_PIDDIR,EARTHBENCH_TEST_PIDFILE,EARTHBENCH_TEST_NAP,EARTHBENCH_TEST_RESULT_MB,"
+              "EARTHBENCH_TEST_VICTIM")
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """The session's built STL-TAMP NLPs (and those of the cases it runs) go to a temporary
-    folder, not the user's cache, unless the caller chose one."""
+    folder, not the user's cache, unless the caller chose one; the test planners' settings reach
+    their cases."""
+    os.environ.setdefault("EARTHBENCH_CASE_ENV", _TEST_VARS)
     if _NLP_CACHE_ENV not in os.environ:
         config._earthbench_nlp_cache = os.environ[_NLP_CACHE_ENV] = tempfile.mkdtemp(prefix="earthbench-nlp-")
 

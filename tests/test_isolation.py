@@ -160,6 +160,54 @@ def test_a_plugin_file_sees_itself_not_the_folder_it_sits_in(tmp_path):
     assert df.reason["h-peek-folder"] == "ok", df.error["h-peek-folder"]
 
 
+SIBLINGS = '''
+import os
+from earthbench import Plan, Planner
+
+
+class Siblings(Planner):
+    """A script-registered planner that imports a module and a package beside it, inside its case."""
+
+    name = "h-siblings"
+
+    def plan(self, scenario):
+        import helper_mod
+        from helper_pkg import VALUE
+
+        here = sorted(os.listdir(os.path.dirname(os.path.abspath(__file__))))
+        return Plan(info={"helper": helper_mod.VALUE, "pkg": VALUE, "here": here})
+'''
+
+
+def test_a_plugin_file_imports_its_sibling_modules_but_sees_nothing_else_beside_it(tmp_path):
+    plugin = tmp_path / "siblings.py"
+    plugin.write_text(SIBLINGS)
+    (tmp_path / "helper_mod.py").write_text("VALUE = 1\n")
+    (tmp_path / "helper_pkg").mkdir()
+    (tmp_path / "helper_pkg" / "__init__.py").write_text("VALUE = 2\n")
+    (tmp_path / "notes.toml").write_text("[budget]\n")
+    df, db = run(tmp_path, tiny_suite_toml("siblings"), ["h-siblings"], str(plugin), tmp_path / "earthbench.db")
+    assert df.reason["h-siblings"] == "ok", df.error["h-siblings"]
+    with Store(db) as store:
+        info = json.loads(store.plan_json(int(df.id["h-siblings"])))["info"]
+    assert (info["helper"], info["pkg"]) == (1, 2)
+    if isolation.support().bwrap:  # the modules, not the store beside them nor anything else
+        assert info["here"] == ["helper_mod.py", "helper_pkg", "siblings.py"]
+
+
+def test_a_run_refuses_a_store_its_cases_could_read(tmp_path):
+    """A plugin inside a package folder sees the whole package: a store in it is refused, saying why."""
+    from earthbench.errors import StoreError
+
+    pkg = tmp_path / "mypkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    plugin = pkg / "siblings.py"
+    plugin.write_text(SIBLINGS)
+    with pytest.raises(StoreError, match=r"lies inside .*mypkg, which the cases of .* can read; keep the store out"):
+        run(tmp_path, tiny_suite_toml("exposed"), ["h-siblings"], str(plugin), pkg / "earthbench.db")
+
+
 @pytest.mark.skipif(isolation.support().cgroup is None, reason=isolation.describe())
 def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypatch):
     """Where user namespaces are not allowed but cgroups are (e.g. root in a container without
@@ -171,3 +219,76 @@ def test_a_cgroup_without_namespaces_still_holds_the_budgets(tmp_path, monkeypat
     assert df.solve_cpu_s["h-forge-report"] >= 1.8 and df.peak_rss_mb["h-forge-report"] >= 290
     assert df.peak_rss_mb["h-tree-memory"] <= 1024 + 1
     assert set(df.isolation) == {f"cgroup-{cg}"}
+
+
+def test_no_variable_of_the_harness_reaches_a_case(tmp_path, monkeypatch):
+    """A secret of the harness's environment, its HOME, OLDPWD and working folders: none reach a
+    case (which sends back all it was given, in its plan's info and in its log)."""
+    secret = "s3cr3t-" + os.urandom(8).hex()
+    monkeypatch.setenv("EARTHBENCH_PUBLISH_TOKEN", secret)
+    monkeypatch.setenv("OLDPWD", str(tmp_path / "where-the-operator-was"))
+    df, db = run(tmp_path, tiny_suite_toml("env"), ["h-env-leak"], HOSTILE)
+    assert df.reason["h-env-leak"] == "ok", df.error["h-env-leak"]
+    with Store(db) as store:
+        info = json.loads(store.plan_json(int(df.id["h-env-leak"])))["info"]
+        tail = df.log_tail["h-env-leak"]
+    env = info["env"]
+    assert secret not in json.dumps(info) and secret not in tail
+    assert "OLDPWD" not in env and env.get("PWD") in (None, info["cwd"]) and env.get("HOME") != os.environ.get("HOME"), env
+    assert "where-the-operator-was" not in tail
+    if isolation.support().full:  # nothing of the host's paths with the harness's pid either
+        import re
+
+        assert env["HOME"] == "/tmp" and info["cwd"] == "/tmp"
+        assert not [k for k, v in env.items() if re.search(rf"(?<![0-9a-z]){os.getpid()}(?![0-9a-z])", v)], env
+
+
+UNPRIVILEGED = r'''
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from helpers import tiny_suite_toml
+from earthbench.harness import build_cases, isolation, run_case
+from earthbench.registry import load_plugin_file
+from earthbench.suite import parse_suite
+load_plugin_file(sys.argv[2])
+out = {"isolation": isolation.describe()}
+for name in ("h-forge-report", "h-tree-memory", "h-env-leak"):
+    (case,), _ = build_cases(parse_suite(tiny_suite_toml("u", wall_s=60.0, memory_mb=1024)), [name], plugins=[sys.argv[2]])
+    r = run_case(case, (0,))
+    out[name] = [r.reason, r.solve_cpu_s, r.peak_rss_mb, r.isolation]
+print(json.dumps(out))
+'''
+
+
+def _hidden_folder(path: str) -> str:
+    """The folder under the first ancestor of ``path`` that other users cannot enter ('' if none)."""
+    parts = Path(path).parts
+    for i in range(1, len(parts) - 1):
+        if not os.stat(Path(*parts[:i + 1])).st_mode & 0o001:
+            return str(Path(*parts[:i + 2]))
+    return ""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(os.getuid() != 0 or isolation.support().cgroup != "v1" or not isolation.support().bwrap,
+                    reason="needs root to delegate a cgroup v1 subtree, and user namespaces")
+def test_an_unprivileged_harness_keeps_the_fences(tmp_path):
+    """As ``nobody`` owning a delegated cgroup subtree (docs/isolation.md "Without root"), the
+    harness has every fence: the kernel's CPU figure, not the forged one; the memory budget of
+    the whole tree; an allow-listed environment."""
+    import shutil
+    import subprocess
+    import sys
+
+    if not (shutil.which("setpriv") and shutil.which("unshare")):
+        pytest.skip("needs setpriv and unshare (util-linux)")
+    script = Path(__file__).resolve().parents[1] / "scripts" / "unprivileged_harness.sh"
+    env = {**os.environ, "EB_BIND": _hidden_folder(os.path.realpath(sys.executable))}
+    out = subprocess.run([str(script), sys.executable, "-c", UNPRIVILEGED, str(Path(__file__).parent), HOSTILE],
+                         capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["isolation"] == "isolation: namespaces+cgroup-v1"
+    assert got["h-forge-report"][0] == "ok" and got["h-forge-report"][1] >= 1.8 and got["h-forge-report"][2] >= 290
+    assert got["h-tree-memory"][0] == "memory" and got["h-tree-memory"][2] <= 1024 + 1
+    assert got["h-env-leak"][0] == "ok" and {g[3] for k, g in got.items() if k != "isolation"} == {"namespaces+cgroup-v1"}

@@ -189,3 +189,50 @@ def test_a_suite_can_run_without_preparations(tmp_path):
     assert load_runs(tmp_path / "n.db").prepare_s.isna().all()
     with pytest.raises(SuiteError, match="prepare must be true or false"):
         parse_suite(toml.replace("prepare = false", 'prepare = "no"'))
+
+
+HOSTILE_PREPARATIONS = {
+    "t-prep-links": "a symbolic link",
+    "t-prep-fifo": "a FIFO (pipe)",
+    "t-prep-hardlink": "a hard link (b, 2 links)",
+    "t-prep-flood": "disk budget of 8 MB",
+    "t-prep-bigfile": "File too large",
+}
+
+
+def test_a_preparation_folder_is_hostile_data(tmp_path, prepared_root, monkeypatch):
+    """Links, special files, hard links and a folder over the disk budget: each an ``error`` of
+    that planner alone (the suite goes on), no file of the host written or made readable through
+    a link, the harness never waits on a FIFO, nothing of them kept for a case."""
+    victim = tmp_path / "key"
+    victim.write_text("secret")
+    victim.chmod(0o600)
+    monkeypatch.setenv("EARTHBENCH_TEST_VICTIM", str(victim))
+    report, df, log = _run(tmp_path, [*HOSTILE_PREPARATIONS, "t-prepares"], seeds="0-0", budget="prepare_disk_mb = 8")
+    df = df.set_index("planner")
+    assert df.reason.to_dict() == {**{p: "error" for p in HOSTILE_PREPARATIONS}, "t-prepares": "ok"}, df.error.to_dict()
+    for planner, why in HOSTILE_PREPARATIONS.items():
+        assert why in df.error[planner], (planner, df.error[planner])
+    assert "only plain files and folders are accepted" in df.error["t-prep-links"]
+    assert victim.read_text() == "secret" and oct(victim.stat().st_mode & 0o777) == "0o600"
+    assert [p.name for p in prepared_root.iterdir() if not p.name.startswith(".")] == [prepare_key(PlannerRef.resolve("t-prepares"))]
+    assert not [p for p in prepared_root.iterdir() if p.name.endswith(".tmp")]  # no half-made folder left
+
+
+def test_two_processes_prepare_a_key_once(tmp_path, prepared_root):
+    """The second of two processes that prepare one key at once waits for the first and uses its
+    folder; both report the one preparation's time (the one the folder's manifest holds)."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "earthbench", "prepare", "t-prepare-slow", "--plugin", PLUGIN]
+    env = {**os.environ, "EARTHBENCH_PREPARED": str(prepared_root)}
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) for _ in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    said = sorted("ran now" in out for out, _ in outs)
+    assert said == [False, True], outs
+    assert sum("waiting for another process that is preparing t-prepare-slow" in err for _, err in outs) == 1, outs
+    manifest = json.loads((prepared_root / prepare_key(PlannerRef.resolve("t-prepare-slow")) / "prepare.json").read_text())
+    for out, _ in outs:
+        assert f"wall     {manifest['wall_s']:.1f} s" in out

@@ -29,7 +29,7 @@ EXPECTED = {
     # the hostile ones
     "h-forge-ready": "error", "h-forge-started": "error", "h-forge-done": "error", "h-plan-42": "error",
     "h-dict-plan": "error", "h-garbage": "error", "h-bloated": "error", "h-escape": "ok", "h-kill-warden": "crashed",
-    "h-orphan-burn": "ok", "h-segv": "crashed",
+    "h-orphan-burn": "ok", "h-segv": "crashed", "h-log-flood": "error", "h-after-result": "error", "h-blank-lines": "error",
 }
 
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
@@ -70,6 +70,10 @@ def test_the_zoo_in_one_run(tmp_path, monkeypatch):
     assert "plan of type int" in df.error["h-plan-42"] and "plan of type dict" in df.error["h-dict-plan"]
     assert "not JSON" in df.error["h-garbage"] and "plan-size limit" in df.error["h-bloated"]
     assert "SIGSEGV" in df.error["h-segv"] and df.peak_rss_mb["h-segv"] < 300
+    # the log is a pipe with a byte budget (nothing on disk); after the result nothing may come
+    assert "wrote more than 64 MB to its stdout" in df.error["h-log-flood"] and len(df.log_tail["h-log-flood"]) <= 4000
+    assert "after its result" in df.error["h-after-result"] and df.solve_cpu_s["h-after-result"] < 1.0
+    assert "empty line" in df.error["h-blank-lines"] and df.solve_time_s["h-blank-lines"] < WALL_S
     # 0 orphans: every process a case started has ended (the pids the planners could write
     # down, without isolation; every process with a case's tag, in both modes)
     pids = [int(x) for f in tmp_path.glob("*.pids") for x in f.read_text().split()]

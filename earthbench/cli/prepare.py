@@ -2,7 +2,7 @@
 
 ``earthbench run`` does the same before the planner's first case when the folder is missing;
 this command runs it on its own (e.g. to time it, or before a run on a busy machine), under a
-suite's ``[budget] prepare_s`` and ``prepare_memory_mb`` (``--suite``; default: their defaults).
+suite's ``[budget] prepare_s``, ``prepare_memory_mb`` and ``prepare_disk_mb`` (``--suite``; default: their defaults).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("planner", help="planner name (see `earthbench list planners`)")
     add_plugin_arg(p)
     add_config_arg(p)
-    p.add_argument("--suite", metavar="SUITE", help="take prepare_s and prepare_memory_mb (and cores) from this suite's budget")
+    p.add_argument("--suite", metavar="SUITE", help="take the prepare_* limits (and cores) from this suite's budget")
     p.add_argument("--again", action="store_true", help="run it again even if this machine has it")
     return p
 
@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     from ..records import PlannerRef
-    from ..harness.prepare import PrepareError, ensure, find, forget, prepare_key
+    from ..harness.prepare import PrepareError, ensure, forget, prepare_key
     from ..registry import PLANNERS
 
     overrides = parse_config(args.config, PLANNERS.get(args.planner)) if args.config else {}
@@ -57,13 +57,12 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if args.again:
         forget(ref)
-    before = find(ref)
     try:
         done = ensure(ref, budget, log=lambda m: print(f"earthbench: {m}", file=sys.stderr, flush=True))
     except PrepareError as exc:
         raise EarthbenchError(str(exc)) from None
     assert done is not None  # ref.prepares
-    state = "found on this machine (use --again to run it anew)" if before is not None else "ran now"
+    state = "ran now" if done.ran else "found on this machine (use --again to run it anew)"
     print(f"{ref.name} {ref.version} [{ref.config_hash[:8]}]: {state}\n"
           f"  folder   {done.path}\n  key      {prepare_key(ref)}\n"
           f"  wall     {done.wall_s:.1f} s\n  CPU      {done.cpu_s:.1f} s\n"

@@ -71,6 +71,9 @@ def load_planner_class(source: str, name: str) -> type:
         from earthbench.planner import Planner
         from earthbench.registry import PLANNERS, plugin_module
 
+        folder = os.path.dirname(os.path.realpath(source))
+        if folder not in sys.path:  # its sibling modules, as for a script (the case sees them: docs/isolation.md)
+            sys.path.insert(0, folder)
         module, run = plugin_module(source)
         run()
         mod_name = module.__name__
@@ -232,6 +235,7 @@ def _short_tb() -> str:
 BOOTSTRAP = r"""
 import ctypes, json, os, resource, signal, sys
 msg_fd, report_fd, cores, mem, harness = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
+fsize = int(sys.argv[6]) if len(sys.argv) > 6 else 0
 try:
     prctl = ctypes.CDLL(None, use_errno=True).prctl
 except (OSError, AttributeError):
@@ -266,6 +270,8 @@ if planner == 0:
         os._exit(70)
     if mem > 0:
         resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+    if fsize > 0:  # a preparation: no file it writes may be larger than its disk budget
+        resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
     from earthbench.harness.child import main
     main(msg_fd)
     sys.exit(0)
@@ -331,5 +337,6 @@ except OSError:  # the harness is gone
     pass
 os._exit(0)
 """
-"""Run as ``python -c BOOTSTRAP MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID`` (pid 0: in a
-sandbox of its own); the first line of its stdin is the case's specification."""
+"""Run as ``python -c BOOTSTRAP MSG_FD REPORT_FD CORES MEMORY_BYTES HARNESS_PID [FILE_BYTES]`` (pid 0:
+in a sandbox of its own; ``FILE_BYTES``: a preparation's ``RLIMIT_FSIZE``, 0 none); the first line of
+its stdin is the case's specification."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import importlib.machinery
 import importlib.util
 import itertools
 import json
@@ -155,7 +156,7 @@ def visible_paths(planner_source: str = "") -> tuple[str, ...]:
                  if os.path.basename(p.rstrip(os.sep)) in ("site-packages", "dist-packages") and os.path.isdir(p))
     mods = set(_own_packages())
     if planner_source.endswith(".py"):
-        paths.add(_plugin_files(os.path.realpath(planner_source)))
+        paths.update(_plugin_files(os.path.realpath(planner_source)))
     elif ":" in planner_source:
         module = planner_source.split(":", 1)[0]
         mods.add(module)
@@ -184,25 +185,66 @@ def visible_paths(planner_source: str = "") -> tuple[str, ...]:
     return tuple(out)
 
 
-def _plugin_files(path: str) -> str:
-    """A plugin file's own files: the outermost package folder it sits in, or the file alone
-    (its folder may hold anything, e.g. the store a user runs beside it)."""
+def _plugin_files(path: str) -> tuple[str, ...]:
+    """A plugin file's own files: the outermost package folder it sits in; or, for a file in a
+    plain folder, the file and the modules beside it that it can import (``*.py``, compiled
+    modules, package folders), never anything else of that folder (it may hold anything, e.g.
+    the store a user runs beside it)."""
     top = ""
     d = os.path.dirname(path)
     while os.path.isfile(os.path.join(d, "__init__.py")):
         top, d = d, os.path.dirname(d)
-    return top or path
+    if top:
+        return (top,)
+    suffixes = tuple(importlib.machinery.all_suffixes())
+    out = [path]
+    try:
+        entries = list(os.scandir(d))
+    except OSError:
+        return tuple(out)
+    for e in entries:
+        if e.name.startswith("."):
+            continue
+        if e.name.endswith(suffixes) and e.is_file(follow_symlinks=False):
+            out.append(os.path.join(d, e.name))
+        elif e.is_dir(follow_symlinks=False) and e.name.isidentifier() and os.path.isfile(os.path.join(e.path, "__init__.py")):
+            out.append(os.path.join(d, e.name))
+    return tuple(dict.fromkeys(out))
+
+
+def store_exposure(db: str, sources: Iterable[str]) -> str:
+    """Why a case of a planner from ``sources`` could read the results store at ``db`` (its
+    ``-wal``, ``-shm``, ``-journal`` files too), or '' when none can: the harness refuses to run
+    then (the store holds the truth of every scenario, sealed ones too)."""
+    files = [os.path.realpath(str(db) + s) for s in ("", "-wal", "-shm", "-journal")]
+    for source in dict.fromkeys(sources):
+        for seen in visible_paths(source):
+            if any(_under(f, [seen]) for f in files):
+                return (f"the results store {db} lies inside {seen}, which the cases of {source or 'every planner'} can read; "
+                        "keep the store out of the planner's package and of the Python environment "
+                        "(e.g. --db in a folder of its own)")
+    return ""
+
+
+#: Where STL-TAMP's cache of built NLPs is (planners/stl_tamp/nlp_cache.py reads the same variable).
+NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"
+
+
+def nlp_cache_setting() -> str:
+    """``$EARTHBENCH_NLP_CACHE`` as a case is given it: ``off``, or the cache's resolved path
+    (the case has no ``HOME`` of the user's to find the default under)."""
+    env = os.environ.get(NLP_CACHE_ENV, "").strip()
+    if env.lower() == "off":
+        return "off"
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.realpath(os.path.expanduser(env) if env else os.path.join(base, "earthbench", "nlp"))
 
 
 def _nlp_cache() -> str | None:
     """STL-TAMP's cache of built NLPs, read-only: a case uses what is there and cannot change it
     for another case (it is filled outside the sandbox; see docs/isolation.md)."""
-    env = os.environ.get("EARTHBENCH_NLP_CACHE", "").strip()
-    if env.lower() == "off":
-        return None
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    path = os.path.realpath(os.path.expanduser(env) if env else os.path.join(base, "earthbench", "nlp"))
-    return path if os.path.isdir(path) else None
+    path = nlp_cache_setting()
+    return path if path != "off" and os.path.isdir(path) else None
 
 
 @functools.lru_cache(maxsize=1)

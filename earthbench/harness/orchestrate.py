@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import PluginError
+from ..errors import PluginError, StoreError
 from ..registry import PLANNERS
 from ..records import Case, PlannerRef
 from .local import Executor, LocalExecutor
@@ -39,6 +39,15 @@ def _refuse_inside_a_case() -> None:
             "the planner's file started a suite run while a case process imported it; "
             "put the code that runs suites under 'if __name__ == \"__main__\":'"
         )
+
+
+def _refuse_a_visible_store(cases: Sequence[Case], store: Store) -> None:
+    """No case may see the store (docs/isolation.md): it lies in no folder a case can read."""
+    from . import isolation
+
+    why = isolation.store_exposure(str(store.path), (c.planner.source for c in cases))
+    if why:
+        raise StoreError(why)
 
 
 def build_cases(
@@ -115,6 +124,7 @@ def run_cases(
             by_key.setdefault(c.key, c)
     todo = list(by_key.values())
     report.skipped = len(cases) - len(todo)
+    _refuse_a_visible_store(todo, store)
     if getattr(executor, "prepares_here", False):
         prepare_planners(todo, getattr(executor, "slots", [None])[0], log=log)
     if progress is not None:

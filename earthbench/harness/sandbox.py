@@ -55,7 +55,7 @@ import tempfile
 import threading
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -84,6 +84,9 @@ EXIT_GRACE_S = 5.0
 MEMORY_KILL_FRACTION = 0.9
 #: Bytes of the case's stdout/stderr kept with the result.
 LOG_TAIL = 4000
+#: Bytes a case may write to its stdout and stderr in all: past them it ends as ``error`` (the
+#: harness reads them from a pipe and keeps only :data:`LOG_TAIL`; nothing goes to a disk).
+LOG_LIMIT = 64 * 2**20
 #: The plan-size rule: the largest message (in practice, a plan's JSON) a case may send. A plan
 #: of about 350,000 actions fits; a larger one is refused as ``error`` with its own message, so
 #: a case can neither exhaust the harness's memory nor hold it parsing for minutes.
@@ -98,24 +101,40 @@ THREAD_VARS = (
     "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
     "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS",
 )
-#: Prefixes of the C library's allocator settings, removed from a case's environment. A Dask
-#: nanny gives its worker ``MALLOC_TRIM_THRESHOLD_=65536``; inherited by the case, it made
-#: greedy's 96 × 48 m plan fault 25x as many pages and run 0.2-0.4 s slower than under the
-#: local executor. A planner's speed must not depend on the executor that started it.
-ALLOCATOR_VARS = ("MALLOC_", "GLIBC_TUNABLES")
-#: Variables of the harness's environment a case is not given: where the results store is (it
-#: holds the truth of every scenario, sealed ones too; docs/sealed-evaluation.md).
+#: Variables of the harness's environment a case (and a preparation) is given, with the
+#: locale's ``LC_*``: what an interpreter and a compiler need. Nothing else of the harness's
+#: environment reaches a case (its tokens, ``HOME``, its working folders, where the store is;
+#: docs/isolation.md "What leaks into a case"); a planner that needs a setting of its own is
+#: given it by name in :data:`CASE_ENV`. Allocator settings stay out too: a Dask nanny gives
+#: its worker ``MALLOC_TRIM_THRESHOLD_=65536``, which made greedy's 96 × 48 m plan fault 25x as
+#: many pages; a planner's speed must not depend on the executor that started it.
+PASSED_VARS = ("PATH", "LANG", "LANGUAGE", "TZ", "LD_LIBRARY_PATH", "PYTHONHASHSEED", "PYTHONDONTWRITEBYTECODE",
+               "CC", "CXX")
+#: ``EARTHBENCH_CASE_ENV=NAME,NAME``: more variables of the harness's environment to give every
+#: case and preparation, for a planner's own settings (the operator chooses; never the store's).
+CASE_ENV = "EARTHBENCH_CASE_ENV"
+#: Variables never given to a case, whatever :data:`CASE_ENV` says: where the results store is
+#: (it holds the truth of every scenario, sealed ones too; docs/sealed-evaluation.md).
 HIDDEN_VARS = ("EARTHBENCH_DB",)
 _DIR_PREFIX = "earthbench-case-"
+#: This harness's case tags start so (random: a tag does not tell a case the harness's pid).
+TAG_PREFIX = f"{_DIR_PREFIX}{secrets.token_hex(6)}-"
 
 
 class HarnessError(EarthbenchError):
     """This machine cannot run a case at all (e.g. the temp directory is full): the run stops."""
 
 
-def _child_env(cores: int, tag: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(ALLOCATOR_VARS) and k not in HIDDEN_VARS}
+def _child_env(cores: int, tag: str, home: str) -> dict[str, str]:
+    """The allow-listed environment of a case: :data:`PASSED_VARS`, the operator's
+    :data:`CASE_ENV`, the thread caps, the module path and ``HOME`` (the case's own folder)."""
+    chosen = {n.strip() for n in os.environ.get(CASE_ENV, "").split(",") if n.strip()} - set(HIDDEN_VARS)
+    env = {k: v for k, v in os.environ.items() if k in PASSED_VARS or k.startswith("LC_") or k in chosen}
     env[CASE_TAG] = tag
+    env["HOME"] = home
+    cache = isolation.nlp_cache_setting()
+    if cache:  # where the planner finds the built NLPs, resolved here (the case has no HOME of the user's)
+        env[isolation.NLP_CACHE_ENV] = cache
     for var in THREAD_VARS:
         env[var] = str(cores)
     # the child sees the modules the harness sees (test modules, plugins added to sys.path), but
@@ -126,8 +145,8 @@ def _child_env(cores: int, tag: str) -> dict[str, str]:
         p for p in sys.path
         if p and os.path.isdir(p) and os.path.realpath(p) not in own and not (os.path.realpath(p) + os.sep).startswith(prefixes)
     ]
-    if env.get("PYTHONPATH"):
-        paths.append(env["PYTHONPATH"])
+    if os.environ.get("PYTHONPATH"):
+        paths.append(os.environ["PYTHONPATH"])
     env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
     env["PYTHONUNBUFFERED"] = "1"
     return env
@@ -222,45 +241,47 @@ class JobOutcome:
 
 
 def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *, writable: str,
-            stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> JobOutcome:
+            stop: threading.Event | None = None, startup_s: float = STARTUP_S,
+            watch: Callable[[], str] | None = None) -> JobOutcome:
     """Run a non-case job (``job`` is its specification, with ``"job"`` naming it) in a fresh,
     fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one input once
-    it is ready; ``writable`` is the folder it may write. Only a ``prepare`` job exists (:mod:`.prepare`)."""
+    it is ready; ``writable`` is the folder it may write; ``watch`` (called every second while it
+    runs) says why to end it, e.g. its folder is over its disk budget. Only a ``prepare`` job
+    exists (:mod:`.prepare`)."""
     o, tail, label = _run_fenced(job, payload, tuple(cores), budget, what="a preparation",
                                  visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,),
-                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s)
+                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s, watch=watch)
     return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
                       tail, label)
 
 
 def _run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], budget: Budget, *, what: str,
                 visible: Sequence[str], writable: Sequence[str] = (), loop: StepLoop | None = None, prepare: bool = False,
-                stop: threading.Event | None = None, startup_s: float = STARTUP_S) -> tuple[_Outcome, str, str]:
+                stop: threading.Event | None = None, startup_s: float = STARTUP_S,
+                watch: Callable[[], str] | None = None) -> tuple[_Outcome, str, str]:
     """One process tree of the bootstrap in the fences (namespaces, cgroup) on ``cores`` under
     ``budget``, supervised until it ends: ``spec`` is the first line of its input (a pipe; no file
     anyone else can reach), ``payload`` the one it is handed once ready (a case's observation, a
     preparation's job). Returns the outcome, the tail of its log and the fences it had; a case
-    and a preparation differ only in these arguments (``what`` names it in errors)."""
+    and a preparation differ only in these arguments (``what`` names it in errors); ``watch``,
+    called every :data:`TREE_SAMPLE_S` while it runs, says why to end it ('' to go on)."""
     fences = isolation.support()
     _undumpable()
-    tmp = _case_dir()  # the harness's own folder (the log); a sandboxed process never sees it
+    tmp = _case_dir()  # the working folder of a case without namespaces; a sandboxed one never sees it
     try:
-        try:
-            log = open(os.path.join(tmp, "log.txt"), "wb")
-        except OSError as exc:
-            raise HarnessError(f"cannot write the case folder {tmp}: {exc.strerror}; free space there or point TMPDIR elsewhere") from None
         mr, mw = os.pipe()
         rr, rw = os.pipe()
+        lr, lw = os.pipe()  # its stdout and stderr: read here with a byte budget, never a file on disk
         mem = int(budget.memory_mb) * 1024 * 1024
-        tag = os.path.basename(tmp)
-        env = _child_env(len(cores), tag)
-        if fences.bwrap:  # HOME stays: what the case may read under it (an NLP cache) is where it was
-            env["TMPDIR"] = "/tmp"
+        tag = TAG_PREFIX + secrets.token_hex(8)
+        env = _child_env(len(cores), tag, "/tmp" if fences.bwrap else tmp)
+        env["TMPDIR"] = "/tmp" if fences.bwrap else tempfile.gettempdir()
+        fsize = budget.prepare_disk_mb * 2**20 if prepare else 0
         argv = [sys.executable, "-c", BOOTSTRAP, str(mw), str(rw), ",".join(map(str, cores)), str(mem),
-                "0" if fences.bwrap else str(os.getpid())]
+                "0" if fences.bwrap else str(os.getpid()), str(fsize)]
         fence = isolation.Fence(
             argv, bwrap=fences.bwrap, cgroup=fences.cgroup, cores=cores, memory_bytes=mem, visible=visible, writable=writable,
-            pass_fds=(mw, rw), env=env, stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=tmp,
+            pass_fds=(mw, rw), env=env, stdin=subprocess.PIPE, stdout=lw, stderr=lw, cwd=tmp,
         )
         t_spawn = time.monotonic()
         try:
@@ -269,26 +290,24 @@ def _run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], bu
             except isolation.FenceError as exc:
                 raise HarnessError(f"cannot start a sandbox for {what}: {exc}") from None
             finally:
-                os.close(mw)
-                os.close(rw)
-                log.close()
+                for fd in (mw, rw, lw):
+                    os.close(fd)
             assert proc.stdin is not None
             try:
                 proc.stdin.write(json.dumps(spec).encode() + b"\n")
                 proc.stdin.flush()
             except OSError:
                 pass
-            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn, loop, fence.cgroup, bool(fences.bwrap))
+            sup = _Supervisor(proc, mr, rr, payload, tag, budget, startup_s, stop, t_spawn, loop, fence.cgroup, bool(fences.bwrap),
+                              log_fd=lr)
             sup.prepare = prepare
+            sup.watch = watch
             out = sup.run()
         finally:
-            os.close(mr)
-            os.close(rr)
+            for fd in (mr, rr, lr):
+                os.close(fd)
             fence.close()
-        with open(os.path.join(tmp, "log.txt"), "rb") as f:
-            f.seek(0, os.SEEK_END)
-            f.seek(max(0, f.tell() - LOG_TAIL))
-            log_tail = f.read().decode(errors="replace")
+        log_tail = bytes(sup.log).decode(errors="replace")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out, log_tail, fence.label
@@ -373,9 +392,12 @@ class _Supervisor:
 
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
                  budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None,
-                 cgroup: isolation.CaseCgroup | None = None, sandboxed: bool = False):
+                 cgroup: isolation.CaseCgroup | None = None, sandboxed: bool = False, log_fd: int = -1):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
         self.prepare = False  # a preparation job (run_job), not a case
+        self.watch: Callable[[], str] | None = None
+        self.next_watch = t_spawn + TREE_SAMPLE_S
+        self.log_fd, self.log, self.logged = log_fd, bytearray(), 0
         self.budget, self.stop = budget, stop
         self.o = _Outcome(t_spawn=t_spawn, startup_s=startup_s, loop=loop)
         self.outbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
@@ -402,6 +424,9 @@ class _Supervisor:
         sel = selectors.DefaultSelector()
         sel.register(self.msg_fd, selectors.EVENT_READ)
         os.set_blocking(self.msg_fd, False)
+        if self.log_fd >= 0:
+            sel.register(self.log_fd, selectors.EVENT_READ)
+            os.set_blocking(self.log_fd, False)
         eof = False
         try:
             while not o.fault:
@@ -415,16 +440,21 @@ class _Supervisor:
                 if now >= self.next_sample:
                     self._sample(now)
                     self.next_sample = now + SAMPLE_S
-                if self._over_cpu():
+                if self.watch is not None and now >= self.next_watch:
+                    o.fault = self.watch()
+                    self.next_watch = time.monotonic() + TREE_SAMPLE_S
+                if o.fault or self._over_cpu():
                     break
-                if not eof:
-                    if sel.select(timeout=min(self.deadline - now, 0.25)):
-                        eof = self._read()
+                if sel.get_map():
+                    eof = self._pump(sel, min(self.deadline - now, 0.005 if eof else 0.25)) or eof
                 else:
                     time.sleep(0.005)
                 if self._reaped():
-                    while not eof and not o.fault and sel.select(timeout=0.05):  # what is still in the pipe
-                        eof = self._read()
+                    while not eof and not o.fault:  # what is still in the pipe
+                        got = self._pump(sel, 0.05, drain=True)
+                        if got is None:
+                            break
+                        eof = got
                     break
         finally:
             sel.close()
@@ -439,14 +469,53 @@ class _Supervisor:
                 o.cgroup_peak_mb = self.cgroup.peak_bytes() / 2**20
                 o.oom_kills = self.cgroup.oom_kills()
                 o.processes = self.cgroup.pids_peak
+            if self.log_fd >= 0:
+                self._read_log()  # what its processes wrote before they ended (they all have)
             if self.writer is not None:
                 self.outbox.put(None)
                 self.writer.join(timeout=1.0)
         return o
 
+    def _pump(self, sel: selectors.BaseSelector, timeout: float, drain: bool = False) -> bool | None:
+        """Wait up to ``timeout`` for the message pipe or the log; read what came. Returns whether
+        the message pipe reached its end (None: nothing came while ``drain``ing the messages)."""
+        events = sel.select(timeout=max(0.0, timeout))
+        eof, got = False, False
+        for key, _ in events:
+            if key.fd == self.log_fd:
+                if not self._read_log():
+                    sel.unregister(self.log_fd)
+            else:
+                got = True
+                eof = self._read()
+                if eof:
+                    sel.unregister(self.msg_fd)
+        return None if drain and not got else eof
+
+    def _read_log(self) -> bool:
+        """Keep the last :data:`LOG_TAIL` bytes of what the case wrote to its stdout and stderr
+        (nothing reaches a disk); past :data:`LOG_LIMIT` bytes it is a fault. False at its end."""
+        while True:
+            try:
+                part = os.read(self.log_fd, 1 << 20)
+            except BlockingIOError:
+                return True
+            except OSError:
+                return False
+            if not part:
+                return False
+            self.logged += len(part)
+            self.log += part[-LOG_TAIL:]
+            del self.log[:-LOG_TAIL]
+            if self.logged > LOG_LIMIT and not self.o.fault:
+                self.o.fault = (f"the case wrote more than {LOG_LIMIT // 2**20} MB to its stdout and stderr "
+                                f"(only the last {LOG_TAIL:,} bytes are kept)")
+                return True
+
     # -- messages ------------------------------------------------------------------------------
     def _read(self) -> bool:
-        """Read what the pipe holds; scan only the new bytes for line ends (linear in the size)."""
+        """Read what the pipe holds; scan only the new bytes for line ends (linear in the size).
+        After the result nothing more may come: any byte is a protocol fault, read no further."""
         chunk, eof = bytearray(), False
         while len(chunk) < 1 << 24:  # drain what is there (up to 16 MB) before scanning it
             try:
@@ -457,21 +526,32 @@ class _Supervisor:
                 eof = True
                 break
             chunk += part
+            if self.o.done is not None:
+                break
+        if self.o.done is not None and chunk and not self.o.fault:
+            self.o.fault = f"the case wrote on its message pipe after its result: {bytes(chunk[:40])!r}"
+            return eof
         self.buf += chunk
+        start = 0
         while not self.o.fault:
             nl = self.buf.find(b"\n", self.scanned)
             if nl < 0:
                 self.scanned = len(self.buf)
-                if len(self.buf) > MAX_RESULT_BYTES:
-                    self.o.fault = _too_large(len(self.buf))
+                if len(self.buf) - start > MAX_RESULT_BYTES:
+                    self.o.fault = _too_large(len(self.buf) - start)
                 break
-            line = bytes(self.buf[:nl])
-            del self.buf[: nl + 1]
-            self.scanned = 0
+            line = bytes(self.buf[start:nl])
+            start = self.scanned = nl + 1
             if len(line) > MAX_RESULT_BYTES:
                 self.o.fault = _too_large(len(line))
-            elif line.strip():
+            elif not line.strip():
+                self.o.fault = "the case sent an empty line on its message pipe (every message is one JSON object)"
+            else:
                 self._handle(line)
+                if self.o.done is not None and len(self.buf) > start and not self.o.fault:
+                    self.o.fault = f"the case wrote on its message pipe after its result: {bytes(self.buf[start:start + 40])!r}"
+        del self.buf[:start]
+        self.scanned = max(0, self.scanned - start)
         if eof and self.buf.strip() and not self.o.fault:
             self.o.fault = "the case's last message is not terminated by a newline"
         return eof

@@ -105,13 +105,11 @@ def load_script(name: str) -> ModuleType:
 def case_processes() -> list[int]:
     """Live processes of this process's cases, found by the tag every case process carries
     (inside a sandbox too: its processes are ours to see, not the other way round)."""
-    import os
-
     import psutil
 
-    from earthbench.harness.sandbox import CASE_TAG
+    from earthbench.harness.sandbox import CASE_TAG, TAG_PREFIX
 
-    mine = f"earthbench-case-{os.getpid()}-"
+    mine = TAG_PREFIX
     out = []
     for p in psutil.process_iter():
         try:

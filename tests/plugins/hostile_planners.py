@@ -324,3 +324,64 @@ class EscapesCores(Planner):
         except OSError:
             pass
         return Plan(info={"affinity": sorted(os.sched_getaffinity(0))})
+
+
+class LeaksEnvironment(Planner):
+    """Sends the whole environment it was given out again: in its plan's info and in its log."""
+
+    name = "h-env-leak"
+
+    def plan(self, scenario):
+        env = dict(os.environ)
+        print(env, flush=True)
+        return Plan(info={"env": env, "cwd": os.getcwd()})
+
+
+class FloodsLog(Planner):
+    """Writes 100 MB to its stdout (a file on the host would hold them all) and tries to fallocate more."""
+
+    name = "h-log-flood"
+
+    def plan(self, scenario):
+        try:
+            os.posix_fallocate(1, 0, 2**30)
+        except OSError:
+            pass
+        block = b"spam " * 200_000
+        for _ in range(100):
+            os.write(1, block)
+        return Plan()
+
+
+class FloodsAfterResult(Planner):
+    """Keeps a copy of its message pipe and, once its result is sent, floods it with blank lines."""
+
+    name = "h-after-result"
+
+    def plan(self, scenario):
+        import atexit
+
+        fd = os.dup(_harness_pipe())
+
+        def flood():
+            end = time.monotonic() + 20
+            while time.monotonic() < end:
+                try:
+                    os.write(fd, b"\n" * 65536)
+                except OSError:
+                    return
+
+        atexit.register(flood)
+        return Plan()
+
+
+class FloodsBlankLines(Planner):
+    """Floods its message pipe with blank lines before any result."""
+
+    name = "h-blank-lines"
+
+    def plan(self, scenario):
+        for _ in range(160):
+            os.write(_harness_pipe(), b"\n" * 65536)
+        time.sleep(12)
+        return Plan()

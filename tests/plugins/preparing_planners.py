@@ -63,3 +63,85 @@ class PrepareSleeps(Planner):
 
     def plan(self, scenario):
         return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+class PrepareSlow(Planner):
+    """A preparation that takes a while (two processes that prepare it at once must not both run it)."""
+
+    name = "t-prepare-slow"
+
+    def prepare(self, folder, jobs=1):
+        time.sleep(3.0)
+        (folder / "done.txt").write_text(str(time.time()))
+        return {"slept": 3.0}
+
+    def plan(self, scenario):
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+# -- hostile preparations: the folder a job leaves is data the harness must not trust ------------
+def _victim() -> str:
+    """A file of the host the test made (0600); only its path reaches the job, through the environment."""
+    return os.environ.get("EARTHBENCH_TEST_VICTIM", "/nonexistent")
+
+
+class _Hostile(Planner):
+    def plan(self, scenario):
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+class PrepareLinks(_Hostile):
+    """Plants the manifest's name as a link to a host file (the harness would write through it) and a
+    link to the victim key (a chmod through it would make it world-readable); and a dangling one."""
+
+    name = "t-prep-links"
+
+    def prepare(self, folder, jobs=1):
+        (folder / "key").symlink_to(_victim())
+        (folder / "prepare.json").symlink_to(_victim())
+        (folder / "gone").symlink_to("/nonexistent/at/all")
+        return {}
+
+
+class PrepareFifo(_Hostile):
+    """Leaves a FIFO: a harness that opened it would wait forever."""
+
+    name = "t-prep-fifo"
+
+    def prepare(self, folder, jobs=1):
+        os.mkfifo(folder / "pipe")
+        return {}
+
+
+class PrepareHardLink(_Hostile):
+    """Leaves a second name of one of its files (outside the sandbox it could be a host file)."""
+
+    name = "t-prep-hardlink"
+
+    def prepare(self, folder, jobs=1):
+        (folder / "a").write_text("a")
+        os.link(folder / "a", folder / "b")
+        return {}
+
+
+class PrepareFloods(_Hostile):
+    """Many files, each under the disk budget, more than it together; then waits to be caught."""
+
+    name = "t-prep-flood"
+
+    def prepare(self, folder, jobs=1):
+        for i in range(6):
+            (folder / f"part{i}").write_bytes(b"x" * 3 * 2**20)
+        time.sleep(5)
+        return {}
+
+
+class PrepareBigFile(_Hostile):
+    """One file larger than the disk budget (fallocate'd: no data written)."""
+
+    name = "t-prep-bigfile"
+
+    def prepare(self, folder, jobs=1):
+        with open(folder / "big", "wb") as f:
+            os.posix_fallocate(f.fileno(), 0, 64 * 2**20)
+        return {}
