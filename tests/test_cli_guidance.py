@@ -5,6 +5,8 @@ checked with close matches."""
 from __future__ import annotations
 
 import json
+import re
+import shlex
 from pathlib import Path
 
 import pytest
@@ -20,6 +22,35 @@ PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
+#: A command the CLI prints for the user to run: ``earthbench`` and a command name, its words up to two
+#: spaces (the explanation in brackets follows), a semicolon, a comma after a word ("…, then") or the line's end.
+HINT = re.compile(r"\bearthbench ([a-z][a-z-]*(?: [^\s;(),]+(?:,[^\s;(),]+)*)*)")
+
+
+def hints(text: str) -> list[list[str]]:
+    """Every command ``text`` tells the user to run, as argv lists (placeholders such as ``N`` excluded)."""
+    out = []
+    for m in HINT.finditer(text):
+        argv = shlex.split(m.group(1))
+        if argv and not any(a in ("N", "RUN", "DIR", "PATH") for a in argv):
+            out.append(argv)
+    return out
+
+
+def run_hints(text: str, capsys) -> dict[str, str]:
+    """Run every hint of ``text`` as printed; each must exit 0 and say something. Returns command line → its output."""
+    seen = {}
+    for argv in hints(text):
+        line = " ".join(argv)
+        if line in seen:
+            continue
+        assert main(argv) == 0, f"hint failed: earthbench {line}"
+        cap = capsys.readouterr()
+        seen[line] = cap.out + cap.err
+        assert seen[line].strip(), line
+    return seen
+
+
 @pytest.fixture
 def suite(tmp_path):
     f = tmp_path / "g.toml"
@@ -27,14 +58,25 @@ def suite(tmp_path):
     return str(f)
 
 
-def test_invalid_case_names_its_rule_and_the_run_to_see(tmp_path, suite, capsys):
+def test_invalid_case_names_its_rule_and_the_run_to_see(tmp_path, suite, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # hints that write files (a board, P.json) write here
     db = str(tmp_path / "g.db")
     assert main(["run", suite, "--planner", "t-invalid", "--plugin", PLUGIN, "--db", db]) == 1  # no valid plan
     err = capsys.readouterr().err
     run_id = int(load_runs(db)["id"].iloc[0])
     assert "1 case (1 scenario × t-invalid), 1 slot of" in err
-    assert "invalid" in err and "cut_depth at action 0" in err and f"see: earthbench runs --id {run_id}" in err
-    assert "no case has a valid plan (exit status 1)" in err and "next: earthbench runs" in err
+    assert "invalid" in err and "cut_depth at action 0" in err and f"see: earthbench runs --db {db} --id {run_id}" in err
+    assert "no case has a valid plan (exit status 1)" in err
+    assert f"next: earthbench runs --db {db} --suite g --planner t-invalid --reason invalid  (the 1 failed run: 1 invalid" in err
+    # every command it printed runs as printed, and the failure filter shows the failure
+    done = run_hints(err, capsys)
+    assert f"runs --db {db} --id {run_id}" in done and "leaderboard --db " + db + " --suite g" in done
+    assert "invalid" in done[f"runs --db {db} --suite g --planner t-invalid --reason invalid"].splitlines()[2]  # a row
+    assert (tmp_path / "board" / "README.md").exists()  # the leaderboard hint's default folder
+    more = done[f"runs --db {db} --id {run_id}"]
+    assert [a[0] for a in hints(more)] == ["runs", "show"]  # "to see it": export the pair, then draw it
+    run_hints(more, capsys)
+    assert (tmp_path / "earthbench-show.png").stat().st_size > 0
 
     scen, plan = tmp_path / "s.json", tmp_path / "p.json"
     assert main(["runs", "--db", db, "--id", str(run_id), "--scenario-out", str(scen), "--plan-out", str(plan)]) == 0
@@ -43,6 +85,41 @@ def test_invalid_case_names_its_rule_and_the_run_to_see(tmp_path, suite, capsys)
     assert Scenario.from_json(scen).digest == load_runs(db)["scenario_digest"].iloc[0]
     assert main(["validate", str(plan), "--scenario", str(scen)]) == 1  # the exported pair reproduces the verdict
     assert "cut_depth" in capsys.readouterr().out
+
+
+def test_next_names_the_failures_that_happened_and_keeps_the_selection(tmp_path, capsys, monkeypatch):
+    """A run whose failures are errors and short plans is pointed at those, never at an empty `--reason invalid`;
+    the leaderboard hint keeps `--seeds`, and every hint runs as printed."""
+    monkeypatch.chdir(tmp_path)
+    f = tmp_path / "two.toml"
+    f.write_text(tiny_suite_toml("two", seeds="0-1"))
+    db = str(tmp_path / "two.db")
+    for planner in ("t-raise", "t-fast"):
+        main(["run", str(f), "--planner", planner, "--plugin", PLUGIN, "--db", db, "--seeds", "0"])
+    err = capsys.readouterr().err
+    assert "--reason invalid" not in err
+    assert f"earthbench runs --db {db} --suite two --planner t-raise --reason error  (the 1 failed run: 1 error" in err
+    assert f"earthbench runs --db {db} --suite two --planner t-fast --short  (the 1 valid run short of the target" in err
+    assert f"earthbench leaderboard --db {db} --suite two --seeds 0  (" in err
+    done = run_hints(err, capsys)
+    assert "t-raise" in done[f"runs --db {db} --suite two --planner t-raise --reason error"]
+    assert "(1 run(s)" in done[f"runs --db {db} --suite two --planner t-fast --short"]
+    assert "leaderboard: 2 run(s)" in done[f"leaderboard --db {db} --suite two --seeds 0"]
+    assert "scenarios: seed 0 of the suite only" in (tmp_path / "board" / "README.md").read_text()  # not 2 of 4 at 50 %
+
+
+def test_runs_refuses_names_it_has_no_run_of(tmp_path, suite, capsys):
+    db = str(tmp_path / "n.db")
+    assert main(["run", suite, "--planner", "greedy", "--db", db, "--quiet"]) == 0
+    capsys.readouterr()
+    for argv, said in ((["runs", "--planner", "gredy"], "planner 'gredy' has no runs in"),
+                       (["runs", "--suite", "gg"], "suite 'gg' has no runs in"),
+                       (["rescore", "--planner", "gredy"], "did you mean 'greedy'?"),
+                       (["verify", db, "--planner", "near-truk"], "Planners there: greedy")):
+        assert main([*argv[:1], *([] if argv[0] == "verify" else ["--db", db]), *argv[1:]]) == 2, argv
+        assert said in capsys.readouterr().err
+    assert main(["runs", "--db", db, "--short"]) == 0
+    assert "(0 run(s)" in capsys.readouterr().err  # greedy reaches the target: no short run
 
 
 def test_exit_status_and_legend(tmp_path, suite, capsys):

@@ -1,4 +1,7 @@
-"""``earthbench leaderboard``: turn the results store into ``leaderboard/`` (tables, CSVs, page, figures).
+"""``earthbench leaderboard``: turn the results store into a board folder (tables, CSVs, page, figures).
+
+The folder is ``board/`` unless ``--out`` names another; the published boards of a clone
+(``leaderboard/``) are rewritten only when ``--out`` names them.
 
 Writes README.md (one ranked table per suite and track, each with its ranking rule and a
 reproducibility stamp, then one table per family and per target and a history of older
@@ -16,12 +19,16 @@ import time
 from ..store import default_db
 from ._common import plain
 
+#: Where a board goes without ``--out``: never the clone's tracked ``leaderboard/``, which a plain run would overwrite.
+DEFAULT_OUT = "board"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("leaderboard", help="write leaderboard tables, CSVs, an HTML page and figures from the store",
                        description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database (default: $EARTHBENCH_DB or earthbench.db)")
-    p.add_argument("--out", default="leaderboard", metavar="DIR", help="output directory (default: leaderboard/)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                   help=f"output directory (default: {DEFAULT_OUT}/; a clone's published boards are in leaderboard/)")
     p.add_argument("--suite", action="append", default=[], metavar="NAME",
                    help="publish only this suite (repeatable; default: every suite with runs in the store)")
     p.add_argument("--no-figures", action="store_true", help="tables, CSVs and page only")

@@ -13,7 +13,7 @@ import sys
 
 from ..store import Store, decompress, default_db, stored_steps
 from ..verify import rejudge
-from ._common import plain
+from ._common import check_filters, plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -29,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
     changed = same = failed = 0
     with Store(args.db, create=False) as store:
         store.check_writable()
+        check_filters(store, args.db, args.suite, args.planner)
         rows = [r for r in store.query(suite=args.suite, planner=args.planner) if r["plan"] is not None]
         scenarios = {}
         for r in rows:
