@@ -182,3 +182,29 @@ def test_settings_are_listed_and_typed(capsys):
         "relax_fills": (0.5, 0.2), "max_digs": 7, "fill_min": 1.0}
     assert parse_config(["retime_moves=false", "mu_strategy=monotone"], PLANNERS.get("stl-tamp")) == {
         "retime_moves": False, "mu_strategy": "monotone"}
+
+
+def test_help_says_where_to_start_and_each_first_step_runs(tmp_path, capsys, monkeypatch):
+    from earthbench.cli import START_HERE, build_parser
+
+    assert build_parser().format_help().rstrip().endswith(START_HERE)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("EARTHBENCH_DB", raising=False)
+    done = run_hints(START_HERE, capsys)
+    assert sorted(done) == ["new-planner my-planner", "run smoke --planner greedy"]
+    assert (tmp_path / "earthbench.db").exists() and (tmp_path / "earthbench-my-planner").is_dir()
+
+
+def test_suites_line_up_and_runs_validate_have_help(capsys):
+    assert main(["suites"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len({line.index(" scenarios ") for line in lines}) == 1, "a long suite name pushed its row out of line"
+    import argparse
+
+    from earthbench.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert "--short" in sub.choices["runs"].description
+    for command, p in sub.choices.items():
+        bare = [a.dest for a in p._actions if not a.help and not isinstance(a, argparse._HelpAction)]
+        assert not bare, f"earthbench {command}: arguments without help: {bare}"

@@ -40,3 +40,38 @@ def test_readme_quick_start_is_what_ci_runs():
     assert "pip install -e '.[test]' && python -m pytest\n" in readme
     ci = (ROOT / ".ci" / "run").read_text()
     assert "pip install --quiet -e '.[test]'" in ci and ci.rstrip().endswith("python -m pytest")
+
+
+def _documented_commands() -> dict[str, set[str]]:
+    """docs/commands.md's table: command name → the options its first cell shows (every form of it)."""
+    text = (ROOT / "docs" / "commands.md").read_text()
+    out: dict[str, set[str]] = {}
+    for row in text.splitlines():
+        if not row.startswith("| `earthbench "):
+            continue
+        first = re.split(r"(?<!\\)\|", row)[1]
+        for form in re.findall(r"`earthbench ([^`]+)`", first):
+            out.setdefault(form.split()[0], set()).update(re.findall(r"(?<![\w-])(--?[a-z][a-z-]*)", form))
+    return out
+
+
+def _parser_commands() -> dict[str, list[list[str]]]:
+    """The command line's sub-commands → each option's spellings (without --help)."""
+    import argparse
+
+    from earthbench.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {name: [a.option_strings for a in p._actions if a.option_strings and not isinstance(a, argparse._HelpAction)]
+            for name, p in sub.choices.items()}
+
+
+def test_commands_page_documents_every_command_and_option_and_nothing_else():
+    documented, actual = _documented_commands(), _parser_commands()
+    assert sorted(documented) == sorted(actual), "docs/commands.md's commands differ from the command line's"
+    missing = [f"{c} {spellings[-1]}" for c, opts in actual.items() for spellings in opts
+               if not set(spellings) & documented[c]]
+    assert not missing, f"options docs/commands.md leaves out: {missing}"
+    known = {c: {s for spellings in opts for s in spellings} for c, opts in actual.items()}
+    gone = [f"{c} {o}" for c, opts in documented.items() for o in opts if o not in known[c]]
+    assert not gone, f"options docs/commands.md names that the command does not take: {gone}"
