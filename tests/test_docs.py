@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pandas as pd
+
 ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
@@ -75,3 +77,51 @@ def test_commands_page_documents_every_command_and_option_and_nothing_else():
     known = {c: {s for spellings in opts for s in spellings} for c, opts in actual.items()}
     gone = [f"{c} {o}" for c, opts in documented.items() for o in opts if o not in known[c]]
     assert not gone, f"options docs/commands.md names that the command does not take: {gone}"
+
+
+def _board(name: str = "") -> pd.DataFrame:
+    """A published board's suite-scope rows of each planner's latest version (``leaderboard/NAME/summary.csv``)."""
+    d = pd.read_csv(ROOT / "leaderboard" / name / "summary.csv", dtype={"planner_version": str})
+    return d[(d["scope"] == "suite") & d["latest"].astype(bool)]
+
+
+def _sentence(text: str, start: str) -> str:
+    """The paragraph of ``text`` from ``start`` on (to its blank line): the claim a test reads."""
+    assert start in text, f"the sentence starting {start!r} is gone: move its check with it"
+    return text[text.index(start):].split("\n\n")[0]
+
+
+def test_readme_solve_medians_are_the_boards():
+    """The README's solve-time medians are the `standard` board's, to the digits written."""
+    claim = _sentence((ROOT / "README.md").read_text(), "times — on the published `standard` board")
+    quoted = {p: v for v, p in re.findall(r"(\d+(?:\.\d+)?) s for\s+`([a-z-]+)`", claim)}
+    board = _board().query("suite == 'standard'").set_index("planner")["solve_time_median"]
+    assert sorted(quoted) == sorted(board.index), "the README should quote every planner of the board"
+    for planner, text in quoted.items():
+        digits = len(text.split(".")[1]) if "." in text else 0
+        assert float(text) == round(float(board[planner]), digits), (
+            f"README says {text} s for {planner}; leaderboard/summary.csv has {board[planner]:.3f} s")
+
+
+def test_readme_names_the_boards_planners_versions_and_size():
+    readme = (ROOT / "README.md").read_text()
+    standard = _board().query("suite == 'standard'")
+    claim = " ".join(_sentence(readme, "- [backhoe](leaderboard/README.md)").split())
+    m = re.search(r"\(([^()]*) on the (\d+) scenarios of `standard`\)", claim)
+    assert m, claim
+    assert sorted(re.split(r", | and ", m.group(1))) == sorted(standard["planner"]), m.group(1)
+    assert int(m.group(2)) == int(standard["of"].max())
+    remade = " ".join(_sentence(readme, "Which versions each holds").split())
+    for board, planner in (("closed-loop", "stl-tamp"), ("scale", "stl-tamp")):
+        version = _board(board).query("planner == @planner")["planner_version"].max()
+        assert f"the {board} board with {planner + ' ' if board == 'closed-loop' else ''}{version}" in remade, (board, version)
+
+
+def test_closed_loop_page_names_rows_the_board_has():
+    """The closed-loop page's example rows (`NAME VERSION closed-loop` and `NAME VERSION`) are on the published board."""
+    page = (ROOT / "docs" / "closed-loop.md").read_text()
+    board = (ROOT / "leaderboard" / "closed-loop" / "README.md").read_text()
+    named = re.findall(r"`([a-z][a-z-]* \d+(?:\.\d+)+(?: closed-loop)?)`", page)
+    assert len(named) >= 2
+    for label in named:
+        assert f"solve times of {label}:" in board, f"docs/closed-loop.md names `{label}`, which the closed-loop board lacks"
