@@ -208,3 +208,28 @@ def test_suites_line_up_and_runs_validate_have_help(capsys):
     for command, p in sub.choices.items():
         bare = [a.dest for a in p._actions if not a.help and not isinstance(a, argparse._HelpAction)]
         assert not bare, f"earthbench {command}: arguments without help: {bare}"
+
+
+def test_a_ranking_on_partial_data_says_so(tmp_path, capsys, monkeypatch):
+    """Runs on one of two scenarios: the run's table, the board's README and page and the command's note
+    call the ranking partial; once complete, none does."""
+    monkeypatch.chdir(tmp_path)
+    f = tmp_path / "two.toml"
+    f.write_text(tiny_suite_toml("two", seeds="0-1"))
+    db = str(tmp_path / "p.db")
+    assert main(["run", str(f), "--planner", "greedy", "--db", db, "--seeds", "0", "--quiet"]) == 0
+    capsys.readouterr()
+    from earthbench.cli.run import print_summary
+    from earthbench.store import Store
+
+    with Store(db) as store:
+        print_summary(store, "two")
+    assert "partial: not every scenario has a run (greedy 1.2 1 of 2)" in capsys.readouterr().out
+    assert main(["leaderboard", "--db", db, "--no-figures"]) == 0
+    assert "partial data on two" in capsys.readouterr().err
+    note = "partial: not every scenario has a run (greedy 1.2: 1 of 2)"
+    assert note in (tmp_path / "board" / "README.md").read_text() and note in (tmp_path / "board" / "index.html").read_text()
+    assert main(["run", str(f), "--planner", "greedy", "--db", db, "--quiet"]) == 0
+    assert "partial" not in capsys.readouterr().out
+    assert main(["leaderboard", "--db", db, "--no-figures"]) == 0
+    assert "partial" not in capsys.readouterr().err and "partial:" not in (tmp_path / "board" / "README.md").read_text()

@@ -57,4 +57,10 @@ def run(args: argparse.Namespace) -> int:
           f"({time.perf_counter() - t0:.1f} s)"
           + (f"; removed {len(res.removed)} figure file(s) of an earlier board from {res.out / 'figures'}/" if res.removed else ""),
           file=sys.stderr)
+    if res.summary is not None and not res.summary.empty:
+        main = res.summary[(res.summary["scope"] == "suite") & res.summary["latest"].astype(bool)]
+        partial = sorted(set(main.loc[main["runs"] < main["of"], "suite"]))
+        if partial:
+            print(f"leaderboard: note: partial data on {', '.join(partial)}: some planners lack runs on some scenarios "
+                  "(counted as failed); each such table says which", file=sys.stderr)
     return 0
