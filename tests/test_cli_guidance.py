@@ -115,8 +115,12 @@ def test_runs_refuses_names_it_has_no_run_of(tmp_path, suite, capsys):
     for argv, said in ((["runs", "--planner", "gredy"], "planner 'gredy' has no runs in"),
                        (["runs", "--suite", "gg"], "suite 'gg' has no runs in"),
                        (["rescore", "--planner", "gredy"], "did you mean 'greedy'?"),
-                       (["verify", db, "--planner", "near-truk"], "Planners there: greedy")):
-        assert main([*argv[:1], *([] if argv[0] == "verify" else ["--db", db]), *argv[1:]]) == 2, argv
+                       (["verify", db, "--planner", "near-truk"], "Planners there: greedy"),
+                       (["compare", db, "--a", "gredy@1.2", "--b", "greedy"], "did you mean 'greedy'?"),
+                       (["compare", db, "--suite", "gg", "--a", "greedy", "--b", "greedy"], "suite 'gg' has no runs in"),
+                       (["leaderboard", "--suite", "gg", "--out", str(tmp_path / "b")], "suite 'gg' has no runs in")):
+        own_db = argv[0] in ("verify", "compare")
+        assert main([*argv[:1], *([] if own_db else ["--db", db]), *argv[1:]]) == 2, argv
         assert said in capsys.readouterr().err
     assert main(["runs", "--db", db, "--short"]) == 0
     assert "(0 run(s)" in capsys.readouterr().err  # greedy reaches the target: no short run

@@ -17,7 +17,7 @@ import sys
 import time
 
 from ..store import default_db
-from ._common import plain
+from ._common import check_filters, plain
 
 #: Where a board goes without ``--out``: never the clone's tracked ``leaderboard/``, which a plain run would overwrite.
 DEFAULT_OUT = "board"
@@ -47,7 +47,12 @@ def run(args: argparse.Namespace) -> int:
     from ..publish import publish
     from ..suite import parse_seed_range
 
+    from ..store import Store
+
     t0 = time.perf_counter()
+    with Store(args.db, create=False) as store:
+        for suite in args.suite:  # a mistyped name: the close matches
+            check_filters(store, args.db, suite, [])
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
                   workers=args.jobs, replays=args.replays, all_versions=args.all_versions,
                   seeds=parse_seed_range(args.seeds) if args.seeds else None)
