@@ -125,3 +125,12 @@ def test_closed_loop_page_names_rows_the_board_has():
     assert len(named) >= 2
     for label in named:
         assert f"solve times of {label}:" in board, f"docs/closed-loop.md names `{label}`, which the closed-loop board lacks"
+
+
+def test_readme_preparation_time_is_the_boards():
+    """The README's stl-tamp preparation time is the `standard` board's "Prepare s", to the second."""
+    claim = " ".join(_sentence((ROOT / "README.md").read_text(), "On a 2-core AMD EPYC").split())
+    m = re.search(r"prepares stl-tamp, once \(it took (\d+) s for the published `standard` board", claim)
+    assert m, claim
+    board = _board().query("suite == 'standard' and planner == 'stl-tamp'")["prepare_max"]
+    assert int(m.group(1)) == round(float(board.iloc[0]))
