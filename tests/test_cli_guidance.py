@@ -5,7 +5,6 @@ checked with close matches."""
 from __future__ import annotations
 
 import json
-import re
 import shlex
 from pathlib import Path
 
@@ -15,26 +14,17 @@ from earthbench.cli import main
 from earthbench.store import load_runs
 from earthbench.world import Scenario
 
-from helpers import tiny_suite_toml
+from helpers import load_script, tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "faulty_planners.py")
 
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
 
 
-#: A command the CLI prints for the user to run: ``earthbench`` and a command name, its words up to two
-#: spaces (the explanation in brackets follows), a semicolon, a comma after a word ("…, then") or the line's end.
-HINT = re.compile(r"\bearthbench ([a-z][a-z-]*(?: [^\s;(),]+(?:,[^\s;(),]+)*)*)")
-
-
 def hints(text: str) -> list[list[str]]:
-    """Every command ``text`` tells the user to run, as argv lists (placeholders such as ``N`` excluded)."""
-    out = []
-    for m in HINT.finditer(text):
-        argv = shlex.split(m.group(1))
-        if argv and not any(a in ("N", "RUN", "DIR", "PATH") for a in argv):
-            out.append(argv)
-    return out
+    """Every earthbench command ``text`` tells the user to run, as argv lists, read as
+    ``scripts/newcomer_route.py`` reads them (placeholders such as ``N`` excluded)."""
+    return [shlex.split(h)[1:] for h in load_script("newcomer_route").hints(text) if h.startswith("earthbench ")]
 
 
 def run_hints(text: str, capsys) -> dict[str, str]:
@@ -237,3 +227,19 @@ def test_a_ranking_on_partial_data_says_so(tmp_path, capsys, monkeypatch):
     assert "partial" not in capsys.readouterr().out
     assert main(["leaderboard", "--db", db, "--no-figures"]) == 0
     assert "partial" not in capsys.readouterr().err and "partial:" not in (tmp_path / "board" / "README.md").read_text()
+
+
+def test_seal_and_export_hints_run_as_printed(tmp_path, capsys, monkeypatch):
+    """`seal`'s next step runs the sealed draw; `export`'s merge command merges the bundle; each as printed."""
+    monkeypatch.chdir(tmp_path)
+    key = tmp_path / "my key.json"  # a space: the printed command must quote it
+    assert main(["seal", "smoke", "--key", str(key)]) == 0
+    out = capsys.readouterr().out
+    assert f"next: earthbench run smoke --sealed '{key}'" in out
+    done = run_hints(out, capsys)
+    (command,) = done
+    assert "smoke~sealed-" in done[command] and "4 cases" in done[command]
+    sealed = out.split("sealed suite: ")[1].split()[0]
+    assert main(["export", "--suite", sealed, "--planner", "greedy", "mine.db"]) == 0
+    done = run_hints(capsys.readouterr().out, capsys)
+    assert list(done) == ["merge ALL.db mine.db"] and (tmp_path / "ALL.db").exists()
