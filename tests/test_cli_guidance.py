@@ -88,12 +88,21 @@ def test_next_names_the_failures_that_happened_and_keeps_the_selection(tmp_path,
         main(["run", str(f), "--planner", planner, "--plugin", PLUGIN, "--db", db, "--seeds", "0"])
     err = capsys.readouterr().err
     assert "--reason invalid" not in err
-    assert f"earthbench runs --db {db} --suite two --planner t-raise --reason error  (the 1 failed run: 1 error" in err
-    assert f"earthbench runs --db {db} --suite two --planner t-fast --short  (the 1 valid run short of the target" in err
+    assert f"earthbench runs --db {db} --suite two --seeds 0 --planner t-raise --reason error  (the 1 failed run: 1 error" in err
+    assert f"earthbench runs --db {db} --suite two --seeds 0 --planner t-fast --short  (the 1 valid run short of the target" in err
     assert f"earthbench leaderboard --db {db} --suite two --seeds 0  (" in err
     done = run_hints(err, capsys)
-    assert "t-raise" in done[f"runs --db {db} --suite two --planner t-raise --reason error"]
-    assert "(1 run(s)" in done[f"runs --db {db} --suite two --planner t-fast --short"]
+    assert "t-raise" in done[f"runs --db {db} --suite two --seeds 0 --planner t-raise --reason error"]
+    assert "(1 run(s)" in done[f"runs --db {db} --suite two --seeds 0 --planner t-fast --short"]
+    # a run on the other seed is not the selection's: --seeds keeps the listing to the run's scenarios
+    assert main(["run", str(f), "--planner", "t-fast", "--plugin", PLUGIN, "--db", db, "--seeds", "1", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["runs", "--db", db, "--suite", "two", "--seeds", "0", "--short"]) == 0
+    assert "(1 run(s)" in capsys.readouterr().err
+    assert main(["runs", "--db", db, "--suite", "two", "--short"]) == 0
+    assert "(2 run(s)" in capsys.readouterr().err
+    assert main(["runs", "--db", db, "--seeds", "0"]) == 2
+    assert "--seeds needs --suite" in capsys.readouterr().err
     assert "leaderboard: 2 run(s)" in done[f"leaderboard --db {db} --suite two --seeds 0"]
     assert "scenarios: seed 0 of the suite only" in (tmp_path / "board" / "README.md").read_text()  # not 2 of 4 at 50 %
 

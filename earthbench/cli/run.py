@@ -213,9 +213,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def runs_command(args: argparse.Namespace, suite: str) -> str:
-    """``earthbench runs`` narrowed to this command's store, suite and planners, runnable as printed."""
+    """``earthbench runs`` narrowed to this command's store, suite, seeds and planners, runnable as printed."""
     planners = "".join(f" --planner {shlex.quote(p)}" for p in dict.fromkeys(args.planner))
-    return f"earthbench runs{db_option(args.db)} --suite {shlex.quote(suite)}{planners}"
+    seeds = f" --seeds {shlex.quote(args.seeds)}" if args.seeds else ""
+    return f"earthbench runs{db_option(args.db)} --suite {shlex.quote(suite)}{seeds}{planners}"
 
 
 def next_steps(store: Store, cases: list[Any], args: argparse.Namespace, suite: str) -> str:
@@ -226,7 +227,7 @@ def next_steps(store: Store, cases: list[Any], args: argparse.Namespace, suite: 
             if (r["scenario_digest"], r["planner"], r["planner_version"], r["config_hash"]) in keys]
     base = runs_command(args, suite)
     lines = [f"{base} {flt}  ({what}; then --id N for one run)" for flt, what in failure_filters(rows)]
-    if not lines:
+    if rows and not lines:
         lines = [f"{base}  (every run reached the target; --id N shows one in full)"]
     seeds = f" --seeds {shlex.quote(args.seeds)}" if args.seeds else ""
     lines.append(f"earthbench leaderboard{db_option(args.db)} --suite {shlex.quote(suite)}{seeds}  "

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..records import REASONS
 from ..scoring import is_success, restate
-from ..store import DEFAULT_DB, Store, default_db
+from ..store import DEFAULT_DB, Store, default_db, suite_members
 from ._common import check_filters
 
 HELP = """List the runs stored in the results database, newest first, with filters; or, with --id N,
@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--short", action="store_true",
                    help="only valid plans that loaded less than the target (the summary's `short` column)")
     p.add_argument("--scenario", metavar="TEXT", help="only scenarios whose id contains TEXT")
+    p.add_argument("--seeds", metavar="A-B", help="with --suite: only its scenarios of these seeds, e.g. 0-2,7 (as `run --seeds`)")
     p.add_argument("--limit", type=int, default=50, help="at most this many rows, newest first (0: all; default 50)")
     p.add_argument("--format", choices=("table", "csv", "json"), default="table", help="output format (default: table)")
     p.add_argument("--id", type=int, metavar="RUN", help="show one run in full: config, violations, error, output tail")
@@ -106,18 +107,32 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _rows(store: Store, args: argparse.Namespace) -> list[dict[str, Any]]:
-    """The filtered runs' columns, at most ``--limit`` of them (``--short`` filters after the store's query)."""
+    """The filtered runs' columns, at most ``--limit`` of them (``--short`` and ``--seeds`` filter after the store's query)."""
     reason = ["ok"] if args.short else args.reason
     if args.short and args.reason and "ok" not in args.reason:
         return []  # a short run is a valid one: no other reason holds one
-    limit = None if args.short else args.limit or None
+    limit = None if args.short or args.seeds else args.limit or None
     stored = store.query(suite=args.suite, planner=args.planner, reason=reason, scenario=args.scenario, limit=limit)
+    if args.seeds:
+        digests = _seed_digests(store, args)
+        stored = [r for r in stored if r["scenario_digest"] in digests]
     ver = store.suite_version(args.suite) if args.suite else None
     labels = labels_of(store)
     rows = [_values(r, None if ver is None else ver["threshold"], labels) for r in stored]
     if args.short:
         rows = [r for r, row in zip(rows, stored) if is_short(row)]
     return rows[:args.limit] if args.limit else rows
+
+
+def _seed_digests(store: Store, args: argparse.Namespace) -> set[str]:
+    """The scenario digests of ``--suite``'s scenarios of ``--seeds``."""
+    from ..errors import EarthbenchError
+    from ..suite import parse_seed_range
+
+    if not args.suite:
+        raise EarthbenchError("--seeds needs --suite: seeds are counted within a suite")
+    members = suite_members(store, [args.suite])
+    return set(members.loc[members["seed"].isin(parse_seed_range(args.seeds)), "scenario_digest"])
 
 
 def is_short(row: Any) -> bool:
