@@ -291,7 +291,8 @@ def viewer_html(replays: list[dict[str, Any]]) -> str:
         f"<p>{len(replays)} published runs can be replayed as the referee judged them: pick one (or ▶ in a runs table), "
         "then play or drag the timeline. The heightmap changes dig by dig; the machines move along their paths; "
         "bucket footprints (black outline) and dumps (■) appear at their action; the excavator's reach annulus "
-        "follows its base; violations are marked in red at their action.</p>"
+        "follows its base; violations are marked in red at their action. The bar beside the map is its height scale "
+        "(m, the run's lowest to highest ground, as on the terrain figures).</p>"
         '<div class="rp-controls"><label>Run <select id="rp-run"></select></label> '
         '<button type="button" id="rp-play">▶ Play</button> '
         '<button type="button" id="rp-prev" title="previous action">◀|</button>'
@@ -300,6 +301,7 @@ def viewer_html(replays: list[dict[str, Any]]) -> str:
         '<label><input type="checkbox" id="rp-overlays" checked> paths and marks</label> '
         '<span id="rp-clock"></span></div>'
         '<div class="rp-body"><canvas id="rp-canvas" width="900" height="450"></canvas>'
+        '<canvas id="rp-scale" width="84" height="450" role="img" aria-label="height scale (m)"></canvas>'
         '<div class="rp-side"><p id="rp-verdict"></p><p id="rp-now"></p><ol id="rp-log"></ol></div></div>'
         f'<script type="application/json" id="rp-data">{_json_block(replays)}</script>'
         f"<noscript>{e('The replay viewer needs JavaScript.')}</noscript></section>"

@@ -25,12 +25,14 @@ class Progress:
     """Counts finished cases by reason; the ETA is the mean time per case so far × cases left."""
 
     def __init__(self, total: int, *, stream: TextIO | None = None, live: bool | None = None, quiet: bool = False,
-                 run_id: Callable[[Case], int | None] | None = None):
+                 run_id: Callable[[Case], int | None] | None = None, runs_command: str = "earthbench runs"):
         self.total = total
+        self.planned = total  # the cases asked for; ``total`` becomes those left to run (the harness skips stored ones)
         self.stream = stream or sys.stderr
         self.live = self.stream.isatty() if live is None else live
         self.quiet = quiet
         self.run_id = run_id  # the stored run of a case, for a pointer to `earthbench runs --id N`
+        self.runs_command = runs_command  # `earthbench runs` with the options (``--db``) its pointer needs to run as printed
         self.counts = {r: 0 for r in REASONS}
         self.done = 0
         self.t0 = time.monotonic()
@@ -44,6 +46,10 @@ class Progress:
 
     def start(self) -> None:
         self.t0 = time.monotonic()
+        if not self.quiet and self.planned > self.total:  # say it before counting to fewer than the header's cases
+            skipped = self.planned - self.total
+            self.stream.write(f"{skipped} of the {self.planned} cases already stored: skipped (--rerun runs them again); "
+                              f"running {self.total}\n")
         if self.live and not self.quiet and self.total:
             self.stream.write("\r" + self.line() + "\x1b[K")
             self.stream.flush()
@@ -65,7 +71,7 @@ class Progress:
             detail += " — " + result.error.strip().splitlines()[-1][:160]
         rid = self.run_id(case) if self.run_id is not None and result.reason != "ok" else None
         if rid is not None:
-            detail += f"; see: earthbench runs --id {rid}"
+            detail += f"; see: {self.runs_command} --id {rid}"
         if self.live:
             self.stream.write("\r\x1b[K" + detail + "\n" + self.line() + "\x1b[K")
         else:

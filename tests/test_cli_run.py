@@ -69,7 +69,8 @@ def test_sigkill_halfway_then_resume_stores_every_case_once(tmp_path):
     again = cli(*args, env={"EARTHBENCH_TEST_NAP": "0"})
     out, err = again.communicate(timeout=120)
     assert again.returncode == 0, err
-    assert f"{halfway} cases already stored were skipped" in err
+    assert f"{halfway} of the 6 cases already stored: skipped (--rerun runs them again); running {6 - halfway}" in err
+    assert err.index("already stored: skipped") < err.index("[1/")  # said before counting to fewer than the header's 6
     df = load_runs(db)
     assert len(df) == 6 and df.scenario_digest.is_unique and set(df.reason) == {"ok"}
     assert "t-nap" in out and "6/6" in out
@@ -86,6 +87,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_finished_cases(tmp_path):
     assert proc.returncode == 130, err
     assert "interrupted" in err and "run the same command again to resume" in err
     n = stored(db)
+    assert "the table above is partial" in err and "partial: not every scenario has a run (t-nap " in out and f" {n} of 6)" in out
     assert 1 <= n < 6
     con = sqlite3.connect(db)
     assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"

@@ -109,3 +109,42 @@ def test_script_file_and_package_reach_a_ranked_table(fresh):
         reasons = dict(db.execute("SELECT planner, group_concat(DISTINCT reason) FROM runs GROUP BY planner").fetchall())
     assert reasons == {"script-greedy": "ok", "file-greedy": "ok", "route-demo": "ok", "greedy": "ok"}
 
+
+
+def test_the_readme_route_and_every_printed_command_run_as_written(tmp_path):
+    """``scripts/newcomer_route.py --reuse``: the README's steps 1–3 as written in a fresh environment, then every
+    command earthbench printed for the user (``see:``, ``next:``, the new package's steps), each as printed."""
+    from helpers import load_script
+
+    route_script = load_script("newcomer_route")
+    lines: list[str] = []
+    route = route_script.walk(tmp_path, reuse=True, say=lines.append)
+    assert not route.failed, "\n".join(lines) + "\n" + "\n".join(s.output[-2000:] for s in route.failed)
+    readme = route_script.readme_commands((route_script.ROOT / "README.md").read_text())
+    ran = [s.command for s in route.steps]
+    assert all(c in ran for c in readme), "a README command did not run"
+    printed = {s.command: s.source for s in route.steps if s.source != "README"}
+    # the package's own steps, the runs filter and the board of each run, a submission's merge
+    assert "pip install -e earthbench-my-planner" in printed and "earthbench run smoke --planner my-planner" in printed
+    assert any(c.startswith("earthbench runs --suite quick") for c in printed)
+    assert "earthbench leaderboard --suite quick" in printed and any(c.startswith("earthbench merge ") for c in printed)
+    assert "passed" in next(s.output for s in route.steps if "python -m pytest earthbench-my-planner/tests" in s.command)
+
+
+def test_hints_are_read_as_printed():
+    """The route's reader of printed commands: inline ones stop where their explanation starts; a `next:`
+    block's indented lines are whole commands; placeholders are not run."""
+    from helpers import load_script
+
+    hints = load_script("newcomer_route").hints
+    text = ("[1/2] ok 1 | t: invalid — cut_depth; see: earthbench runs --db 'a b.db' --id 7\n"
+            "next: earthbench runs --suite s --reason error --short  (the 2 failed runs; then --id N for one run)\n"
+            "      earthbench leaderboard --suite s --seeds 0-2,7  (tables)\n"
+            "  to see it: earthbench runs --id 7 --plan-out P.json --scenario-out S.json, then earthbench show --plan P.json\n"
+            "merge it with `earthbench merge ALL.db m.db`; the command: earthbench runs --id N\n"
+            "next:\n  pip install -e pkg\n  earthbench run smoke --planner p  (first run)\n\n  earthbench not-this\n")
+    assert hints(text) == [
+        "earthbench runs --db 'a b.db' --id 7", "earthbench runs --suite s --reason error --short",
+        "earthbench leaderboard --suite s --seeds 0-2,7", "earthbench runs --id 7 --plan-out P.json --scenario-out S.json",
+        "earthbench show --plan P.json", "earthbench merge ALL.db m.db", "pip install -e pkg", "earthbench run smoke --planner p",
+        "earthbench not-this"]

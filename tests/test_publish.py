@@ -236,7 +236,9 @@ def test_cli_compare_for_ci(db, capsys):
 def test_cli_compare_errors(db, capsys):
     assert main(["compare", str(db), "--a", "greedy"]) == 2
     assert main(["compare", str(db), "--a", "nobody", "--b", "half"]) == 2
-    assert "stored configurations" in capsys.readouterr().err
+    assert "planner 'nobody' has no runs in" in capsys.readouterr().err  # with the planners there
+    assert main(["compare", str(db), "--a", "greedy@9", "--b", "half"]) == 2
+    assert "stored configurations" in capsys.readouterr().err  # a known planner, no such version
 
 
 # -- merge -------------------------------------------------------------------------------------------

@@ -95,6 +95,45 @@ def test_terrain_changes_dig_by_dig_where_the_referee_cut(viewer):
     dt.js("document.getElementById('rp-overlays').checked = true")
 
 
+def _shot(dt, element: str) -> np.ndarray:
+    import matplotlib.image as mpimg
+
+    r = dt.js(f"(() => {{ const c = document.getElementById('{element}'); c.scrollIntoView();"
+              " const b = c.getBoundingClientRect();"
+              " return [b.left + c.clientLeft + window.scrollX, b.top + c.clientTop + window.scrollY, c.width, c.height]; })()")
+    png = dt.screenshot(clip={"x": r[0], "y": r[1], "width": r[2], "height": r[3]})
+    return (mpimg.imread(io.BytesIO(png))[..., :3] * 255).round().astype(int)
+
+
+def test_height_scale_beside_the_map_reads_its_colours(viewer):
+    """The scale spans the run's lowest to highest ground, and its bar at a cell's height has that cell's colour."""
+    dt, db = viewer
+    run = dt.js("earthbenchReplay.state().run")
+    sc, _ = _scenario_plan(db, run)
+    dt.js("document.getElementById('rp-overlays').checked = false")
+    the_map = _canvas(dt, 0.0)
+    scale = dt.js("earthbenchReplay.scale()")
+    z0 = np.asarray(sc.terrain.z)
+    assert scale["lo"] <= z0.min() + 1e-3 and scale["hi"] >= z0.max() - 1e-3
+    heights = [t["height"] for t in scale["ticks"]]
+    assert heights[0] == pytest.approx(scale["lo"]) and heights[-1] == pytest.approx(scale["hi"]) and heights == sorted(heights)
+    bar = _shot(dt, "rp-scale")
+    top, bottom, x = scale["ticks"][-1]["y"], scale["ticks"][0]["y"], scale["bar"]["x"] + scale["bar"]["w"] // 2
+    assert bar[bottom - 1:bottom + 1, x - 2:x + 2].any()  # drawn
+    # the highest, the lowest and a middling cell of the map: their colour on the map is the bar's at their height
+    flat = z0.ravel()
+    order = np.argsort(flat)
+    picks = [order[-1], order[0], order[len(order) // 2]]
+    cells = np.array([np.unravel_index(k, z0.shape) for k in picks])
+    on_map = _cell_pixels(the_map, sc, cells)
+    for (j, i), colour in zip(cells, on_map):
+        f = (z0[j, i] - scale["lo"]) / (scale["hi"] - scale["lo"])
+        y = int(round(bottom - f * (bottom - top)))
+        near = bar[max(y - 2, top):min(y + 3, bottom + 1), x]
+        assert np.abs(near - colour).sum(axis=1).min() <= 12, (z0[j, i], colour, near)
+    dt.js("document.getElementById('rp-overlays').checked = true")
+
+
 def test_machines_move_and_violations_are_red(viewer):
     dt, db = viewer
     runs = dt.js("JSON.parse(document.getElementById('rp-data').textContent).map(d => [d.run, d.verdict, d.label])")

@@ -7,6 +7,7 @@
   var playBtn = document.getElementById('rp-play'), logEl = document.getElementById('rp-log');
   var nowEl = document.getElementById('rp-now'), verdictEl = document.getElementById('rp-verdict');
   var ctx = canvas.getContext('2d'), overlays = document.getElementById('rp-overlays');
+  var scaleEl = document.getElementById('rp-scale');
   var COLOURS = {excavator: '#e67e00', truck: '#1f66c2', loader: '#2a9d2a'};
   var TERRAIN = [[0, [51, 51, 153]], [0.15, [0, 153, 255]], [0.25, [0, 204, 102]], [0.5, [255, 255, 153]],
                  [0.75, [128, 92, 84]], [1, [255, 255, 255]]];
@@ -79,11 +80,42 @@
     draw();
   }
   function fit() {
-    var g = cur.doc.grid, room = canvas.parentNode.clientWidth - 4;
+    var g = cur.doc.grid, room = canvas.parentNode.clientWidth - 4 - (scaleEl ? scaleEl.width + 16 : 0);  // the scale beside it
     var w = Math.max(room < 900 ? room : Math.min(room * 0.72, 1100), 240);  // narrow windows: the log goes below
     w = Math.max(Math.min(w, 0.8 * window.innerHeight * g.nx / g.ny), 240);  // a tall map fits the window's height
     canvas.width = Math.round(w);
     canvas.height = Math.round(w * g.ny / g.nx);
+    drawScale();
+  }
+  // the height scale beside the map: the map's colours from its lowest ground (bottom) to its highest (top), in m
+  var BAR = {x: 4, w: 16, pad: 8};
+  function scaleTicks() {
+    var g = cur.doc.grid, h = Math.max(canvas.height, 160), n = 5, out = [];
+    for (var k = 0; k < n; k++) {
+      var f = k / (n - 1);
+      out.push({height: g.lo + f * (g.hi - g.lo), y: Math.round(h - BAR.pad - f * (h - 2 * BAR.pad))});
+    }
+    return out;
+  }
+  function drawScale() {
+    if (!scaleEl) return;
+    var g = cur.doc.grid, h = Math.max(canvas.height, 160), sctx = scaleEl.getContext('2d');
+    scaleEl.height = h;
+    sctx.clearRect(0, 0, scaleEl.width, h);
+    var top = BAR.pad, bottom = h - BAR.pad;
+    for (var y = top; y <= bottom; y++) {
+      var c = colour((bottom - y) / Math.max(bottom - top, 1));
+      sctx.fillStyle = 'rgb(' + c[0] + ',' + c[1] + ',' + c[2] + ')';
+      sctx.fillRect(BAR.x, y, BAR.w, 1);
+    }
+    sctx.strokeStyle = '#000'; sctx.lineWidth = 1;
+    sctx.strokeRect(BAR.x + 0.5, top + 0.5, BAR.w - 1, bottom - top);
+    sctx.font = '11px sans-serif'; sctx.fillStyle = '#000'; sctx.textBaseline = 'middle';
+    var digits = g.hi - g.lo < 0.5 ? 3 : 2;
+    scaleTicks().forEach(function (tk) {
+      sctx.beginPath(); sctx.moveTo(BAR.x + BAR.w, tk.y + 0.5); sctx.lineTo(BAR.x + BAR.w + 4, tk.y + 0.5); sctx.stroke();
+      sctx.fillText(tk.height.toFixed(digits) + ' m', BAR.x + BAR.w + 6, tk.y);
+    });
   }
   function toPx(x, y) {
     var g = cur.doc.grid, s = canvas.width / (g.nx * g.r);
@@ -308,6 +340,7 @@
     a.addEventListener('click', function () { sel.value = String(n); togglePlay(false); load(n); });
   });
   window.earthbenchReplay = {load: load, setTime: setTime, state: function () {
-    return cur ? {run: cur.doc.run, t: cur.t, applied: cur.applied, makespan: cur.doc.makespan} : null; }};
+    return cur ? {run: cur.doc.run, t: cur.t, applied: cur.applied, makespan: cur.doc.makespan} : null; },
+    scale: function () { return cur ? {lo: cur.doc.grid.lo, hi: cur.doc.grid.hi, ticks: scaleTicks(), bar: BAR} : null; }};
   window.earthbenchReplayReady = load(0);
 })();

@@ -180,6 +180,8 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
         # the ranking first; what it rests on (stamp, rule's fine print) folded under it
         parts.append(f'<section id="{e(_anchor(s))}"><h2>Suite {e(s["suite"])} — track {e(s["track"])}</h2>')
         parts.append(filter_bar(s))
+        if s.get("partial"):
+            parts.append(f'<p class="partial"><strong>{e(s["partial"])}</strong></p>')
         parts.append(html_table(fold_zero_failures(s["rows"])))
         parts.append(replay_links(s.get("replay_runs", [])))
         parts.append(f'<details class="stamp-box"><summary>How this table is ranked, and what it rests on: suite digest, '

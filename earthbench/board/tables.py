@@ -129,7 +129,20 @@ def section_tables(summary: pd.DataFrame, all_versions: bool = False, closed: fr
                 breakdowns.append((f"{word} {group}", mark_unseparable(table_rows(g, closed), g)))
     history = summary[(summary["scope"] == "suite") & ~summary["latest"].astype(bool)] if not all_versions else summary.iloc[:0]
     return {"rows": mark_unseparable(table_rows(main, closed), main), "breakdowns": breakdowns,
-            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"), closed)}
+            "history": table_rows(history.sort_values(["planner", "planner_version", "config_hash"], kind="mergesort"), closed),
+            "partial": partial_note(main)}
+
+
+def partial_note(table: pd.DataFrame) -> str:
+    """What a table ranks on partial data says so: the rows with fewer runs than the suite has scenarios
+    (an interrupted run, a planner added late), each such scenario counted as a failure. Empty when complete."""
+    short = table[table["runs"] < table["of"]]
+    if not len(short):
+        return ""
+    who = "; ".join(f"{r.get('config_label') or r['planner']} {r['planner_version']}: {r['runs']} of {r['of']}"
+                    for _, r in short.iterrows())
+    return (f"partial: not every scenario has a run ({who}); a scenario without a run counts as failed, so this "
+            "ranking is on partial data until those runs are stored (the same earthbench run command resumes where it stopped)")
 
 
 @dataclass
@@ -302,7 +315,7 @@ def mark_mixed_solve_columns(rows: list[dict[str, Any]], mixed: bool) -> list[di
 def table_sections(summary: pd.DataFrame, all_versions: bool, closed: frozenset[str], mixed: bool) -> dict[str, Any]:
     """:func:`section_tables` with † on the solve-time headings of a table whose runs come from several machines."""
     tables = section_tables(summary, all_versions, closed)
-    return {"rows": mark_mixed_solve_columns(tables["rows"], mixed),
+    return {"rows": mark_mixed_solve_columns(tables["rows"], mixed), "partial": tables["partial"],
             "breakdowns": [(h, mark_mixed_solve_columns(r, mixed)) for h, r in tables["breakdowns"]],
             "history": mark_mixed_solve_columns(tables["history"], mixed)}
 
@@ -355,6 +368,7 @@ def markdown_page(sections: list[dict[str, Any]], generated: str) -> str:
         lines.append("No runs in the store.")
     for s in sections:
         lines += [f"## Suite {md_escape(s['suite'])} — track {md_escape(s['track'])}", "",
+                  *([f"**{md_escape(s['partial'])}**", ""] if s.get("partial") else []),
                   f"Ranking: {RANKING_RULE}.", "", "```", *(line.replace("`", "'") for line in s["stamp"].lines()), "```", "",
                   *(f"- {md_escape(line)}" for line in s["stamp"].planner_lines()), "", markdown_table(s["rows"]),
                   *markdown_more_tables(s)]
@@ -388,5 +402,5 @@ def write_csv(path: Path, text: str) -> None:
 
 __all__ = ["BREAKDOWN_NOTE", "FAILURE_COLUMNS", "FORMULA_STARTS", "HISTORY_NOTE", "PROVENANCE", "UNSEPARABLE", "Stamp",
            "builds_of", "load_text", "mark_mixed_solve_columns", "mark_unseparable", "markdown_more_tables", "markdown_page",
-           "markdown_table", "md_escape", "number_text", "rules_text", "section_tables", "slug", "spreadsheet_safe", "stamp", "table_rows",
-           "table_sections", "write_csv"]
+           "markdown_table", "md_escape", "number_text", "partial_note", "rules_text", "section_tables", "slug", "spreadsheet_safe",
+           "stamp", "table_rows", "table_sections", "write_csv"]

@@ -37,10 +37,19 @@ COMMANDS = [
 ]
 
 
+#: The first steps, under ``earthbench --help`` (the README's route, docs/commands.md for every command).
+START_HERE = """start here:
+  earthbench run smoke --planner greedy      a first run: 4 small scenarios, seconds, a table and what to do next
+  earthbench new-planner my-planner          a planner package of your own to edit (README.md, docs/plugins.md)
+  earthbench COMMAND --help                  one command's options; every command: docs/commands.md"""
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="earthbench",
         description="Benchmark earthmoving planners on shared terrain suites, judged by an independent referee.",
+        epilog=START_HERE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from .. import __version__
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import inspect
 import json
 import re
@@ -21,6 +22,26 @@ from ..world import Scenario
 def plural(n: int, word: str, many: str | None = None) -> str:
     """``1 case``, ``2 cases`` (``many`` for irregular plurals)."""
     return f"{n} {word if n == 1 else (many or word + 's')}"
+
+
+def refuse_unstored(kind: str, names: typing.Iterable[str], stored: typing.Iterable[str], db: object) -> None:
+    """Refuse a ``--suite`` or ``--planner`` that names nothing in the store ``db``, with close matches:
+    a typo would otherwise be an empty table that looks like an answer."""
+    known = sorted(set(stored))
+    for name in names:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
+            raise EarthbenchError(
+                f"{kind} {name!r} has no runs in {str(db)!r}"
+                + (f"; did you mean {', '.join(map(repr, close))}?" if close else ".")
+                + f" {kind.capitalize()}s there: {', '.join(known) or '(none)'}")
+
+
+def check_filters(store: Any, db: object, suite: str | None, planners: typing.Iterable[str]) -> None:
+    """Refuse a ``--suite`` or ``--planner`` filter that matches nothing in ``store`` (:func:`refuse_unstored`)."""
+    if suite:
+        refuse_unstored("suite", [suite], [*store.suite_names(), *store.run_suites()], db)
+    refuse_unstored("planner", planners, store.planner_names(), db)
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:

@@ -17,10 +17,11 @@ on any of them.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
-from ..store import default_db
-from ._common import plain
+from ..store import Store, default_db
+from ._common import check_filters, plain, refuse_unstored
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -54,8 +55,14 @@ def run(args: argparse.Namespace) -> int:
         if m != SUCCESS and m not in metrics:
             raise UnknownNameError("metric for --fail-on-regression", m, (*metrics, SUCCESS))
 
+    for db in dict.fromkeys(d for d in (args.db_a, args.db_b) if d):
+        with Store(db, create=False) as store:
+            check_filters(store, db, args.suite, [])
     runs_a = load_runs(args.db_a, suite=args.suite)
     runs_b = load_runs(args.db_b, suite=args.suite) if args.db_b else runs_a
+    for spec, runs, db in ((args.a, runs_a, args.db_a), (args.b, runs_b, args.db_b or args.db_a)):
+        if spec:  # a planner's name mistyped: the close matches, as `run` gives them
+            refuse_unstored("planner", [re.split(r"[@#\[]", spec)[0]], runs["planner"].astype(str).unique(), db)
     if not args.db_b and not (args.a and args.b):
         raise CompareError("with one database, name both sides: --a PLANNER[@VERSION][#CONFIG] --b PLANNER[@VERSION][#CONFIG]")
     a = Selector.parse(args.a).pick(runs_a, "A")

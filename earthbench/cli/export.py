@@ -9,6 +9,7 @@ re-judge them on another machine, and ``earthbench verify`` to re-time a sample.
 from __future__ import annotations
 
 import argparse
+import shlex
 
 from ..store import default_db
 from ._common import plain
@@ -29,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
 
     report = export(args.db, args.out, args.suite, args.planner)
     print(f"exported {report.runs} run(s) of {', '.join(args.planner)} on {args.suite} into {args.out}; "
-          f"merge it with `earthbench merge ALL.db {args.out}`")
+          f"merge it with `earthbench merge ALL.db {shlex.quote(str(args.out))}`")
     return 0

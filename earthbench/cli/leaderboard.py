@@ -1,4 +1,7 @@
-"""``earthbench leaderboard``: turn the results store into ``leaderboard/`` (tables, CSVs, page, figures).
+"""``earthbench leaderboard``: turn the results store into a board folder (tables, CSVs, page, figures).
+
+The folder is ``board/`` unless ``--out`` names another; the published boards of a clone
+(``leaderboard/``) are rewritten only when ``--out`` names them.
 
 Writes README.md (one ranked table per suite and track, each with its ranking rule and a
 reproducibility stamp, then one table per family and per target and a history of older
@@ -14,14 +17,18 @@ import sys
 import time
 
 from ..store import default_db
-from ._common import plain
+from ._common import check_filters, plain
+
+#: Where a board goes without ``--out``: never the clone's tracked ``leaderboard/``, which a plain run would overwrite.
+DEFAULT_OUT = "board"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("leaderboard", help="write leaderboard tables, CSVs, an HTML page and figures from the store",
                        description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", default=default_db(), metavar="PATH", help="results database (default: $EARTHBENCH_DB or earthbench.db)")
-    p.add_argument("--out", default="leaderboard", metavar="DIR", help="output directory (default: leaderboard/)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                   help=f"output directory (default: {DEFAULT_OUT}/; a clone's published boards are in leaderboard/)")
     p.add_argument("--suite", action="append", default=[], metavar="NAME",
                    help="publish only this suite (repeatable; default: every suite with runs in the store)")
     p.add_argument("--no-figures", action="store_true", help="tables, CSVs and page only")
@@ -40,7 +47,12 @@ def run(args: argparse.Namespace) -> int:
     from ..publish import publish
     from ..suite import parse_seed_range
 
+    from ..store import Store
+
     t0 = time.perf_counter()
+    with Store(args.db, create=False) as store:
+        for suite in args.suite:  # a mistyped name: the close matches
+            check_filters(store, args.db, suite, [])
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
                   workers=args.jobs, replays=args.replays, all_versions=args.all_versions,
                   seeds=parse_seed_range(args.seeds) if args.seeds else None)
@@ -50,4 +62,10 @@ def run(args: argparse.Namespace) -> int:
           f"({time.perf_counter() - t0:.1f} s)"
           + (f"; removed {len(res.removed)} figure file(s) of an earlier board from {res.out / 'figures'}/" if res.removed else ""),
           file=sys.stderr)
+    if res.summary is not None and not res.summary.empty:
+        main = res.summary[(res.summary["scope"] == "suite") & res.summary["latest"].astype(bool)]
+        partial = sorted(set(main.loc[main["runs"] < main["of"], "suite"]))
+        if partial:
+            print(f"leaderboard: note: partial data on {', '.join(partial)}: some planners lack runs on some scenarios "
+                  "(counted as failed); each such table says which", file=sys.stderr)
     return 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import keyword
 import re
+import shlex
 from pathlib import Path
 
 from ..errors import EarthbenchError
@@ -70,9 +71,10 @@ def run(args: argparse.Namespace) -> int:
     dist, module, cls = names(args.name)
     print(f"wrote {root}/ ({dist}: planner {args.name!r}, class {module}.planner.{cls})")
     print("next:")
-    print(f"  pip install -e {root}")
-    print(f"  pip install pytest && python -m pytest {root}/tests")
-    print(f"  earthbench run smoke --planner {args.name}")
+    # each runnable as printed (a folder with a space in its name quoted)
+    print(f"  pip install -e {shlex.quote(str(root))}")
+    print(f"  pip install pytest && python -m pytest {shlex.quote(f'{root}/tests')}")
+    print(f"  earthbench run smoke --planner {shlex.quote(args.name)}")
     return 0
 
 

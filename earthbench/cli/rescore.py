@@ -20,7 +20,7 @@ from collections import Counter
 
 from ..store import Store, decompress, default_db, stored_steps
 from ..verify import rejudge
-from ._common import plain
+from ._common import check_filters, plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     with Store(args.db, create=False, read_only=args.dry_run) as store:
         if not args.dry_run:
             store.check_writable()
+        check_filters(store, args.db, args.suite, args.planner)
         selected = store.query(suite=args.suite, planner=args.planner)
         rows = [r for r in selected if r["plan"] is not None]
         scenarios = {}

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import signal
 import sys
 from typing import Any
@@ -18,6 +19,7 @@ from ..harness import REASONS, LocalExecutor, build_cases, run_cases
 from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
+from .runs import db_option, failure_filters
 
 HELP = """Run every (planner, scenario) case of a suite, each in a fresh process pinned to its own
 2-core slot under the suite's wall and memory budget, and store each result as it finishes.
@@ -113,6 +115,11 @@ def print_summary(store: Store, suite: str, planners: list[str] | None = None, f
         if n == 0:
             print("  " + "  ".join("-" * w for w in widths), file=file)
     print(LEGEND, file=file)
+    missing = rows[rows["runs"] < rows["of"]]
+    if len(missing):
+        who = "; ".join(f"{r['config_label']} {r['planner_version']} {r['runs']} of {r['of']}" for _, r in missing.iterrows())
+        print(f"  partial: not every scenario has a run ({who}); a scenario without one counts as failed, so these "
+              "figures and the order are on partial data until the same command completes them", file=file)
     n_of = int(rows["of"].max())
     if len(rows) > 1 and n_of < min_separating_n(RANK_ALPHA):
         print(f"  note: {separation_note(n_of, RANK_ALPHA)}", file=file)
@@ -168,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         from ..progress import Progress
 
-        progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: store.run_id(case.key))
+        progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: store.run_id(case.key),
+                            runs_command=f"earthbench runs{db_option(args.db)}")
         planners = sorted({c.planner.name for c in cases})
         if not args.quiet:
             print(
@@ -186,26 +194,45 @@ def run(args: argparse.Namespace) -> int:
             if old is not None:
                 signal.signal(signal.SIGTERM, old)
             getattr(executor, "close", lambda: None)()
-        if report.skipped and not args.quiet:
-            print(f"{plural(report.skipped, 'case')} already stored {'was' if report.skipped == 1 else 'were'} skipped "
-                  "(use --rerun to run them again)", file=sys.stderr)
         print_summary(store, suite.name, planners, seeds=seeds)
         if report.interrupted:
             left = report.planned - report.skipped - report.stored
-            print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run; "
+            print(f"earthbench: interrupted: {plural(report.stored, 'finished case')} stored, {left} not run"
+                  + (f", {report.skipped} skipped as already stored" if report.skipped else "")
+                  + "; the table above is partial (a scenario without a run counts as failed); "
                   "run the same command again to resume", file=sys.stderr)
             return 130
         enough = any_stored(store, cases, succeeded=args.require_success)
-        db = "" if args.db == default_db() else f" --db {args.db}"
         if not args.quiet:
-            print(f"\nnext: earthbench runs{db} --suite {suite.name} --reason invalid  (what failed, then --id N for one run)\n"
-                  f"      earthbench leaderboard{db} --suite {suite.name} --out DIR  (tables, figures and a page with replays)",
-                  file=sys.stderr)
+            print("\n" + next_steps(store, cases, args, suite.name), file=sys.stderr)
         if cases and not enough:
             what = "succeeded" if args.require_success else "has a valid plan"
-            print(f"earthbench: no case {what} (exit status 1); see earthbench runs{db} --suite {suite.name}", file=sys.stderr)
+            print(f"earthbench: no case {what} (exit status 1); see {runs_command(args, suite.name)}", file=sys.stderr)
             return 1
     return 0
+
+
+def runs_command(args: argparse.Namespace, suite: str) -> str:
+    """``earthbench runs`` narrowed to this command's store, suite, seeds and planners, runnable as printed."""
+    planners = "".join(f" --planner {shlex.quote(p)}" for p in dict.fromkeys(args.planner))
+    seeds = f" --seeds {shlex.quote(args.seeds)}" if args.seeds else ""
+    return f"earthbench runs{db_option(args.db)} --suite {shlex.quote(suite)}{seeds}{planners}"
+
+
+def next_steps(store: Store, cases: list[Any], args: argparse.Namespace, suite: str) -> str:
+    """The commands to look further, each runnable as printed: the ``runs`` filters that show the
+    failures that happened (none named when none did) and the leaderboard of the same selection."""
+    keys = {c.key for c in cases}
+    rows = [r for r in store.query(suite=suite, planner=sorted({c.planner.name for c in cases}))
+            if (r["scenario_digest"], r["planner"], r["planner_version"], r["config_hash"]) in keys]
+    base = runs_command(args, suite)
+    lines = [f"{base} {flt}  ({what}; then --id N for one run)" for flt, what in failure_filters(rows)]
+    if rows and not lines:
+        lines = [f"{base}  (every run reached the target; --id N shows one in full)"]
+    seeds = f" --seeds {shlex.quote(args.seeds)}" if args.seeds else ""
+    lines.append(f"earthbench leaderboard{db_option(args.db)} --suite {shlex.quote(suite)}{seeds}  "
+                 "(tables, figures and a page with replays, in board/)")
+    return "next: " + "\n      ".join(lines)
 
 
 def any_stored(store: Store, cases: list[Any], *, succeeded: bool) -> bool:

@@ -10,6 +10,7 @@ anyone can check the board with `earthbench verify STORE --key FILE` (docs/seale
 from __future__ import annotations
 
 import argparse
+import shlex
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -29,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"sealed suite: {sealed.name} ({len(sealed.scenarios)} scenarios drawn from {suite.name} {suite.digest[:12]}…)")
     print(f"commitment:   {key.commitment}")
     print(f"key:          {args.key} (secret until the board is published)")
-    print(f"next: earthbench run {args.suite} --sealed {args.key}")
+    print(f"next: earthbench run {shlex.quote(args.suite)} --sealed {shlex.quote(str(args.key))}")
     return 0

@@ -24,11 +24,13 @@ def run(args: argparse.Namespace) -> int:
         for sc in s.scenarios:
             print(f"  {sc.id:<40} {sc.digest[:12]}  target {sc.task.target_volume:g} m³")
         return 0
-    for name, path in known_suites().items():
+    suites = known_suites()
+    width = max((len(n) for n in suites), default=0)  # the longest name sets the column: no row pushed out of line
+    for name, path in suites.items():
         try:
             s = load_suite(path)
             n = sum(len(f.targets) * len(f.seeds) for f in s.families)
-            print(f"  {name:<18} {s.track:<13} {n:>4} scenarios  {s.description}")
+            print(f"  {name:<{width}}  {s.track:<12}  {n:>4} scenarios  {s.description}")
         except Exception as exc:  # noqa: BLE001 - one broken file must not hide the others
-            print(f"  {name:<18} BROKEN: {exc}")
+            print(f"  {name:<{width}}  BROKEN: {exc}")
     return 0

@@ -20,8 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help="judge a plan with the referee and print the verdict, violations and metrics",
         description="Replay PLAN on the scenario with the referee. Exit status 0 for a valid plan, 1 for an invalid one.",
     )
-    p.add_argument("plan", metavar="PLAN.json")
-    p.add_argument("--scenario", required=True, metavar="SCENARIO.json")
+    p.add_argument("plan", metavar="PLAN.json", help="the plan document (`earthbench plan -o` or `earthbench runs --id N --plan-out`)")
+    p.add_argument("--scenario", required=True, metavar="SCENARIO.json",
+                   help="the scenario it was planned for (`earthbench plan --save-scenario` or `earthbench runs --id N --scenario-out`)")
     p.add_argument("--threshold", type=float, default=DEFAULT_SUCCESS_THRESHOLD,
                    help=f"volume ratio needed for success (default: {DEFAULT_SUCCESS_THRESHOLD:g})")
     p.add_argument("--json", action="store_true", help="print the result as JSON")

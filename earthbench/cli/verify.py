@@ -28,7 +28,7 @@ from __future__ import annotations
 import argparse
 import statistics
 
-from ._common import add_plugin_arg, load_plugins, plain
+from ._common import add_plugin_arg, check_filters, load_plugins, plain
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     keys = [SealKey.read(k) for k in args.key]
     with Store(args.store, create=False, read_only=args.sample is None or args.no_record) as store:
+        check_filters(store, args.store, args.suite, args.planner)
         failed = _suites_and_plans(store, keys, rejudge_all=not keys and args.sample is None)
         if args.sample is not None:
             failed |= _spot(store, args)

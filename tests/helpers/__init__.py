@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -98,6 +99,7 @@ def load_script(name: str) -> ModuleType:
     spec = importlib.util.spec_from_file_location(f"scripts_{name}", SCRIPTS / f"{name}.py")
     assert spec is not None and spec.loader is not None, f"no script {name}"
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # before running it: a script's dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
 
