@@ -142,10 +142,10 @@ def run(args: argparse.Namespace) -> int:
     if args.config:
         if not args.planner:
             raise EarthbenchError("--config needs --planner NAME: the settings are checked against that planner's Config")
-        from ..registry import PLANNERS
+        from ..harness.probe import info
 
         for name in dict.fromkeys(args.planner):  # the command line's settings over the suite file's
-            suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, PLANNERS.get(name))}
+            suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, info(name))}
     seeds = parse_seed_range(args.seeds) if args.seeds else None
     if seeds is not None and not suite.select(seeds):
         have = sorted({int(s.meta["seed"]) for s in suite.scenarios if s.meta.get("seed") is not None})
