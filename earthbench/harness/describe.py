@@ -9,6 +9,7 @@ process (a built-in planner), so both describe a planner the same way.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
 import types
 import typing
@@ -45,20 +46,27 @@ def answer(spec: Mapping[str, Any], payload: Mapping[str, Any]) -> dict[str, Any
     failures: dict[str, str] = {}
     if "file" in probe:
         module, run = plugin_module(probe["file"])
-        run()
+        try:
+            run()
+        except SystemExit as exc:  # told as what it is, not as a traceback of the probe
+            raise RuntimeError(f"plugin file {probe['file']} called sys.exit({exc.code!r}) while being imported; "
+                               f"a plugin must only define planners") from None
         for obj in list(vars(module).values()):
             if isinstance(obj, type) and issubclass(obj, Planner) and obj.__module__ == module.__name__ and obj.name:
-                classes[obj.name] = obj
+                if inspect.isabstract(obj):
+                    failures[obj.name] = f"planner {obj.name!r} cannot run: {obj.__name__} does not implement plan()"
+                else:
+                    classes[obj.name] = obj
     for name, value in probe.get("entry_points", ()):
         try:
             obj = metadata.EntryPoint(name, value, "earthbench.planners").load()
         except BaseException as exc:  # noqa: BLE001 - one broken entry point must not hide the others
             failures[name] = f"{value}: {type(exc).__name__}: {exc}"
             continue
-        if isinstance(obj, type) and issubclass(obj, Planner):
+        if isinstance(obj, type) and issubclass(obj, Planner) and not inspect.isabstract(obj):
             classes[name] = obj
         else:
-            failures[name] = f"{value}: not a subclass of earthbench.Planner"
+            failures[name] = f"{value}: not a subclass of earthbench.Planner that implements plan()"
     asked = payload.get("configs") or {}
     planners, configs = [], {}
     for name, klass in classes.items():

@@ -30,7 +30,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from ..errors import PluginError, UnknownNameError
 from ..registry import PLANNERS, class_digest, distribution_of, file_digest
@@ -211,7 +211,14 @@ def _cache_write(source: Source, doc: dict[str, Any]) -> None:
 # -- probing --------------------------------------------------------------------------------------
 
 
-def _described(source: Source, wanted: Mapping[str, Sequence[Mapping[str, Any]]]) -> dict[str, PlannerInfo]:
+class Described(NamedTuple):
+    """What a source provides: its planners, and why each of the others failed to load (name -> why)."""
+
+    planners: dict[str, PlannerInfo]
+    failures: dict[str, str]
+
+
+def _described(source: Source, wanted: Mapping[str, Sequence[Mapping[str, Any]]]) -> Described:
     """The planners ``source`` provides, with the configurations ``wanted`` (name -> overrides)
     resolved: from the cache, else from a probe (whose answer is then cached)."""
     cached = _cache_read(source)
@@ -220,8 +227,8 @@ def _described(source: Source, wanted: Mapping[str, Sequence[Mapping[str, Any]]]
             infos = _validate(source, cached)
         except PluginError:
             infos = None
-        if infos is not None and all(overrides_key(o) in infos[n].configs for n, os_ in wanted.items() if n in infos
-                                     for o in os_):
+        if infos is not None and all(overrides_key(o) in infos.planners[n].configs for n, os_ in wanted.items()
+                                     if n in infos.planners for o in os_):
             return infos
     asked: dict[str, list[Any]] = {n: [dict(o) for o in os_] for n, os_ in wanted.items()}
     if cached is not None:  # ask again for what was cached too, so the cache keeps growing
@@ -257,6 +264,7 @@ def _probe(source: Source, asked: Mapping[str, list[Any]]) -> dict[str, Any]:
         why = (o.fault or (o.done or {}).get("error") or
                ("it ran past its budget of 60 s" if o.timed_out else f"its process exited with status {o.status}"))
         last = _clean(str(why).strip().splitlines()[-1] if str(why).strip() else "", 400)
+        last = re.sub(r"^(RuntimeError|earthbench\.errors\.PluginError): ", "", last)
         raise PluginError(f"{source.label} could not be loaded (in a fenced probe): {last}")
     text = o.done.get("summary")
     if not isinstance(text, str) or len(text) > MAX_ANSWER:
@@ -275,7 +283,7 @@ def _clean(text: str, n: int = MAX_TEXT) -> str:
     return text if len(text) <= n else text[:n] + "…"
 
 
-def _validate(source: Source, doc: dict[str, Any]) -> dict[str, PlannerInfo]:
+def _validate(source: Source, doc: dict[str, Any]) -> Described:
     """The probe's answer, read as hostile data: every name, type and size checked."""
     def bad(why: str) -> PluginError:
         return PluginError(f"{source.label}: the probe's answer is refused: {why}")
@@ -286,8 +294,9 @@ def _validate(source: Source, doc: dict[str, Any]) -> dict[str, PlannerInfo]:
     failures = doc.get("failures") or {}
     if not isinstance(failures, dict):
         raise bad("failures is not an object")
+    failed = {_clean(str(k), 64): _clean(str(v), 400) for k, v in list(failures.items())[:MAX_PLANNERS]}
     if not planners:
-        why = "; ".join(f"{_clean(str(k), 64)}: {_clean(str(v))}" for k, v in list(failures.items())[:3])
+        why = "; ".join(f"{k}: {v}" for k, v in list(failed.items())[:3])
         raise PluginError(f"{source.label} defines no Planner subclass with a 'name'" + (f" ({why})" if why else ""))
     allowed = {e[0]: e[1] for e in source.entry_points}
     out: dict[str, PlannerInfo] = {}
@@ -319,7 +328,7 @@ def _validate(source: Source, doc: dict[str, Any]) -> dict[str, PlannerInfo]:
             code_digest=source.digest, origin=source.label,
             configs=_configs(name, configs.get(name), bad),
         )
-    return out
+    return Described(out, failed)
 
 
 def _setting(planner: str, s: Any, bad: Any) -> Setting:
@@ -394,10 +403,13 @@ def catalogue(*, sources_only: bool = False) -> Catalogue:
         try:
             infos = _described(source, {})
         except PluginError as exc:
+            if source.kind == "file":  # a file the command was given: its failure is the command's error
+                raise
             cat.failures[source.label] = str(exc)
             continue
-        for described in infos.values():
+        for described in infos.planners.values():
             _add(cat.planners, described)
+        cat.failures.update({f"{n} ({source.label})": why for n, why in infos.failures.items()})
     return cat
 
 
@@ -411,8 +423,8 @@ def _add(known: dict[str, PlannerInfo], info: PlannerInfo) -> None:
     old = known.get(info.name)
     if old is not None and old.source != info.source:
         raise PluginError(
-            f"planner {info.name!r} is provided by {info.origin} and by {old.origin}; give one of them another "
-            f"name: runs are stored by name and version, so the two would be mixed up")
+            f"{info.origin} provides planner {info.name!r}, but a planner of that name is already registered "
+            f"({old.origin}); give one of them another name: runs are stored by name and version, so the two would be mixed up")
     known[info.name] = info
 
 
@@ -424,8 +436,10 @@ def info(name: str) -> PlannerInfo:
         found[name] = info_of_class(name, PLANNERS.get(name))
     for source in _sources(only=name):
         infos = _described(source, {})
-        if name in infos:
-            _add(found, infos[name])
+        if name in infos.planners:
+            _add(found, infos.planners[name])
+        elif name in infos.failures:
+            raise PluginError(f"{source.label}: {infos.failures[name]}")
     if name not in found:
         if name in PLANNERS.failures:
             PLANNERS.get(name)  # raises with the failure
@@ -439,7 +453,7 @@ def names() -> list[str]:
     for source in _sources():
         if source.kind == "file":
             try:
-                out.update(_described(source, {}))
+                out.update(_described(source, {}).planners)
             except PluginError:
                 pass
     return sorted(out)
@@ -459,7 +473,7 @@ def resolve(name: str, overrides: Mapping[str, Any] | None = None) -> PlannerRef
     got = base.configs.get(key)
     if got is None:
         source = next(s for s in _sources(only=name) if s.label == base.origin)
-        got = _described(source, {name: [overrides]})[name].configs.get(key)
+        got = _described(source, {name: [overrides]}).planners[name].configs.get(key)
     if got is None or "error" in got:
         raise PluginError((got or {}).get("error") or f"planner {name!r}: the probe did not resolve its configuration")
     config = got["config"]
