@@ -15,6 +15,7 @@ from typing import Any
 
 from ..errors import EarthbenchError, SuiteError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
+from ..harness.orchestrate import check_code
 from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
@@ -159,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     with Store(args.db) as store:
         store.check_writable()
+        check_code(cases, store)  # a planner squatting on another's name and version: before anything is written
         store.register_suite(suite)
         executor = make_executor(args, suite)
         if args.jobs is not None and isinstance(executor, LocalExecutor) and args.jobs > len(executor.slots):
