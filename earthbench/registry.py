@@ -127,6 +127,15 @@ class Registry(Generic[T]):
             self._load_entry_points()  # every name, for the list of known ones
             raise UnknownNameError(self.kind, name, self._items) from None
 
+    def foreign_entry_points(self) -> dict[str, EntryPoint]:
+        """Other distributions' entry points of the group (name -> entry point), found without
+        importing anything (the group's own entry points are loaded only when asked for)."""
+        allowed = trusted_distributions() if self._trust else {OWN_DISTRIBUTION}
+        for ep in entry_points(group=self.group):
+            if ep.name not in self._items and distribution_of(ep) not in allowed:
+                self.foreign.setdefault(ep.name, ep)
+        return dict(self.foreign)
+
     def foreign_message(self, name: str) -> str:
         """Why ``name``, another distribution's entry point, is not loaded in this process."""
         ep = self.foreign[name]

@@ -67,9 +67,8 @@ def build_cases(
                 notes.append(f"planner {name!r} supports {', '.join(ref.tracks)}, not this suite's {suite.track!r} track: skipped")
             continue
         refs.append(ref)
-    known = set(probe.names()) if suite.config else set()
     for name in suite.config:
-        if name not in known:
+        if not probe.known(name):
             notes.append(f"the suite configures planner {name!r}, which is not registered: its [config.{name}] is unused")
     plugin_paths = tuple(str(Path(p).resolve()) for p in plugins)
     cases = [

@@ -114,10 +114,9 @@ def plugin_files() -> list[str]:
 
 def _foreign_sources() -> list[Source]:
     """Another distribution's planner entry points, one source per distribution."""
-    PLANNERS.names()  # reads the entry points (imports only earthbench's own)
     by_dist: dict[str, list[tuple[str, str]]] = {}
     dists: dict[str, Any] = {}
-    for name, ep in sorted(PLANNERS.foreign.items()):
+    for name, ep in sorted(PLANNERS.foreign_entry_points().items()):
         d = distribution_of(ep) or "unknown"
         by_dist.setdefault(d, []).append((name, ep.value))
         dists[d] = getattr(ep, "dist", None)
@@ -447,9 +446,23 @@ def info(name: str) -> PlannerInfo:
     return found[name]
 
 
+def known(name: str) -> bool:
+    """Whether some planner is called ``name`` (imports at most the built-in planner of that name)."""
+    if name in PLANNERS or name in PLANNERS.foreign_entry_points():
+        return True
+    for source in _sources():
+        if source.kind == "file":
+            try:
+                if name in _described(source, {}).planners:
+                    return True
+            except PluginError:
+                pass
+    return False
+
+
 def names() -> list[str]:
     """The names of every planner, without describing this process's ones (cheap for a message)."""
-    out = set(PLANNERS.names()) | set(PLANNERS.foreign)
+    out = set(PLANNERS.names()) | set(PLANNERS.foreign_entry_points())
     for source in _sources():
         if source.kind == "file":
             try:
