@@ -43,7 +43,17 @@ TRUST_ENV = "EARTHBENCH_TRUST"
 def distribution_of(ep: EntryPoint) -> str:
     """The normalised name of the distribution that declares ``ep`` ('' if unknown)."""
     dist = getattr(ep, "dist", None)
-    return _normalise(dist.name) if dist is not None and dist.name else ""
+    if dist is None:
+        return ""
+    where = getattr(dist, "_path", None)  # its metadata folder: reading its name parses a file, so once each
+    if where is None:
+        return _normalise(dist.name or "")
+    if where not in _DIST_NAMES:
+        _DIST_NAMES[where] = _normalise(dist.name or "")
+    return _DIST_NAMES[where]
+
+
+_DIST_NAMES: dict[Any, str] = {}
 
 
 def _normalise(name: str) -> str:
@@ -130,6 +140,8 @@ class Registry(Generic[T]):
     def foreign_entry_points(self) -> dict[str, EntryPoint]:
         """Other distributions' entry points of the group (name -> entry point), found without
         importing anything (the group's own entry points are loaded only when asked for)."""
+        if self._loaded:  # every entry point was read: the foreign ones are known
+            return dict(self.foreign)
         allowed = trusted_distributions() if self._trust else {OWN_DISTRIBUTION}
         for ep in entry_points(group=self.group):
             if ep.name not in self._items and distribution_of(ep) not in allowed:
