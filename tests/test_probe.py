@@ -105,6 +105,7 @@ def test_a_hostile_plugin_file_never_runs_in_the_earthbench_process(caches, caps
         ["list", *p], ["list", "planners", "--settings", *p],
         ["plan", "hostile", *p, "--terrain", "rbf", "-o", str(plan), "--save-scenario", str(sc)],
         ["validate", str(plan), "--scenario", str(sc)],
+        ["show", "--scenario", str(sc), "--plan", str(plan), "-o", str(tmp / "shown.png")],
         ["run", "smoke", "--planner", "hostile", *p, "--db", str(db), "--seeds", "0-1", "--config", "speed=2"],
         ["prepare", "hostile", *p],
         ["verify", str(db)], ["verify", str(db), "--sample", "1", "--no-record", *p],

@@ -72,7 +72,7 @@ def answer(spec: Mapping[str, Any], payload: Mapping[str, Any]) -> dict[str, Any
     for name, klass in classes.items():
         doc = (klass.__doc__ or "").strip().splitlines()
         planners.append({"name": name, "version": str(klass.version), "tracks": list(klass.tracks),
-                         "prepares": bool(klass.prepares()), "doc": doc[0] if doc else "",  # type: ignore[attr-defined]
+                         "prepares": bool(klass.prepares()), "doc": doc[0] if doc else "",
                          "settings": [dataclasses.asdict(s) for s in settings_of(klass)]})
         configs[name] = {overrides_key(o): _config(klass, o) for o in [*asked.get(name, []), *asked.get("", [])]}
     return {"planners": planners, "configs": configs, "failures": failures}
@@ -90,6 +90,7 @@ def _config(klass: type, overrides: dict[str, Any]) -> dict[str, Any]:
 
 
 def settings_of(klass: type) -> list[Setting]:
+    """The fields of a planner's ``Config``: name, type (the probe's type language) and JSON default."""
     config = getattr(klass, "Config", None)
     if not (dataclasses.is_dataclass(config) and isinstance(config, type)):
         return []
@@ -116,7 +117,7 @@ def settings_of(klass: type) -> list[Setting]:
     return out
 
 
-def _type_text(hint: Any, depth: int = 0) -> str:
+def _type_text(hint: Any, depth: int = 0) -> str:  # read back by earthbench.harness.probe
     """A type hint as the probe's small type language (the harness converts ``--config`` values with it)."""
     if depth > 3:
         return "any"
