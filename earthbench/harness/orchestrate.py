@@ -56,7 +56,12 @@ def build_cases(
     explicit = bool(planners)
     if plugins:
         probe.use_plugin_files(plugins)
-    names = list(planners or suite.planners or [n for n, p in probe.catalogue().planners.items() if suite.track in p.tracks])
+    if planners or suite.planners:
+        names = list(planners or suite.planners or ())
+    else:  # every planner of the track; one whose code failed to load is said, not silently left out
+        cat = probe.catalogue()
+        names = [n for n, p in cat.planners.items() if suite.track in p.tracks]
+        notes += [f"{what} failed to load: {why}" for what, why in sorted(cat.failures.items())]
     if not names:
         notes.append(f"no registered planner supports the {suite.track!r} track")
     refs = []
