@@ -23,6 +23,7 @@ import pytest
 
 import earthbench.scoring
 from earthbench.cli import main
+from earthbench.errors import PluginError
 from earthbench.harness import probe
 from earthbench.harness.prepare import prepare_key
 from earthbench.records import PlannerRef
@@ -244,3 +245,25 @@ def test_a_hostile_installed_package_never_runs_in_the_earthbench_process(caches
     with sqlite3.connect(db) as con:
         metrics = [json.loads(m) for (m,) in con.execute("SELECT metrics FROM runs")]
     assert all(m["success"] is False for m in metrics)  # the package's metric never joined the scoring
+
+
+def test_a_probe_that_dies_is_a_clear_error_and_imports_nothing_here(caches, capsys):
+    plugin = caches / "dies.py"
+    plugin.write_text("import os\nos._exit(5)\n")
+    assert main(["list", "planners", "--plugin", str(plugin)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "could not be loaded (in a fenced probe)" in err and "status 5" in err
+
+
+def test_a_given_plugin_file_that_fails_stops_a_suite_of_every_planner(caches):
+    from earthbench.harness import build_cases
+    from earthbench.suite import load_suite
+
+    plugin = caches / "broken.py"
+    plugin.write_text("raise ImportError('no such thing')\n")
+    probe.use_plugin_files([plugin])
+    with pytest.raises(PluginError, match="no such thing"):  # a file the command was given: its error, not a note
+        build_cases(load_suite("smoke"), seeds=[0])
+    probe.use_plugin_files([])
+    cases, notes = build_cases(load_suite("smoke"), seeds=[0])
+    assert cases and not [n for n in notes if "failed to load" in n]
