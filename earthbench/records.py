@@ -19,7 +19,7 @@ from typing import Any
 
 from .errors import PluginError
 from .planner import Planner
-from .registry import PLANNERS
+from .registry import PLANNERS, class_digest
 from .world import Scenario
 
 #: Termination reasons of a stored case (``cancelled`` results are never stored).
@@ -47,10 +47,15 @@ class PlannerRef:
     tracks: tuple[str, ...] = ("backhoe",)
     #: Whether the planner declares a preparation (docs/DESIGN.md §6 "Preparation").
     prepares: bool = field(default=False, compare=False)
+    #: A digest of the code that provides the planner (docs/DESIGN.md §6 "Plugin code"): ``sha256:…`` of a
+    #: plugin file or of a distribution's files, ``earthbench`` for the built-in planners, '' unknown.
+    code_digest: str = field(default="", compare=False)
 
     @classmethod
     def resolve(cls, name: str, overrides: dict[str, Any] | None = None) -> PlannerRef:
-        """Look ``name`` up in the registry and check ``overrides`` against its ``Config``."""
+        """Look ``name`` up in this process's registry (the built-in planners and those a script
+        registered) and check ``overrides`` against its ``Config``. Another distribution's planner or
+        a plugin file is resolved by :func:`earthbench.harness.probe.resolve`, never imported here."""
         klass = PLANNERS.get(name)
         overrides = dict(overrides or {})
         probe = object.__new__(klass)  # the base initialiser only: a heavy subclass __init__ runs in the case
@@ -64,6 +69,7 @@ class PlannerRef:
             overrides=overrides,
             tracks=tuple(klass.tracks),
             prepares=klass.prepares(),
+            code_digest=class_digest(klass),
         )
 
 

@@ -6,6 +6,11 @@ notebooks use :func:`register_planner`; a single plugin file is loaded with
 :func:`load_plugin_file`. Entry points are read lazily on first use. A plugin that fails to
 import is recorded in ``failures`` (and shown by ``earthbench list``) without hiding the rest.
 Unknown names raise :class:`UnknownNameError` with the known names and close matches.
+
+Only the earthbench distribution's own entry points are imported into this process
+(docs/DESIGN.md §6 "Plugin code"): another distribution's planners are recorded in ``foreign``
+and read by a fenced probe (:mod:`earthbench.harness.probe`), its terrains and metrics are not
+loaded unless ``$EARTHBENCH_TRUST`` names the distribution.
 """
 
 from __future__ import annotations
@@ -17,7 +22,8 @@ import inspect
 import sys
 import traceback
 from collections.abc import Callable, Iterator
-from importlib.metadata import entry_points
+import os
+from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Generic, TypeVar
@@ -27,16 +33,50 @@ from .planner import Planner
 
 T = TypeVar("T")
 
+#: The distribution whose entry points are the harness's own code (docs/DESIGN.md §6 "Plugin code").
+OWN_DISTRIBUTION = "earthbench"
+#: Comma-separated distribution names whose terrains and metrics may be imported into earthbench's
+#: own process (they run there: a suite's terrain, a run's scoring); planners never are.
+TRUST_ENV = "EARTHBENCH_TRUST"
+
+
+def distribution_of(ep: EntryPoint) -> str:
+    """The normalised name of the distribution that declares ``ep`` ('' if unknown)."""
+    dist = getattr(ep, "dist", None)
+    if dist is None:
+        return ""
+    where = getattr(dist, "_path", None)  # its metadata folder: reading its name parses a file, so once each
+    if where is None:
+        return _normalise(dist.name or "")
+    if where not in _DIST_NAMES:
+        _DIST_NAMES[where] = _normalise(dist.name or "")
+    return _DIST_NAMES[where]
+
+
+_DIST_NAMES: dict[Any, str] = {}
+
+
+def _normalise(name: str) -> str:
+    return name.strip().lower().replace("_", "-").replace(".", "-")
+
+
+def trusted_distributions() -> set[str]:
+    """The distributions this process may import plugin code from: earthbench and ``$EARTHBENCH_TRUST``."""
+    return {OWN_DISTRIBUTION} | {_normalise(n) for n in os.environ.get(TRUST_ENV, "").split(",") if n.strip()}
+
 
 class Registry(Generic[T]):
     """Name → object, filled from an entry-point group and by explicit registration."""
 
-    def __init__(self, group: str, kind: str, check: Callable[[Any], str | None] | None = None):
+    def __init__(self, group: str, kind: str, check: Callable[[Any], str | None] | None = None, *, trust: bool = False):
         self.group, self.kind = group, kind
         self._check = check
         self._items: dict[str, T] = {}
         self._origin: dict[str, str] = {}
         self.failures: dict[str, str] = {}
+        #: Entry points of other distributions, never imported here: name -> the entry point.
+        self.foreign: dict[str, EntryPoint] = {}
+        self._trust = trust  # whether $EARTHBENCH_TRUST may admit another distribution's entry points
         self._loaded = False
 
     def _load_entry_points(self, only: str | None = None) -> None:
@@ -47,6 +87,9 @@ class Registry(Generic[T]):
             self._loaded = True
         for ep in entry_points(group=self.group):
             if (only is not None and ep.name != only) or ep.name in self._items or ep.name in self.failures:
+                continue
+            if distribution_of(ep) not in (trusted_distributions() if self._trust else {OWN_DISTRIBUTION}):
+                self.foreign.setdefault(ep.name, ep)
                 continue
             try:
                 obj = ep.load()
@@ -89,8 +132,31 @@ class Registry(Generic[T]):
         except KeyError:
             if name in self.failures:
                 raise PluginError(f"{self.kind} {name!r} failed to load: {self.failures[name]}") from None
+            if name in self.foreign:
+                raise PluginError(self.foreign_message(name)) from None
             self._load_entry_points()  # every name, for the list of known ones
             raise UnknownNameError(self.kind, name, self._items) from None
+
+    def foreign_entry_points(self) -> dict[str, EntryPoint]:
+        """Other distributions' entry points of the group (name -> entry point), found without
+        importing anything (the group's own entry points are loaded only when asked for)."""
+        if self._loaded:  # every entry point was read: the foreign ones are known
+            return dict(self.foreign)
+        allowed = trusted_distributions() if self._trust else {OWN_DISTRIBUTION}
+        for ep in entry_points(group=self.group):
+            if ep.name not in self._items and distribution_of(ep) not in allowed:
+                self.foreign.setdefault(ep.name, ep)
+        return dict(self.foreign)
+
+    def foreign_message(self, name: str) -> str:
+        """Why ``name``, another distribution's entry point, is not loaded in this process."""
+        ep = self.foreign[name]
+        dist = distribution_of(ep) or "an unknown distribution"
+        if self.kind == "planner":
+            return (f"planner {name!r} comes from the distribution {dist}, whose code earthbench imports only inside "
+                    f"a fenced process (earthbench.harness.probe)")
+        return (f"{self.kind} {name!r} comes from the distribution {dist}, and earthbench loads only its own "
+                f"{self.kind}s in its own process (they run there, unfenced); set {TRUST_ENV}={dist} to trust it")
 
     def origin(self, name: str) -> str:
         self.get(name)
@@ -123,8 +189,8 @@ def _check_callable(obj: Any) -> str | None:
 
 
 PLANNERS: Registry[type[Planner]] = Registry("earthbench.planners", "planner", _check_planner)
-TERRAINS: Registry[Callable[..., Any]] = Registry("earthbench.terrains", "terrain generator", _check_callable)
-METRICS: Registry[Callable[..., Any]] = Registry("earthbench.metrics", "metric", _check_callable)
+TERRAINS: Registry[Callable[..., Any]] = Registry("earthbench.terrains", "terrain generator", _check_callable, trust=True)
+METRICS: Registry[Callable[..., Any]] = Registry("earthbench.metrics", "metric", _check_callable, trust=True)
 
 
 def register_planner(cls: type[Planner] | None = None, *, name: str | None = None, replace: bool = True) -> Any:
@@ -139,6 +205,24 @@ def register_planner(cls: type[Planner] | None = None, *, name: str | None = Non
         return PLANNERS.register(n, c, replace=replace)
 
     return deco(cls) if cls is not None else deco
+
+
+def file_digest(path: str | Path) -> str:
+    """The code digest of a plugin file: sha256 of its bytes (docs/DESIGN.md §6 "Plugin code")."""
+    return "sha256:" + hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def class_digest(klass: type) -> str:
+    """The code digest of a planner class in this process: ``earthbench`` for the distribution's own
+    planners (their versions are pinned with their plans), else the digest of its module's file."""
+    module = klass.__module__
+    if module.split(".")[0] in ("earthbench", "earthbench_planners"):
+        return OWN_DISTRIBUTION
+    file = getattr(sys.modules.get(module), "__file__", None)
+    try:
+        return file_digest(file) if file else ""
+    except OSError:
+        return ""
 
 
 def plugin_module_name(path: str | Path) -> str:

@@ -45,7 +45,8 @@ read-only, it is read as it is (a version-1 store's runs read as open-loop runs,
 version 3 as public runs, runs stored before version 4 as ``isolation: none``: they ran with
 per-process fences, runs before version 5 without load or build; version 6 ``prepare_s`` and
 ``prepare_cpu_s``, the planner's preparation, NULL before it; version 7 ``spot_checks``, which
-``verify`` created on its own before, so a store before it may or may not hold one).
+``verify`` created on its own before, so a store before it may or may not hold one; version 8
+``code_digest``, the digest of the code that provided the run's planner, NULL — unknown — before it).
 """
 
 from __future__ import annotations
@@ -104,6 +105,8 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("7: the spot re-timings of `earthbench verify --sample`, kept in the store they sampled", (
         "CREATE TABLE IF NOT EXISTS spot_checks (" + _SPOT_CHECK_COLUMNS + ")",
         "ALTER TABLE spot_checks ADD COLUMN context TEXT")),
+    ("8: the digest of the code that provided a run's planner (docs/DESIGN.md §6 \"Plugin code\"); NULL: unknown",
+     ("ALTER TABLE runs ADD COLUMN code_digest TEXT",)),
     # a run stored before it read as judged under rules version 1 (docs/referee.md "Rules versions")
     ("9: the version of the referee's rules a run was judged under", ("ALTER TABLE runs ADD COLUMN rules INTEGER NOT NULL DEFAULT 1",)),
 )
@@ -173,7 +176,7 @@ CREATE TABLE runs (
     sealed INTEGER NOT NULL DEFAULT 0,
     isolation TEXT, processes INTEGER,
     load_before REAL, load_after REAL, steal_share REAL,
-    prepare_s REAL, prepare_cpu_s REAL,
+    prepare_s REAL, prepare_cpu_s REAL, code_digest TEXT,
     rules INTEGER NOT NULL DEFAULT 1,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
@@ -346,6 +349,12 @@ class Store:
             rows = self.db.execute(sql)
         return {tuple(r) for r in rows}  # type: ignore[misc]
 
+    def code_digests(self, planner: str, version: str) -> set[str]:
+        """The code digests stored with ``planner``'s runs of ``version`` (unknown ones left out)."""
+        rows = self.db.execute("SELECT DISTINCT code_digest FROM runs WHERE planner=? AND planner_version=? "
+                               "AND code_digest IS NOT NULL", (planner, version))
+        return {r[0] for r in rows}
+
     def register_suite(self, suite: SuiteRecord) -> int:
         """Record a suite version and its scenarios (once per digest), in one transaction."""
         row = self.db.execute("SELECT id FROM suites WHERE name=? AND digest=?", (suite.name, suite.digest)).fetchone()
@@ -417,6 +426,7 @@ class Store:
                     "sealed": int(bool(sc.meta.get("sealed"))),
                     **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                     "prepare_s": result.prepare_s, "prepare_cpu_s": result.prepare_cpu_s,
+                    "code_digest": case.planner.code_digest or None,
                     "rules": result.rules if result.rules is not None else _rules_version(),
                 }
                 cols = ", ".join(row)

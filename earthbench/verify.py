@@ -346,10 +346,10 @@ def machine_label(env: dict[str, Any] | Any) -> str:
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from .records import PlannerRef
+    from .harness.probe import resolve
 
     try:
-        ref = PlannerRef.resolve(row["planner"], config)
+        ref = resolve(row["planner"], config)
     except UnknownNameError as exc:
         raise VerifyError(f"{exc}; a planner from a file is loaded with --plugin FILE.py") from None
     if ref.version != row["planner_version"]:

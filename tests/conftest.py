@@ -22,20 +22,26 @@ _TEST_VARS = ("EARTHBENCH_TEST_PIDDIR,EARTHBENCH_TEST_PIDFILE,EARTHBENCH_TEST_NA
               "EARTHBENCH_TEST_VICTIM")
 
 
+_PROBES_ENV = "EARTHBENCH_PROBES"  # earthbench.harness.probe.ENV
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """The session's built STL-TAMP NLPs (and those of the cases it runs) go to a temporary
-    folder, not the user's cache, unless the caller chose one; the test planners' settings reach
-    their cases."""
+    """The session's built STL-TAMP NLPs (and those of the cases it runs) and its planner probes'
+    answers go to temporary folders, not the user's caches, unless the caller chose them; the test
+    planners' settings reach their cases."""
     os.environ.setdefault("EARTHBENCH_CASE_ENV", _TEST_VARS)
     if _NLP_CACHE_ENV not in os.environ:
         config._earthbench_nlp_cache = os.environ[_NLP_CACHE_ENV] = tempfile.mkdtemp(prefix="earthbench-nlp-")
+    if _PROBES_ENV not in os.environ:
+        config._earthbench_probes = os.environ[_PROBES_ENV] = tempfile.mkdtemp(prefix="earthbench-probes-")
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    folder = getattr(config, "_earthbench_nlp_cache", None)
-    if folder:
-        shutil.rmtree(folder, ignore_errors=True)
-        os.environ.pop(_NLP_CACHE_ENV, None)
+    for attr, env in (("_earthbench_nlp_cache", _NLP_CACHE_ENV), ("_earthbench_probes", _PROBES_ENV)):
+        folder = getattr(config, attr, None)
+        if folder:
+            shutil.rmtree(folder, ignore_errors=True)
+            os.environ.pop(env, None)
 
 
 @pytest.fixture

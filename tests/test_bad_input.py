@@ -147,7 +147,8 @@ def test_a_full_temp_directory_stops_the_run_with_a_message(tmp_path, capsys, mo
     status = main(["run", str(tmp_path / "tiny.toml"), "--planner", "t-fast", "--plugin", FAULTY, "--db", str(db)])
     err = capsys.readouterr().err
     assert status == 2 and "Traceback" not in err and "No space left on device" in err and "TMPDIR" in err
-    assert len(load_runs(db)) == 0  # nothing stored for a case that never ran
+    # nothing stored for a case that never ran (the planner's probe may stop it before the store is made)
+    assert not db.exists() or len(load_runs(db)) == 0
 
 
 def test_output_piped_into_head_ends_quietly():

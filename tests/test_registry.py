@@ -32,12 +32,31 @@ def test_a_broken_plugin_is_reported_and_does_not_hide_the_others(monkeypatch):
         EntryPoint("greedy", "earthbench_planners.greedy.backhoe:GreedyPlanner", "earthbench.planners"),
     ]
     monkeypatch.setattr(registry, "entry_points", lambda group: eps)
+    monkeypatch.setattr(registry, "distribution_of", lambda ep: "earthbench")  # as if earthbench's own
     reg = registry.Registry("earthbench.planners", "planner", registry._check_planner)
     assert reg.names() == ["greedy"]
     assert "ModuleNotFoundError" in reg.failures["broken"]
     assert "not a subclass" in reg.failures["notaplanner"]
     with pytest.raises(PluginError, match="failed to load"):
         reg.get("broken")
+
+
+def test_another_distributions_entry_points_are_never_imported_here(monkeypatch):
+    """Its planners are probed in a fence (earthbench.harness.probe); its terrains and metrics are
+    loaded only when $EARTHBENCH_TRUST names it (docs/DESIGN.md §6 "Plugin code")."""
+    eps = [EntryPoint("theirs", "earthbench_no_such_module:Thing", "earthbench.metrics")]
+    monkeypatch.setattr(registry, "entry_points", lambda group: eps)
+    monkeypatch.setattr(registry, "distribution_of", lambda ep: "their-package")
+    monkeypatch.delenv(registry.TRUST_ENV, raising=False)
+    reg = registry.Registry("earthbench.metrics", "metric", registry._check_callable, trust=True)
+    assert reg.names() == [] and reg.failures == {} and list(reg.foreign) == ["theirs"]
+    with pytest.raises(PluginError, match="EARTHBENCH_TRUST=their-package"):
+        reg.get("theirs")
+    monkeypatch.setenv(registry.TRUST_ENV, "Their_Package")  # trusted: imported (and here it fails to import)
+    reg = registry.Registry("earthbench.metrics", "metric", registry._check_callable, trust=True)
+    assert reg.names() == [] and "ModuleNotFoundError" in reg.failures["theirs"]
+    planners = registry.Registry("earthbench.planners", "planner", registry._check_planner)
+    assert planners.names() == [] and list(planners.foreign) == ["theirs"]  # planners: never, trusted or not
 
 
 @pytest.fixture

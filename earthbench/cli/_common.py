@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import difflib
 import inspect
 import json
@@ -14,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import EarthbenchError, UnknownNameError
+from ..harness.probe import PlannerInfo, info_of_class, use_plugin_files
 from ..planner import Planner
-from ..registry import TERRAINS, load_plugin_file
+from ..registry import TERRAINS
 from ..world import Scenario
 
 
@@ -90,13 +90,13 @@ def check_params(name: str, gen: Any, params: dict[str, Any]) -> None:
             raise UnknownNameError(f"{name} parameter", key, known)
 
 
-def parse_config(items: list[str], planner: type[Planner]) -> dict[str, Any]:
-    """``--config KEY=VALUE`` items as overrides of ``planner.Config``: known fields only, values of the field's type."""
-    fields = {f.name: f for f in dataclasses.fields(planner.Config)} if dataclasses.is_dataclass(planner.Config) else {}
-    try:
-        hints = typing.get_type_hints(planner.Config)
-    except Exception:  # noqa: BLE001 - unresolvable annotations: fall back to JSON values
-        hints = {}
+def parse_config(items: list[str], planner: PlannerInfo | type[Planner]) -> dict[str, Any]:
+    """``--config KEY=VALUE`` items as overrides of the planner's ``Config``: known fields only, values of
+    the field's type (read from the planner's description, :mod:`earthbench.harness.probe`: no plugin code runs)."""
+    if isinstance(planner, type):
+        planner = info_of_class(planner.name, planner)
+    hints = planner.hints()
+    fields = list(hints)
     out: dict[str, Any] = {}
     for item in items:
         key, raw = _key_value(item, "--config")
@@ -161,8 +161,9 @@ def add_plugin_arg(p: argparse.ArgumentParser) -> None:
 
 
 def load_plugins(args: argparse.Namespace) -> None:
-    for path in getattr(args, "plugin", []) or []:
-        load_plugin_file(path)
+    """The command's ``--plugin`` files: checked, and described by a fenced probe when a planner is
+    looked up (docs/DESIGN.md §6 "Plugin code"); never imported into this process."""
+    use_plugin_files(getattr(args, "plugin", []) or [])
 
 
 def plain(doc: str | None) -> str:

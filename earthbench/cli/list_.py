@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import inspect
+import json
 
+from ..harness.probe import PlannerInfo, catalogue
 from ..registry import METRICS, PLANNERS, TERRAINS, Registry
 from ._common import add_plugin_arg, load_plugins
 
@@ -23,11 +24,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def settings(kind: str, obj: object) -> str:
-    """``key=default`` of a planner's ``Config`` or of a generator's keyword parameters."""
-    config = getattr(obj, "Config", None)
-    if kind == "planners" and dataclasses.is_dataclass(config):
-        return ", ".join(f"{f.name}={f.default!r}" if f.default is not dataclasses.MISSING else f.name
-                         for f in dataclasses.fields(config))
+    """``key=default`` of a planner's settings (its description) or of a generator's keyword parameters."""
+    if kind == "planners" and isinstance(obj, PlannerInfo):
+        return ", ".join(f"{s.name}={_default(s.default)}" if s.has_default else s.name for s in obj.settings)
     if kind == "terrains":
         try:
             ps = list(inspect.signature(obj).parameters.values())[2:]  # type: ignore[arg-type]
@@ -38,21 +37,32 @@ def settings(kind: str, obj: object) -> str:
     return ""
 
 
+def _default(value: object) -> str:
+    """A default as Python writes it (JSON lists were tuples or lists: shown as JSON)."""
+    return repr(value) if not isinstance(value, (list, dict)) else json.dumps(value)
+
+
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     for kind in [args.kind] if args.kind else list(KINDS):
         reg = KINDS[kind]
         print(f"{kind}:")
-        for name, obj in reg.items():
-            if kind == "planners":
-                doc = (obj.__doc__ or "").strip().splitlines()
-                first = doc[0] if doc else ""
-                print(f"  {name:<24} v{obj.version:<6} tracks={','.join(obj.tracks):<20} {first}")
-            else:
+        failures = dict(reg.failures)
+        if kind == "planners":
+            cat = catalogue()
+            failures.update(cat.failures)
+            for name, info in sorted(cat.planners.items()):
+                print(f"  {name:<24} v{info.version:<6} tracks={','.join(info.tracks):<20} {info.doc}")
+                if args.settings and settings(kind, info):
+                    print(f"  {'':<24} settings: {settings(kind, info)}")
+        else:
+            for name, obj in reg.items():
                 doc = (getattr(obj, "__doc__", "") or "").strip().splitlines()
                 print(f"  {name:<24} {doc[0] if doc else ''}")
-            if args.settings and settings(kind, obj):
-                print(f"  {'':<24} settings: {settings(kind, obj)}" if kind == "planners" else f"  {'':<24} params: {settings(kind, obj)}")
-        for name, why in sorted(reg.failures.items()):
+                if args.settings and settings(kind, obj):
+                    print(f"  {'':<24} params: {settings(kind, obj)}")
+            for name in sorted(reg.foreign):
+                print(f"  {name:<24} NOT LOADED: {reg.foreign_message(name)}")
+        for name, why in sorted(failures.items()):
             print(f"  {name:<24} FAILED TO LOAD: {why}")
     return 0

@@ -7,7 +7,9 @@ import sys
 import time
 from pathlib import Path
 
+from ..harness.probe import info, resolve
 from ..harness.steps import run_closed_loop
+from ..plan import Plan
 from ..registry import PLANNERS
 from ..sensing import observe
 from ._common import add_config_arg, add_plugin_arg, add_scenario_args, load_plugins, load_scenario, parse_config
@@ -18,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "plan",
         help="run a planner on one scenario and write the plan JSON",
         description="Run PLANNER on a scenario (a file, or a generator, seed and target) and write its plan. "
-        "This runs in-process, without the runner's budget; use `earthbench run` for benchmarking.",
+        "A built-in planner runs in-process, without the runner's budget; a plugin's planner (--plugin, an "
+        "installed package) runs fenced as a case does. Use `earthbench run` for benchmarking.",
     )
     p.add_argument("planner", help="planner name (see `earthbench list planners`)")
     add_scenario_args(p)
@@ -31,7 +34,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
+    if args.planner not in PLANNERS:  # a plugin file's or another distribution's: never imported here
+        return _fenced(args)
     cls = PLANNERS.get(args.planner)
+    resolve(args.planner)  # a plugin file of the same name is a clash
     overrides = parse_config(args.config, cls)
     scenario = load_scenario(args)
     if args.save_scenario:
@@ -48,8 +54,31 @@ def run(args: argparse.Namespace) -> int:
     # a closed-loop configuration is run step by step, each step executed on the truth as the harness does
     plan = run_closed_loop(planner, scenario) if planner.closed_loop else planner.plan(view)
     dt = time.perf_counter() - t0
+    return _write(args, plan, dt, scenario.id)
+
+
+def _write(args: argparse.Namespace, plan: Plan, dt: float, scenario_id: str) -> int:
     text = plan.to_json(args.out)
     if not args.out:
         print(text)
-    print(f"{args.planner}: {len(plan.actions)} actions in {dt:.2f} s for scenario {scenario.id}", file=sys.stderr)
+    print(f"{args.planner}: {len(plan.actions)} actions in {dt:.2f} s for scenario {scenario_id}", file=sys.stderr)
     return 0
+
+
+def _fenced(args: argparse.Namespace) -> int:
+    """A plugin's planner runs as a case does (its fences and the scenario's budget), its preparation found
+    on this machine if there is one; the plan it returns is written as it is (invalid ones too)."""
+    from ..errors import EarthbenchError
+    from ..harness.prepare import find
+    from ..harness.sandbox import run_case
+    from ..records import Case
+
+    ref = resolve(args.planner, parse_config(args.config, info(args.planner)))
+    scenario = load_scenario(args)
+    if args.save_scenario:
+        scenario.to_json(args.save_scenario)
+    res = run_case(Case("plan", "", 0.0, scenario, ref), prepared=find(ref) if ref.prepares else None)
+    if res.plan_json is None:
+        raise EarthbenchError(f"planner {args.planner!r} returned no plan ({res.reason}): "
+                              + (res.error.strip().splitlines() or [""])[-1])
+    return _write(args, Plan.from_json(res.plan_json), res.solve_time_s or 0.0, scenario.id)

@@ -38,11 +38,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
-    from ..records import PlannerRef
     from ..harness.prepare import PrepareError, ensure, forget, prepare_key
-    from ..registry import PLANNERS
+    from ..harness.probe import info, resolve
 
-    overrides = parse_config(args.config, PLANNERS.get(args.planner)) if args.config else {}
+    overrides = parse_config(args.config, info(args.planner)) if args.config else {}
     if args.suite:
         from ..suite import load_suite
 
@@ -51,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         overrides = {**suite.config.get(args.planner, {}), **overrides}
     else:
         budget = Budget()
-    ref = PlannerRef.resolve(args.planner, overrides)
+    ref = resolve(args.planner, overrides)
     if not ref.prepares:
         print(f"earthbench: planner {ref.name!r} declares no preparation: its cases need none", file=sys.stderr)
         return 1

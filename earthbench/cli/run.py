@@ -16,6 +16,7 @@ from typing import Any
 
 from ..errors import EarthbenchError, SuiteError
 from ..harness import REASONS, LocalExecutor, build_cases, run_cases
+from ..harness.orchestrate import check_code
 from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
@@ -149,10 +150,10 @@ def run(args: argparse.Namespace) -> int:
     if args.config:
         if not args.planner:
             raise EarthbenchError("--config needs --planner NAME: the settings are checked against that planner's Config")
-        from ..registry import PLANNERS
+        from ..harness.probe import info
 
         for name in dict.fromkeys(args.planner):  # the command line's settings over the suite file's
-            suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, PLANNERS.get(name))}
+            suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, info(name))}
     seeds = parse_seed_range(args.seeds) if args.seeds else None
     if seeds is not None and not suite.select(seeds):
         have = sorted({int(s.meta["seed"]) for s in suite.scenarios if s.meta.get("seed") is not None})
@@ -166,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     with Store(args.db) as store:
         store.check_writable()
+        check_code(cases, store)  # a planner squatting on another's name and version: before anything is written
         store.register_suite(suite)
         executor = make_executor(args, suite)
         if args.jobs is not None and isinstance(executor, LocalExecutor) and args.jobs > len(executor.slots):

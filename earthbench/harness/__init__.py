@@ -10,7 +10,9 @@ Modules, each with one job:
 * :mod:`.slots` — :func:`make_slots`, :class:`SlotPool`: disjoint core groups;
 * :mod:`.local` — the :class:`Executor` protocol and :class:`LocalExecutor`;
 * :mod:`.dask_executor` — :class:`~.dask_executor.DaskExecutor` (imported on demand: needs ``distributed``);
-* :mod:`.orchestrate` — :func:`build_cases`, :func:`run_cases`, :func:`run_suite`.
+* :mod:`.orchestrate` — :func:`build_cases`, :func:`run_cases`, :func:`run_suite`;
+* :mod:`.probe` — a plugin's planners described by a fenced, cached probe (:mod:`.describe` runs inside it):
+  the harness never imports a plugin's code (docs/DESIGN.md §6 "Plugin code").
 """
 
 from __future__ import annotations

@@ -112,6 +112,10 @@ def main(fd: int) -> None:
 
     try:
         doc = json.loads(sys.stdin.buffer.readline())
+        if doc.get("job") == "probe":  # a planner probe, not a case (earthbench.harness.probe)
+            _probe(doc, given, send)
+            out.close()
+            return
         from earthbench.plan import Plan
         from earthbench.world import Scenario
 
@@ -193,6 +197,21 @@ def _prepare(cls: type, overrides: dict[str, Any], given: dict[str, str], send: 
         except (TypeError, ValueError) as exc:
             msg.update(outcome="error", error="prepare() returned what JSON cannot write:\n" + _tb(exc))
     send(msg)
+
+
+def _probe(spec: dict[str, Any], given: dict[str, str], send: Any) -> None:
+    """A probe job: say ready, read what to resolve, import the plugin and describe its planners
+    (:func:`earthbench.harness.describe.answer`), answer ``{"outcome": "probed", "summary": JSON text}``."""
+    from earthbench.harness.describe import answer
+
+    send({"event": "ready"})
+    try:
+        payload, given["nonce"] = read_input(sys.stdin.buffer.readline())
+        send({"event": "done", "outcome": "probed", "error": "", "summary": json.dumps(answer(spec, payload))})
+    except MemoryError:
+        send({"event": "done", "outcome": "memory", "error": "MemoryError: the probe exceeded its memory budget"})
+    except BaseException as exc:  # noqa: BLE001 - SystemExit and KeyboardInterrupt too
+        send({"event": "done", "outcome": "error", "error": _tb(exc)})
 
 
 def _steps(planner: Any, doc: dict[str, Any], given: dict[str, str], send: Any) -> bool:

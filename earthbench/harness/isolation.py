@@ -258,8 +258,18 @@ def _own_packages() -> tuple[str, ...]:
 
 
 def _find(module: str) -> importlib.machinery.ModuleSpec | None:
+    """The module's spec, found without importing it or its parent packages (a plugin's
+    ``__init__`` is code the harness must not run: docs/DESIGN.md §6 "Plugin code")."""
+    if module in sys.modules:
+        return getattr(sys.modules[module], "__spec__", None)
+    parts = module.split(".")
     try:
-        return importlib.util.find_spec(module)
+        spec = importlib.util.find_spec(parts[0])  # a top-level name: found, not imported
+        for i in range(1, len(parts)):
+            if spec is None or not spec.submodule_search_locations:
+                return None
+            spec = importlib.machinery.PathFinder.find_spec(".".join(parts[:i + 1]), list(spec.submodule_search_locations))
+        return spec
     except (ImportError, ValueError):
         return None
 

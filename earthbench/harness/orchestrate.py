@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import PluginError, StoreError
-from ..registry import PLANNERS
-from ..records import Case, PlannerRef
+from ..records import Case
+from . import probe
 from .local import Executor, LocalExecutor
 from .sandbox import CASE_TAG
 
@@ -63,19 +63,26 @@ def build_cases(
     """
     notes: list[str] = []
     explicit = bool(planners)
-    names = list(planners or suite.planners or [n for n, c in PLANNERS.items() if suite.track in c.tracks])
+    if plugins:
+        probe.use_plugin_files(plugins)
+    if planners or suite.planners:
+        names = list(planners or suite.planners or ())
+    else:  # every planner of the track; one whose code failed to load is said, not silently left out
+        cat = probe.catalogue()
+        names = [n for n, p in cat.planners.items() if suite.track in p.tracks]
+        notes += [f"{what} failed to load: {why}" for what, why in sorted(cat.failures.items())]
     if not names:
         notes.append(f"no registered planner supports the {suite.track!r} track")
     refs = []
     for name in dict.fromkeys(names):
-        ref = PlannerRef.resolve(name, suite.config.get(name))
+        ref = probe.resolve(name, suite.config.get(name))
         if suite.track not in ref.tracks:
             if explicit:
                 notes.append(f"planner {name!r} supports {', '.join(ref.tracks)}, not this suite's {suite.track!r} track: skipped")
             continue
         refs.append(ref)
     for name in suite.config:
-        if name not in PLANNERS:
+        if not probe.known(name):
             notes.append(f"the suite configures planner {name!r}, which is not registered: its [config.{name}] is unused")
     plugin_paths = tuple(str(Path(p).resolve()) for p in plugins)
     cases = [
@@ -116,6 +123,7 @@ def run_cases(
     written), keeps every finished one and returns the report marked ``interrupted``.
     """
     _refuse_inside_a_case()
+    check_code(cases, store)
     report = RunReport(planned=len(cases))
     done = set() if rerun else store.finished_keys()
     by_key: dict[tuple[str, str, str, str], Case] = {}
@@ -150,6 +158,27 @@ def run_cases(
         if progress is not None:
             progress.close()
     return report
+
+
+def check_code(cases: Sequence[Case], store: Store) -> None:
+    """Refuse a planner whose name and version the store holds with other code (docs/DESIGN.md §6
+    "Plugin code"): its runs would be skipped as stored, or mixed with another planner's."""
+    seen: set[tuple[str, str, str]] = set()
+    for c in cases:
+        p = c.planner
+        if not p.code_digest or (p.name, p.version, p.code_digest) in seen:
+            continue
+        seen.add((p.name, p.version, p.code_digest))
+        other = store.code_digests(p.name, p.version) - {p.code_digest}
+        if other:
+            raise PluginError(
+                f"planner {p.name!r} {p.version} is stored in {store.path} with other code ({_short(sorted(other)[0])}) than "
+                f"the one given here ({_short(p.code_digest)}): two planners of one name and version. Give this one another "
+                f"version (or name), or use another store")
+
+
+def _short(digest: str) -> str:
+    return digest.split(":", 1)[-1][:12]
 
 
 def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, *,

@@ -46,6 +46,7 @@ from importlib import metadata
 from pathlib import Path
 
 from ..errors import EarthbenchError
+from ..registry import OWN_DISTRIBUTION
 from ..world import Budget
 from ..records import Case, CaseResult, PlannerRef, utc_now
 from .cases import Prepared
@@ -106,11 +107,15 @@ def machine_stamp() -> dict[str, str]:
 
 
 def prepare_key(ref: PlannerRef) -> str:
-    """The folder's name: a hash of planner, version, configuration and :func:`machine_stamp`.
-    The configuration's ``closed_loop`` setting is left out: it is how the harness calls the
-    planner (docs/DESIGN.md §6), so open and closed loop share one preparation."""
+    """The folder's name: a hash of planner, version, configuration, the digest of its code and
+    :func:`machine_stamp`. The configuration's ``closed_loop`` setting is left out: it is how the
+    harness calls the planner (docs/DESIGN.md §6), so open and closed loop share one preparation.
+    A plugin's code digest is in it (two plugins of one name and version never share a folder); the
+    built-in planners' is earthbench's version, already in the machine stamp, so their keys stay."""
     config = {k: v for k, v in ref.config.items() if k != "closed_loop"}
     doc = {"planner": ref.name, "version": ref.version, "config": config, "machine": machine_stamp()}
+    if ref.code_digest and ref.code_digest != OWN_DISTRIBUTION:
+        doc["code"] = ref.code_digest
     return f"{ref.name}-{hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:24]}"
 
 

@@ -240,23 +240,25 @@ class JobOutcome:
     isolation: str = "none"
 
 
-def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *, writable: str,
-            stop: threading.Event | None = None, startup_s: float = STARTUP_S,
-            watch: Callable[[], str] | None = None) -> JobOutcome:
+def run_job(job: dict[str, Any], payload: bytes, cores: Sequence[int], budget: Budget, *, writable: str | None,
+            stop: threading.Event | None = None, startup_s: float = STARTUP_S, visible: Sequence[str] | None = None,
+            what: str = "a preparation", watch: Callable[[], str] | None = None) -> JobOutcome:
     """Run a non-case job (``job`` is its specification, with ``"job"`` naming it) in a fresh,
     fenced process tree on ``cores`` under ``budget``, giving it ``payload`` as its one input once
-    it is ready; ``writable`` is the folder it may write; ``watch`` (called every second while it
-    runs) says why to end it, e.g. its folder is over its disk budget. Only a ``prepare`` job
-    exists (:mod:`.prepare`)."""
-    o, tail, label = _run_fenced(job, payload, tuple(cores), budget, what="a preparation",
-                                 visible=isolation.visible_paths(str(job.get("source", ""))), writable=(writable,),
-                                 prepare=job.get("job") == "prepare", stop=stop, startup_s=startup_s, watch=watch)
+    it is ready; ``writable`` is the folder it may write (None: none); ``watch`` (called every
+    second while it runs) says why to end it, e.g. its folder is over its disk budget. The jobs:
+    ``prepare`` (:mod:`.prepare`) and ``probe`` (:mod:`.probe`, whose one result is ``probed``)."""
+    if visible is None:
+        visible = isolation.visible_paths(str(job.get("source", "")))
+    o, tail, label = _run_fenced(job, payload, tuple(cores), budget, what=what, visible=visible,
+                                 writable=(writable,) if writable else (), prepare=job.get("job") or False,
+                                 stop=stop, startup_s=startup_s, watch=watch)
     return JobOutcome(o.done, o.fault, o.timed_out, o.cancelled, o.status, o.solve_time_s, o.solve_cpu_s, o.maxrss_mb,
                       tail, label)
 
 
 def _run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], budget: Budget, *, what: str,
-                visible: Sequence[str], writable: Sequence[str] = (), loop: StepLoop | None = None, prepare: bool = False,
+                visible: Sequence[str], writable: Sequence[str] = (), loop: StepLoop | None = None, prepare: bool | str = False,
                 stop: threading.Event | None = None, startup_s: float = STARTUP_S,
                 watch: Callable[[], str] | None = None) -> tuple[_Outcome, str, str]:
     """One process tree of the bootstrap in the fences (namespaces, cgroup) on ``cores`` under
@@ -394,7 +396,7 @@ class _Supervisor:
                  budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: StepLoop | None = None,
                  cgroup: isolation.CaseCgroup | None = None, sandboxed: bool = False, log_fd: int = -1):
         self.proc, self.msg_fd, self.report_fd, self.scenario, self.tag = proc, msg_fd, report_fd, scenario, tag
-        self.prepare = False  # a preparation job (run_job), not a case
+        self.prepare: bool | str = False  # a non-case job (run_job): its name, ``prepare`` or ``probe``
         self.watch: Callable[[], str] | None = None
         self.next_watch = t_spawn + TREE_SAMPLE_S
         self.log_fd, self.log, self.logged = log_fd, bytearray(), 0
@@ -830,14 +832,20 @@ def _sweep(tag: str) -> None:
             continue
 
 
-def _check_done(msg: dict[str, Any], ready: bool, closed_loop: bool = False, prepare: bool = False) -> str:
-    """Why a result message is malformed, or '' when it is well formed. ``prepare``: the job is a
-    preparation (:mod:`.prepare`), whose one result is ``prepared`` (or an error)."""
+#: A non-case job's one result: a preparation's ``prepared``, a probe's ``probed`` (with a JSON text).
+JOB_RESULTS = {"prepare": "prepared", "probe": "probed"}
+
+
+def _check_done(msg: dict[str, Any], ready: bool, closed_loop: bool = False, prepare: bool | str = False) -> str:
+    """Why a result message is malformed, or '' when it is well formed. ``prepare``: the job it is
+    (``prepare``, ``probe``; True: ``prepare``), whose one result is ``prepared`` or ``probed`` (or an error)."""
     outcome = msg.get("outcome")
-    if (outcome == "prepared") != prepare and outcome not in ("error", "memory"):
-        return f"the {'preparation' if prepare else 'case'}'s result has outcome {_clip(outcome)}"
-    if outcome == "prepared":
-        return "" if ready and isinstance(msg.get("summary"), str) else "the preparation's result is malformed"
+    job = "prepare" if prepare is True else (prepare or "")
+    expected = JOB_RESULTS.get(job)
+    if (outcome in JOB_RESULTS.values() or expected) and outcome != expected and outcome not in ("error", "memory"):
+        return f"the {job or 'case'}'s result has outcome {_clip(outcome)}"
+    if expected and outcome == expected:
+        return "" if ready and isinstance(msg.get("summary"), str) else f"the {job}'s result is malformed"
     if outcome not in ("plan", "error", "memory", "steps"):
         return f"the case's result has outcome {_clip(outcome)}, not one of plan, error, memory, steps"
     if outcome == "steps" and not (closed_loop and ready):
