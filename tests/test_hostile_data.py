@@ -84,9 +84,19 @@ def _open_new(path: str, barrier, out) -> None:
 def test_processes_racing_to_create_a_store_all_open_it(tmp_path):
     """The attack (seen under load): two commands started together on a store that did not exist;
     one stopped with "locked by another process" (or took the half-made file for a foreign
-    database). Six processes released at once, twelve times: every one opens the store."""
+    database). Six processes released at once, twenty times, beside two busy loops: every one opens the store."""
     ctx = multiprocessing.get_context("fork")
-    for r in range(12):
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]  # the load
+    try:
+        _race(ctx, tmp_path)
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
+
+
+def _race(ctx, tmp_path: Path) -> None:
+    for r in range(20):
         path = str(tmp_path / f"new{r}.db")
         barrier, out = ctx.Barrier(6), ctx.Queue()
         procs = [ctx.Process(target=_open_new, args=(path, barrier, out)) for _ in range(6)]
@@ -99,3 +109,88 @@ def test_processes_racing_to_create_a_store_all_open_it(tmp_path):
         with Store(path, create=False) as st:
             assert st.runs() == []
         assert sorted(x.name for x in tmp_path.iterdir() if x.name.startswith(f".new{r}")) == []
+
+
+# -- control sequences in what is printed --------------------------------------------------------
+
+ESCAPING = str(Path(__file__).parent / "plugins" / "escaping_planners.py")
+
+
+def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "earthbench", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def _raw_controls(text: str) -> list[str]:
+    """The characters of ``text`` a terminal would act on (newline and tab are text)."""
+    import unicodedata
+
+    return sorted({c for c in text if (unicodedata.category(c) in ("Cc", "Cf", "Zl", "Zp")) and c not in "\n\t"})
+
+
+def test_printable_escapes_every_control_and_formatting_character():
+    import unicodedata
+
+    from earthbench.errors import printable
+
+    controls = "".join(chr(c) for c in range(0x3000) if unicodedata.category(chr(c)) in ("Cc", "Zl", "Zp") or 0x200B <= c <= 0x200F
+                       or 0x202A <= c <= 0x202E or 0x2060 <= c <= 0x2069)
+    out = printable("name " + controls + "\n\tend ü ³ – ∞")
+    assert _raw_controls(out) == []
+    assert out.startswith("name \\x00\\x01") and "\\x1b" in out and "\\u202e" in out and out.endswith("\n\tend ü ³ – ∞")
+
+
+def test_control_sequences_in_names_errors_and_logs_reach_the_terminal_as_text(tmp_path):
+    """The attack: a planner named with a line erase and a fake green "ok", a clipboard write
+    (OSC 52) and a right-to-left override; it prints them to its log and raises with them; the
+    suite's name carries a colour. `run`, `runs`, `runs --id`, `list` and `leaderboard` print
+    every one of them as escapes."""
+    sys.path.insert(0, str(Path(ESCAPING).parent))
+    from escaping_planners import TRICKS, Escaping, EscapingQuiet
+
+    import json
+
+    from helpers import tiny_suite_toml
+
+    suite = tmp_path / "s.toml"
+    suite.write_text("planners = " + json.dumps([Escaping.name, EscapingQuiet.name]) + "\n"
+                     + tiny_suite_toml("tiny\\u001b[31mred\\u0007"))
+    db = str(tmp_path / "x.db")
+    outputs = [_cli("run", str(suite), "--plugin", ESCAPING, "--db", db, cwd=tmp_path),
+               _cli("runs", "--db", db, cwd=tmp_path), _cli("runs", "--db", db, "--id", "1", cwd=tmp_path),
+               _cli("list", "planners", "--plugin", ESCAPING, cwd=tmp_path),
+               _cli("leaderboard", "--db", db, "--out", str(tmp_path / "lb"), "--no-figures", cwd=tmp_path)]
+    for p in outputs:
+        assert p.returncode == 0, p.stderr
+        assert _raw_controls(p.stdout + p.stderr) == [], p.args
+    shown = "\\x1b[2K\\x0d\\x1b[32m ok \\x1b[0m\\x1b]52;c;ZXZpbA==\\x07\\u202e\\x9b31m"
+    assert TRICKS not in "".join(p.stdout + p.stderr for p in outputs)
+    run, _, one, listed, _ = outputs
+    assert "t-esc" + shown in run.stderr and "tiny\\x1b[31mred\\x07" in run.stderr
+    assert "error text " + shown in one.stdout and "log line " + shown in one.stdout and "stderr line " + shown in one.stdout
+    assert "t-esc-ok" + shown in listed.stdout
+
+
+# -- two runs on a new store, from the command line, under load ----------------------------------
+
+
+@pytest.mark.slow
+def test_two_runs_started_together_on_a_new_store_under_load_both_succeed(tmp_path):
+    """The attack as it was seen: two `earthbench run` on a store that does not exist yet, the
+    machine busy. Both finish and both suites' runs are stored once."""
+    from helpers import tiny_suite_toml
+
+    for name, seeds in (("a", "0-0"), ("b", "1-1")):
+        (tmp_path / f"{name}.toml").write_text(tiny_suite_toml(name, seeds=seeds))
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        runs = [subprocess.Popen([sys.executable, "-m", "earthbench", "run", str(tmp_path / f"{name}.toml"), "--planner", "greedy",
+                                  "--db", str(tmp_path / "new.db"), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                 text=True) for name in ("a", "b")]
+        results = [(p.wait(timeout=300), p.communicate()[1]) for p in runs]
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
+    assert [rc for rc, _ in results] == [0, 0], results
+    with Store(tmp_path / "new.db", create=False) as st:
+        assert sorted(r["suite"] for r in st.runs()) == ["a", "b"]

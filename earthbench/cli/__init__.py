@@ -14,6 +14,7 @@ import signal
 import sys
 
 from ..errors import EarthbenchError
+from ._common import PrintableStream
 from ._common import parse_config as parse_config  # public: scripts convert KEY=VALUE settings as --config does
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
@@ -54,6 +55,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; everything it prints goes through :class:`PrintableStream`."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = PrintableStream(out), PrintableStream(err)  # type: ignore[assignment]
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
