@@ -8,12 +8,13 @@ draws every random choice from a key only the person running the board holds
 
 * the terrain seed, the hidden soil's seed and the scan's noise seed of each scenario are
   HMAC-SHA256 of the key and ``PUBLIC_ID\\nPURPOSE`` (:meth:`SealKey.derive`), each 63 bits;
-* a rigid motion of the whole site (:class:`SiteTransform`): a quarter turn about the map's
-  centre, a mirror, and a shift by whole cells of up to :data:`MAX_SHIFT_M` in x and y. A
-  rigid motion of terrain, dig area, keep-outs and machines is the same task, so honest
-  planners face the same difficulty; a generator may allow fewer of these
-  (``seal_transforms``, a tuple of "shift", "rotate", "mirror", as an attribute of the
-  generator; default: all three; every built-in generator allows all three).
+* and nothing else. Whatever a sealed draw changes beyond what the public suite's own seeds
+  change is a feature a case could tell it by (up to 0.3.0, the rigid motion of
+  :class:`SiteTransform` moved every sealed site off the public origin: one look at the map's
+  origin told sealed from public). A sealed scenario is a sample of the generator's own
+  distribution; a generator whose seed changes nothing (``file``) has nothing to seal.
+  :class:`SiteTransform` stays, for studies of a planner's orientation (``scripts/sealed_audit.py``);
+  a generator's ``seal_transforms`` attribute is no longer read.
 
 What is *not* re-drawn: a family's fixed parameters (a sensing ``bias`` of 0.02 m stays 0.02 m,
 a material stays loam): those define the suite's world, and re-drawing them would change the
@@ -46,7 +47,7 @@ from .world import Heightmap, Machines, Pose, Scenario, Site
 
 SEAL_SCHEMA = "earthbench.seal/1"
 KEY_BYTES = 32
-#: The most a sealed site is shifted in x and in y (m), in whole cells of its terrain.
+#: The most :meth:`SiteTransform.draw` shifts a site in x and in y (m), in whole cells of its terrain.
 MAX_SHIFT_M = 50.0
 TRANSFORMS = ("shift", "rotate", "mirror")
 #: What joins a public suite's name and a commitment in a sealed suite's name.
@@ -152,7 +153,7 @@ class SiteTransform:
 
     @classmethod
     def draw(cls, seed: int, allowed: tuple[str, ...], resolution: float) -> SiteTransform:
-        """The transform of one sealed scenario from its seed, within what its generator allows."""
+        """A transform drawn from ``seed`` among the ``allowed`` motions (sealed draws used it up to 0.3.0)."""
         rng = np.random.default_rng(seed)
         turns, mirror = int(rng.integers(4)), bool(rng.integers(2))
         cells = int(MAX_SHIFT_M // resolution)

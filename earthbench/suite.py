@@ -71,7 +71,7 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .seal import KEY_BYTES, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
+from .seal import KEY_BYTES, SealError, SealKey, commitment, sealed_name
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -162,9 +162,9 @@ class Suite:
     def scenarios(self) -> tuple[Scenario, ...]:
         """Every scenario of the suite, in file order (family, then target, then seed).
 
-        A sealed suite (``sealing``) calls the same generators with seeds, soil, scan and a
-        site transform drawn from its key (:mod:`earthbench.seal`); its scenarios keep the
-        public seed in ``meta["seed"]`` so ``--seeds`` selects the same draws.
+        A sealed suite (``sealing``) calls the same generators with the seeds of terrain, soil
+        and scan drawn from its key (:mod:`earthbench.seal`); its scenarios keep the public seed
+        in ``meta["seed"]`` so ``--seeds`` selects the same draws.
         """
         from .registry import TERRAINS
 
@@ -199,8 +199,9 @@ class Suite:
         return tuple(out)
 
     def _generate(self, gen: Any, fam: Family, seed: int, target: float) -> Scenario:
-        """One scenario from its generator: public (the seed as given) or sealed (every random
-        choice drawn from the key and the public id, then the site moved)."""
+        """One scenario from its generator: public (the seed as given) or sealed (every seed
+        drawn from the key and the public id, and nothing else changed: a sealed scenario is a
+        sample of the same distribution as the public ones, so no feature of it tells it apart)."""
         key = self.sealing
         if key is None:
             return gen(seed, target, **fam.params)
@@ -208,9 +209,7 @@ class Suite:
         sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
         if not isinstance(sc, Scenario):
             return sc  # refused by the caller, as for a public suite
-        sc = sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
-        allowed = tuple(getattr(gen, "seal_transforms", TRANSFORMS))
-        return SiteTransform.draw(key.derive(public_id, "transform"), allowed, sc.terrain.resolution).apply(sc)
+        return sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
 
     @cached_property
     def digest(self) -> str:

@@ -194,3 +194,72 @@ def test_two_runs_started_together_on_a_new_store_under_load_both_succeed(tmp_pa
     assert [rc for rc, _ in results] == [0, 0], results
     with Store(tmp_path / "new.db", create=False) as st:
         assert sorted(r["suite"] for r in st.runs()) == ["a", "b"]
+
+
+# -- sealed draws a case could recognise ---------------------------------------------------------
+
+PROBE = """name = "{g}-probe"
+track = "{track}"
+[[family]]
+name = "f"
+generator = "{g}"
+targets = [{target}]
+seeds = "0-15"
+{extra}"""
+REALISM = '[family.soil]\nmaterial = "loam"\n[family.sensing]\nnoise = 0.01\n'
+
+
+def _features(sc) -> dict[str, object]:
+    """What a case can measure of its observation at a glance: where the map lies and how big
+    it is, where each machine stands and faces, the dig area's box, the floor, the keep-outs,
+    the open ground's level, and the terrain's own statistics."""
+    import numpy as np
+
+    from earthbench.sensing import observe
+
+    v = observe(sc)
+    t = v.terrain
+    out: dict[str, object] = {"origin": tuple(t.origin), "shape": t.z.shape, "resolution": t.resolution,
+                              "outside_level": v.outside_level, "floor": v.site.floor, "keep_outs": v.site.keep_outs,
+                              "budget": v.budget, "target": v.task.target_volume, "soil": v.soil}
+    for mid in v.machines.ids:
+        p = v.machines.pose(mid)
+        out[f"{mid} x"], out[f"{mid} y"], out[f"{mid} yaw"] = p.x, p.y, p.yaw
+    xs, ys = zip(*v.site.dig_area)
+    out.update({"dig x min": min(xs), "dig x max": max(xs), "dig y min": min(ys), "dig y max": max(ys)})
+    out.update({"mean height": float(np.mean(t.z)), "highest": float(np.max(t.z)), "height sd": float(np.std(t.z))})
+    return out
+
+
+@pytest.mark.parametrize("generator,track,target,extra", [
+    ("rbf", "backhoe", 0.56, ""), ("rbf", "backhoe", 0.56, REALISM), ("bench", "backhoe", 4.0, ""),
+    ("dem", "backhoe", 4.0, ""), ("pile", "wheel_loader", 2.0, REALISM)])
+def test_no_observation_feature_tells_a_sealed_draw_from_the_public_suite(generator, track, target, extra):
+    """The attack: a case looked at its map's origin (moved by up to 50 m on a sealed draw, 0 on
+    every public scenario) and knew it was sealed; a turned map's extents and the machines'
+    headings told the same. Now a sealed draw changes only the seeds: every feature the public
+    seeds hold fixed is the same value sealed, and every feature they vary is drawn from the same
+    distribution (16 public seeds against 16 sealed draws, a rank test at 1 %)."""
+    from scipy.stats import mannwhitneyu
+
+    from earthbench.seal import SealKey
+    from earthbench.suite import parse_suite
+
+    public = parse_suite(PROBE.format(g=generator, track=track, target=target, extra=extra))
+    sealed = public.sealed(SealKey(public.name, public.digest, bytes(range(32))))  # a fixed key: the test is reproducible
+    pub = [_features(sc) for sc in public.scenarios]
+    sea = [_features(sc) for sc in sealed.scenarios]
+    assert all(not _same_terrain(a, b) for a, b in zip(public.scenarios, sealed.scenarios))  # the worlds are new
+    for name in pub[0]:
+        p_values, s_values = [f[name] for f in pub], [f[name] for f in sea]
+        if all(v == p_values[0] for v in p_values):
+            assert all(v == p_values[0] for v in s_values), f"{name}: public always {p_values[0]!r}, sealed {s_values[:3]!r}…"
+        else:
+            p = mannwhitneyu(p_values, s_values).pvalue
+            assert p >= 0.01, f"{name}: sealed values differ from the public ones (p = {p:.2g})"
+
+
+def _same_terrain(a, b) -> bool:
+    import numpy as np
+
+    return bool(np.array_equal(a.terrain.z, b.terrain.z))
