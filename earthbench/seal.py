@@ -9,12 +9,11 @@ draws every random choice from a key only the person running the board holds
 * the terrain seed, the hidden soil's seed and the scan's noise seed of each scenario are
   HMAC-SHA256 of the key and ``PUBLIC_ID\\nPURPOSE`` (:meth:`SealKey.derive`), each 63 bits;
 * and nothing else. Whatever a sealed draw changes beyond what the public suite's own seeds
-  change is a feature a case could tell it by (up to 0.3.0, the rigid motion of
-  :class:`SiteTransform` moved every sealed site off the public origin: one look at the map's
-  origin told sealed from public). A sealed scenario is a sample of the generator's own
-  distribution; a generator whose seed changes nothing (``file``) has nothing to seal.
-  :class:`SiteTransform` stays, for studies of a planner's orientation (``scripts/sealed_audit.py``);
-  a generator's ``seal_transforms`` attribute is no longer read.
+  change is a feature a case could tell it by (the keys of 0.2.0 and 0.3.0, schema
+  :data:`LEGACY_SCHEMA`, also moved each site rigidly with :class:`SiteTransform`: one look at
+  the map's origin told sealed from public). A sealed scenario is a sample of the generator's
+  own distribution; a generator whose seed changes nothing (``file``) has nothing to seal.
+  A legacy key still draws as it did, so a revealed one regenerates its draw and its commitment.
 
 What is *not* re-drawn: a family's fixed parameters (a sensing ``bias`` of 0.02 m stays 0.02 m,
 a material stays loam): those define the suite's world, and re-drawing them would change the
@@ -45,7 +44,12 @@ from .errors import EarthbenchError, read_document
 from .lazy import moved_getattr
 from .world import Heightmap, Machines, Pose, Scenario, Site
 
-SEAL_SCHEMA = "earthbench.seal/1"
+#: The key file's schema, which also names how its draw is made: ``/2`` keys draw only the seeds;
+#: ``/1`` keys (0.2.0 and 0.3.0) also moved each site with :class:`SiteTransform`, and still do,
+#: so a revealed ``/1`` key regenerates its draw and reproduces its commitment. New keys are ``/2``.
+SEAL_SCHEMA = "earthbench.seal/2"
+LEGACY_SCHEMA = "earthbench.seal/1"
+SCHEMAS = (SEAL_SCHEMA, LEGACY_SCHEMA)
 KEY_BYTES = 32
 #: The most :meth:`SiteTransform.draw` shifts a site in x and in y (m), in whole cells of its terrain.
 MAX_SHIFT_M = 50.0
@@ -69,13 +73,13 @@ def public_name(name: str) -> str | None:
     return head if mark and head and len(tail) == 12 and all(c in "0123456789abcdef" for c in tail) else None
 
 
-def commitment(key: bytes, public_digest: str, sealed_digests: list[str] | tuple[str, ...]) -> str:
-    """sha256 over the key, the public suite's digest and the sorted sealed scenario digests.
+def commitment(key: bytes, public_digest: str, sealed_digests: list[str] | tuple[str, ...], schema: str = SEAL_SCHEMA) -> str:
+    """sha256 over the key's schema, the key, the public suite's digest and the sorted sealed scenario digests.
 
     Published before the run, it binds the board to one key and one set of worlds without
     revealing either; the key's 256 random bits keep a guess at the worlds from confirming it.
     """
-    h = hashlib.sha256(f"{SEAL_SCHEMA}\n{key.hex()}\n{public_digest}\n".encode())
+    h = hashlib.sha256(f"{schema}\n{key.hex()}\n{public_digest}\n".encode())
     for d in sorted(sealed_digests):
         h.update(f"{d}\n".encode())
     return h.hexdigest()
@@ -92,6 +96,8 @@ class SealKey:
     created_at: str = ""
     #: The suite file the key was made from; where :func:`public_suite` finds an unregistered suite.
     path: str = ""
+    #: How the draw is made (:data:`SEAL_SCHEMA`; :data:`LEGACY_SCHEMA`: a 0.2.0 or 0.3.0 key, sites moved).
+    schema: str = SEAL_SCHEMA
 
     def derive(self, public_id: str, purpose: str) -> int:
         """A 63-bit seed for one random choice of one scenario: HMAC-SHA256(key, id and purpose)."""
@@ -104,7 +110,7 @@ class SealKey:
         return sealed_name(self.suite, self.commitment)
 
     def to_json(self) -> str:
-        return json.dumps({"schema": SEAL_SCHEMA, "suite": self.suite, "suite_digest": self.suite_digest,
+        return json.dumps({"schema": self.schema, "suite": self.suite, "suite_digest": self.suite_digest,
                            "key": self.key.hex(), "commitment": self.commitment, "created_at": self.created_at,
                            "path": self.path}, indent=1) + "\n"
 
@@ -125,11 +131,11 @@ class SealKey:
         text = read_document(Path(path), "key file", SealError)
         try:
             doc = json.loads(text)
-            if doc.get("schema") != SEAL_SCHEMA:
+            if doc.get("schema") not in SCHEMAS:
                 raise SealError(f"{str(path)!r} is not an earthbench key file (schema {doc.get('schema')!r}, expected {SEAL_SCHEMA!r})")
             key = bytes.fromhex(doc["key"])
             out = cls(str(doc["suite"]), str(doc["suite_digest"]), key, str(doc["commitment"]), str(doc.get("created_at", "")),
-                      str(doc.get("path", "")))
+                      str(doc.get("path", "")), str(doc["schema"]))
         except SealError:
             raise
         except (ValueError, KeyError, TypeError, AttributeError) as exc:

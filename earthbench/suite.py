@@ -71,7 +71,7 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .seal import KEY_BYTES, SealError, SealKey, commitment, sealed_name
+from .seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -209,7 +209,11 @@ class Suite:
         sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
         if not isinstance(sc, Scenario):
             return sc  # refused by the caller, as for a public suite
-        return sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
+        sc = sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
+        if key.schema == LEGACY_SCHEMA:  # a 0.2.0/0.3.0 key: its draw also moved the site (kept so the key still opens)
+            allowed = tuple(getattr(gen, "seal_transforms", TRANSFORMS))
+            sc = SiteTransform.draw(key.derive(public_id, "transform"), allowed, sc.terrain.resolution).apply(sc)
+        return sc
 
     @cached_property
     def digest(self) -> str:
@@ -241,7 +245,7 @@ def new_key(suite: Suite) -> tuple[SealKey, Suite]:
 def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
     """The sealed suite of ``key`` and the key with the commitment those scenarios give."""
     probe = suite.sealed(key)
-    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios])
+    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios], key.schema)
     full = dataclasses.replace(key, commitment=c)
     return full, suite.sealed(full, drawn=probe.scenarios)
 

@@ -363,3 +363,64 @@ def test_a_step_that_starts_before_the_scan_ends_is_refused():
 
     with pytest.raises(PlanFormatError, match="before the executed actions end and the 1 s scan after them"):
         run_closed_loop(Impatient(), parse_suite(RESCAN).scenarios[0])
+
+
+# -- keys that survive ---------------------------------------------------------------------------
+
+LEADERBOARD = Path(__file__).resolve().parents[1] / "leaderboard"
+
+
+def test_every_committed_key_is_listed_with_its_commitment_and_reads():
+    """A key committed beside a board is worth something only if it reads and names the
+    commitment that was published before its draw ran (leaderboard/commitments.txt)."""
+    from earthbench.seal import LEGACY_SCHEMA, SealKey
+
+    published = (LEADERBOARD / "commitments.txt").read_text()
+    keys = sorted(LEADERBOARD.glob("keys-*/*.key"))
+    assert keys
+    for f in keys:
+        key = SealKey.read(f)
+        assert f"commitment:   {key.commitment}" in published, f
+        assert key.schema == LEGACY_SCHEMA  # the 0.2.0 draws: made with the site transform, and still drawn so
+
+
+def test_a_revealed_legacy_key_still_regenerates_its_draw_and_commitment():
+    """The 0.2.0 draws moved their sites; sealed draws no longer do, yet a revealed key of
+    theirs still opens: its schema says how its draw was made (earthbench.seal.LEGACY_SCHEMA)."""
+    from earthbench.seal import SealKey
+    from earthbench.suite import load_suite, open_sealed
+
+    key = SealKey.read(LEADERBOARD / "keys-0.2.0" / "standard-realistic-1.key")
+    sealed = open_sealed(load_suite(key.suite), key)  # raises unless the regenerated draw gives the commitment
+    assert sealed.name == "standard-realistic~sealed-df1b17309007" and len(sealed.scenarios) == 48
+    assert any(sc.terrain.origin != (0.0, 0.0) for sc in sealed.scenarios)  # drawn as it was: sites moved
+
+
+@pytest.mark.slow
+def test_a_board_published_with_its_key_can_be_verified_from_the_published_key(tmp_path):
+    """The process: seal, run the draw, publish the board with `--key` (checked against the
+    store, written to keys/), then anyone re-judges the store with the published key. A board
+    published without it says so."""
+    from helpers import tiny_suite_toml
+
+    suite = tmp_path / "tiny.toml"
+    suite.write_text(tiny_suite_toml("tiny", seeds="0-1"))
+    db, key = str(tmp_path / "board.db"), str(tmp_path / "secret.key")
+    assert _cli("seal", str(suite), "--key", key, cwd=tmp_path).returncode == 0
+    for extra in ([], ["--sealed", key]):
+        assert _cli("run", str(suite), "--planner", "greedy", "--db", db, "--quiet", *extra, cwd=tmp_path).returncode == 0
+    bare = _cli("leaderboard", "--db", db, "--out", str(tmp_path / "bare"), "--no-figures", cwd=tmp_path)
+    assert bare.returncode == 0 and "is published without its key" in bare.stderr
+    out = tmp_path / "lb"
+    board = _cli("leaderboard", "--db", db, "--out", str(out), "--no-figures", "--key", key, cwd=tmp_path)
+    assert board.returncode == 0, board.stderr
+    assert "without its key" not in board.stderr
+    published = list((out / "keys").glob("tiny~sealed-*.key"))
+    assert len(published) == 1 and published[0].stat().st_mode & 0o044  # readable by all: it is published
+    check = _cli("verify", db, "--key", str(published[0]), cwd=tmp_path)
+    assert check.returncode == 0, check.stdout + check.stderr
+    assert "regenerated" in check.stdout
+    other = tmp_path / "other.key"
+    assert _cli("seal", str(suite), "--key", str(other), cwd=tmp_path).returncode == 0
+    refused = _cli("leaderboard", "--db", db, "--out", str(tmp_path / "x"), "--no-figures", "--key", str(other), cwd=tmp_path)
+    assert refused.returncode == 2 and "holds no suite" in refused.stderr and not (tmp_path / "x").exists()
