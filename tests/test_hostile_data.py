@@ -142,8 +142,9 @@ def test_printable_escapes_every_control_and_formatting_character():
 def test_control_sequences_in_names_errors_and_logs_reach_the_terminal_as_text(tmp_path):
     """The attack: a planner named with a line erase and a fake green "ok", a clipboard write
     (OSC 52) and a right-to-left override; it prints them to its log and raises with them; the
-    suite's name carries a colour. `run`, `runs`, `runs --id`, `list` and `leaderboard` print
-    every one of them as escapes."""
+    suite's name carries a colour. `run`, `runs`, `runs --id`, `list`, `leaderboard` and the
+    traceback of `plan` (the planner raising in earthbench's own process) print every one of
+    them as escapes."""
     sys.path.insert(0, str(Path(ESCAPING).parent))
     from escaping_planners import TRICKS, Escaping, EscapingQuiet
 
@@ -162,6 +163,9 @@ def test_control_sequences_in_names_errors_and_logs_reach_the_terminal_as_text(t
     for p in outputs:
         assert p.returncode == 0, p.stderr
         assert _raw_controls(p.stdout + p.stderr) == [], p.args
+    in_process = _cli("plan", "--plugin", ESCAPING, Escaping.name, cwd=tmp_path)  # the planner raises here, unhandled
+    assert in_process.returncode == 1 and "RuntimeError: error text \\x1b[2K" in in_process.stderr
+    assert _raw_controls(in_process.stdout + in_process.stderr) == []
     shown = "\\x1b[2K\\x0d\\x1b[32m ok \\x1b[0m\\x1b]52;c;ZXZpbA==\\x07\\u202e\\x9b31m"
     assert TRICKS not in "".join(p.stdout + p.stderr for p in outputs)
     run, _, one, listed, _ = outputs
