@@ -6,8 +6,10 @@ A *sealed* run of the suite keeps its families, generators, parameters, targets 
 draws every random choice from a key only the person running the board holds
 (docs/sealed-evaluation.md):
 
-* the terrain seed, the hidden soil's seed and the scan's noise seed of each scenario are
-  HMAC-SHA256 of the key and ``PUBLIC_ID\\nPURPOSE`` (:meth:`SealKey.derive`), each 63 bits;
+* the terrain seed, the hidden soil's seed and the scan's noise seed of each public seed of a
+  family are HMAC-SHA256 of the key and ``SUITE/FAMILY/sSEED\\nPURPOSE`` (:meth:`SealKey.derive`),
+  each 63 bits, shared by the family's targets as the public seed is (a ``/1`` key derived them
+  per scenario, from ``SUITE/FAMILY/sSEED/vTARGET``);
 * and nothing else. Whatever a sealed draw changes beyond what the public suite's own seeds
   change is a feature a case could tell it by (the keys of 0.2.0 and 0.3.0, schema
   :data:`LEGACY_SCHEMA`, also moved each site rigidly with :class:`SiteTransform`: one look at

@@ -200,12 +200,14 @@ class Suite:
 
     def _generate(self, gen: Any, fam: Family, seed: int, target: float) -> Scenario:
         """One scenario from its generator: public (the seed as given) or sealed (every seed
-        drawn from the key and the public id, and nothing else changed: a sealed scenario is a
-        sample of the same distribution as the public ones, so no feature of it tells it apart)."""
+        drawn from the key and the public seed's id, and nothing else changed: a sealed draw is a
+        sample of the same distribution as the public suite, its targets sharing a world per seed
+        as the public ones do, so no feature of it tells it apart)."""
         key = self.sealing
         if key is None:
             return gen(seed, target, **fam.params)
-        public_id = f"{key.suite}/{fam.name}/s{seed}/v{target:g}"
+        # as a public seed serves every target of its family, so does its sealed draw's (a /1 key drew per target)
+        public_id = f"{key.suite}/{fam.name}/s{seed}" + (f"/v{target:g}" if key.schema == LEGACY_SCHEMA else "")
         sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
         if not isinstance(sc, Scenario):
             return sc  # refused by the caller, as for a public suite

@@ -428,3 +428,19 @@ def test_a_board_published_with_its_key_can_be_verified_from_the_published_key(t
     assert _cli("seal", str(suite), "--key", str(other), cwd=tmp_path).returncode == 0
     refused = _cli("leaderboard", "--db", db, "--out", str(tmp_path / "x"), "--no-figures", "--key", str(other), cwd=tmp_path)
     assert refused.returncode == 2 and "holds no suite" in refused.stderr and not (tmp_path / "x").exists()
+
+
+def test_a_sealed_draw_shares_its_worlds_across_targets_as_the_public_suite_does():
+    """A public seed serves every target of its family with one world; a sealed draw that gave
+    each target its own would tell itself apart to a case that remembers what it saw."""
+    from earthbench.seal import SealKey
+    from earthbench.suite import parse_suite
+
+    public = parse_suite(PROBE.format(g="rbf", track="backhoe", target="0.56, 1.12", extra="").replace('"0-15"', '"0-2"'))
+    sealed = public.sealed(SealKey(public.name, public.digest, bytes(range(32))))
+
+    def shared(scenarios):
+        return [[_same_terrain(a, b) for b in scenarios] for a in scenarios]
+
+    assert shared(sealed.scenarios) == shared(public.scenarios)
+    assert sum(map(sum, shared(public.scenarios))) == 12  # each of 6 with itself and its other target
