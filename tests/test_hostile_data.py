@@ -55,10 +55,12 @@ def test_merge_refuses_a_plan_bomb_quickly_with_bounded_memory(bomb_store, tmp_p
     the process's peak memory stays far below the bomb (measured in a process of its own)."""
     assert bomb_store.stat().st_size < 2 * 2**20
     out = tmp_path / "out.db"
-    code = ("import resource, sys\n"
+    # VmHWM: this process image's own peak (ru_maxrss would carry over the forking pytest's)
+    code = ("import sys\n"
             "from earthbench.cli import main\n"
             f"rc = main(['merge', {str(out)!r}, {str(bomb_store)!r}])\n"
-            "print('peak_mb', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)\n"
+            "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
+            "print('peak_mb', int(hwm) / 1024)\n"
             "sys.exit(rc)\n")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert p.returncode == 2, p.stderr
