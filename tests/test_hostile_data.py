@@ -446,3 +446,22 @@ def test_a_sealed_draw_shares_its_worlds_across_targets_as_the_public_suite_does
 
     assert shared(sealed.scenarios) == shared(public.scenarios)
     assert sum(map(sum, shared(public.scenarios))) == 12  # each of 6 with itself and its other target
+
+
+def test_sealing_a_generator_that_ignores_its_seed_says_it_hides_nothing(tmp_path, capsys):
+    """Nothing but the seeds may change, so a site whose generator ignores its seed (as `file`
+    does) is its public self when sealed: `earthbench seal` says so rather than promise a draw."""
+    from earthbench.cli import main
+    from earthbench.registry import TERRAINS
+    from earthbench_terrains.rbf import rbf
+
+    def fixed(seed, target_volume, **params):
+        return rbf(0, target_volume, **params)
+
+    TERRAINS.register("t-fixed", fixed)
+    try:
+        (tmp_path / "s.toml").write_text('name = "fixed"\n[[family]]\nname = "f"\ngenerator = "t-fixed"\ntargets = [0.56]\nseeds = "0-2"\n')
+        assert main(["seal", str(tmp_path / "s.toml"), "--key", str(tmp_path / "k.key")]) == 0
+        assert "3 of 3 sealed scenarios have their public terrain" in capsys.readouterr().err
+    finally:
+        TERRAINS.unregister("t-fixed")
