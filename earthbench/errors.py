@@ -7,6 +7,7 @@ print its message and exit non-zero instead of showing a traceback. Messages say
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -59,3 +60,16 @@ def read_document(path: Path, what: str, error: type[EarthbenchError]) -> str:
         raise error(f"{what} file {str(path)!r} not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise error(f"cannot read {what} file {str(path)!r}: {getattr(exc, 'strerror', None) or exc}") from None
+
+
+#: What a terminal acts on instead of showing: the C0 controls but newline and tab (escape
+#: sequences start with ESC, a carriage return overwrites a line), DEL, the C1 controls, and
+#: Unicode's zero-width, line-separator and bidirectional marks (text that reads other than it is).
+_CONTROLS = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u2028-\u202e\u2060-\u2069\ufeff]")
+
+
+def printable(text: str) -> str:
+    """``text`` with every character a terminal would act on written as its escape (``\\x1b``,
+    ``\\u202e``): planner names, errors, log tails and suite names come from plugins and
+    submitted stores, and must reach the operator's terminal as text, never as commands."""
+    return _CONTROLS.sub(lambda m: f"\\x{ord(m[0]):02x}" if ord(m[0]) < 0x100 else f"\\u{ord(m[0]):04x}", text)

@@ -41,7 +41,8 @@ class Observation:
 
     ``scenario`` is the planner's view of the world now: the terrain as observed after the
     executed actions, the machines at their current poses, the task's full target. ``t`` is
-    the plan time the executed actions end at (the next actions may not start earlier),
+    the plan time the executed actions end at, plus the scan after them on a scanned site
+    (:func:`earthbench.sensing.scan_seconds`); the next actions may not start earlier;
     ``loaded`` the volume the truck reports holding (m³), ``turn`` the excavator's upper body
     relative to its base yaw (rad; what the next swing starts from), ``bucket`` the volume
     still in the bucket (m³; more than 0 after a dump into a full truck), ``step`` 0 on the

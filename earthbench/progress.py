@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
+from .errors import printable
 from .records import REASONS, Case, CaseResult
 
 
@@ -29,6 +30,9 @@ class Progress:
         self.total = total
         self.planned = total  # the cases asked for; ``total`` becomes those left to run (the harness skips stored ones)
         self.stream = stream or sys.stderr
+        # the line's own controls (redraw in place) go to the terminal itself; what it shows of a
+        # case (planner names, errors) goes through printable() in _write
+        self.terminal: TextIO = getattr(self.stream, "raw", self.stream)
         self.live = self.stream.isatty() if live is None else live
         self.quiet = quiet
         self.run_id = run_id  # the stored run of a case, for a pointer to `earthbench runs --id N`
@@ -51,8 +55,7 @@ class Progress:
             self.stream.write(f"{skipped} of the {self.planned} cases already stored: skipped (--rerun runs them again); "
                               f"running {self.total}\n")
         if self.live and not self.quiet and self.total:
-            self.stream.write("\r" + self.line() + "\x1b[K")
-            self.stream.flush()
+            self._write("\r", self.line(), "\x1b[K")
 
     def update(self, case: Case, result: CaseResult) -> None:
         self.done += 1
@@ -73,12 +76,15 @@ class Progress:
         if rid is not None:
             detail += f"; see: {self.runs_command} --id {rid}"
         if self.live:
-            self.stream.write("\r\x1b[K" + detail + "\n" + self.line() + "\x1b[K")
+            self._write("\r\x1b[K", detail + "\n" + self.line(), "\x1b[K")
         else:
-            self.stream.write(self.line() + "  " + detail + "\n")
-        self.stream.flush()
+            self._write("", self.line() + "  " + detail + "\n", "")
 
     def close(self) -> None:
         if self.live and not self.quiet and self.total:
-            self.stream.write("\n")
-            self.stream.flush()
+            self._write("", "\n", "")
+
+    def _write(self, before: str, text: str, after: str) -> None:
+        """``text`` made printable between the line's own control sequences."""
+        self.terminal.write(before + printable(text) + after)
+        self.terminal.flush()

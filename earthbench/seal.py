@@ -6,14 +6,16 @@ A *sealed* run of the suite keeps its families, generators, parameters, targets 
 draws every random choice from a key only the person running the board holds
 (docs/sealed-evaluation.md):
 
-* the terrain seed, the hidden soil's seed and the scan's noise seed of each scenario are
-  HMAC-SHA256 of the key and ``PUBLIC_ID\\nPURPOSE`` (:meth:`SealKey.derive`), each 63 bits;
-* a rigid motion of the whole site (:class:`SiteTransform`): a quarter turn about the map's
-  centre, a mirror, and a shift by whole cells of up to :data:`MAX_SHIFT_M` in x and y. A
-  rigid motion of terrain, dig area, keep-outs and machines is the same task, so honest
-  planners face the same difficulty; a generator may allow fewer of these
-  (``seal_transforms``, a tuple of "shift", "rotate", "mirror", as an attribute of the
-  generator; default: all three; every built-in generator allows all three).
+* the terrain seed, the hidden soil's seed and the scan's noise seed of each public seed of a
+  family are HMAC-SHA256 of the key and ``SUITE/FAMILY/sSEED\\nPURPOSE`` (:meth:`SealKey.derive`),
+  each 63 bits, shared by the family's targets as the public seed is (a ``/1`` key derived them
+  per scenario, from ``SUITE/FAMILY/sSEED/vTARGET``);
+* and nothing else. Whatever a sealed draw changes beyond what the public suite's own seeds
+  change is a feature a case could tell it by (the keys of 0.2.0 and 0.3.0, schema
+  :data:`LEGACY_SCHEMA`, also moved each site rigidly with :class:`SiteTransform`: one look at
+  the map's origin told sealed from public). A sealed scenario is a sample of the generator's
+  own distribution; a generator whose seed changes nothing (``file``) has nothing to seal.
+  A legacy key still draws as it did, so a revealed one regenerates its draw and its commitment.
 
 What is *not* re-drawn: a family's fixed parameters (a sensing ``bias`` of 0.02 m stays 0.02 m,
 a material stays loam): those define the suite's world, and re-drawing them would change the
@@ -44,9 +46,14 @@ from .errors import EarthbenchError, read_document
 from .lazy import moved_getattr
 from .world import Heightmap, Machines, Pose, Scenario, Site
 
-SEAL_SCHEMA = "earthbench.seal/1"
+#: The key file's schema, which also names how its draw is made: ``/2`` keys draw only the seeds;
+#: ``/1`` keys (0.2.0 and 0.3.0) also moved each site with :class:`SiteTransform`, and still do,
+#: so a revealed ``/1`` key regenerates its draw and reproduces its commitment. New keys are ``/2``.
+SEAL_SCHEMA = "earthbench.seal/2"
+LEGACY_SCHEMA = "earthbench.seal/1"
+SCHEMAS = (SEAL_SCHEMA, LEGACY_SCHEMA)
 KEY_BYTES = 32
-#: The most a sealed site is shifted in x and in y (m), in whole cells of its terrain.
+#: The most :meth:`SiteTransform.draw` shifts a site in x and in y (m), in whole cells of its terrain.
 MAX_SHIFT_M = 50.0
 TRANSFORMS = ("shift", "rotate", "mirror")
 #: What joins a public suite's name and a commitment in a sealed suite's name.
@@ -68,13 +75,13 @@ def public_name(name: str) -> str | None:
     return head if mark and head and len(tail) == 12 and all(c in "0123456789abcdef" for c in tail) else None
 
 
-def commitment(key: bytes, public_digest: str, sealed_digests: list[str] | tuple[str, ...]) -> str:
-    """sha256 over the key, the public suite's digest and the sorted sealed scenario digests.
+def commitment(key: bytes, public_digest: str, sealed_digests: list[str] | tuple[str, ...], schema: str = SEAL_SCHEMA) -> str:
+    """sha256 over the key's schema, the key, the public suite's digest and the sorted sealed scenario digests.
 
     Published before the run, it binds the board to one key and one set of worlds without
     revealing either; the key's 256 random bits keep a guess at the worlds from confirming it.
     """
-    h = hashlib.sha256(f"{SEAL_SCHEMA}\n{key.hex()}\n{public_digest}\n".encode())
+    h = hashlib.sha256(f"{schema}\n{key.hex()}\n{public_digest}\n".encode())
     for d in sorted(sealed_digests):
         h.update(f"{d}\n".encode())
     return h.hexdigest()
@@ -91,6 +98,8 @@ class SealKey:
     created_at: str = ""
     #: The suite file the key was made from; where :func:`public_suite` finds an unregistered suite.
     path: str = ""
+    #: How the draw is made (:data:`SEAL_SCHEMA`; :data:`LEGACY_SCHEMA`: a 0.2.0 or 0.3.0 key, sites moved).
+    schema: str = SEAL_SCHEMA
 
     def derive(self, public_id: str, purpose: str) -> int:
         """A 63-bit seed for one random choice of one scenario: HMAC-SHA256(key, id and purpose)."""
@@ -103,7 +112,7 @@ class SealKey:
         return sealed_name(self.suite, self.commitment)
 
     def to_json(self) -> str:
-        return json.dumps({"schema": SEAL_SCHEMA, "suite": self.suite, "suite_digest": self.suite_digest,
+        return json.dumps({"schema": self.schema, "suite": self.suite, "suite_digest": self.suite_digest,
                            "key": self.key.hex(), "commitment": self.commitment, "created_at": self.created_at,
                            "path": self.path}, indent=1) + "\n"
 
@@ -124,11 +133,11 @@ class SealKey:
         text = read_document(Path(path), "key file", SealError)
         try:
             doc = json.loads(text)
-            if doc.get("schema") != SEAL_SCHEMA:
+            if doc.get("schema") not in SCHEMAS:
                 raise SealError(f"{str(path)!r} is not an earthbench key file (schema {doc.get('schema')!r}, expected {SEAL_SCHEMA!r})")
             key = bytes.fromhex(doc["key"])
             out = cls(str(doc["suite"]), str(doc["suite_digest"]), key, str(doc["commitment"]), str(doc.get("created_at", "")),
-                      str(doc.get("path", "")))
+                      str(doc.get("path", "")), str(doc["schema"]))
         except SealError:
             raise
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
@@ -152,7 +161,7 @@ class SiteTransform:
 
     @classmethod
     def draw(cls, seed: int, allowed: tuple[str, ...], resolution: float) -> SiteTransform:
-        """The transform of one sealed scenario from its seed, within what its generator allows."""
+        """A transform drawn from ``seed`` among the ``allowed`` motions (sealed draws used it up to 0.3.0)."""
         rng = np.random.default_rng(seed)
         turns, mirror = int(rng.integers(4)), bool(rng.integers(2))
         cells = int(MAX_SHIFT_M // resolution)

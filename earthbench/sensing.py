@@ -20,8 +20,19 @@ The scan of a :class:`~earthbench.world.Sensing` section, in this order:
    the line of sight over it (which it lies below): a scan delivers a full grid, not holes, and
    the planner cannot tell a filled cell from a measured one.
 4. **Noise**: every cell gets ``bias`` plus Gaussian noise of σ ``noise``, drawn from
-   ``default_rng([seed, step])``, so a scan is reproducible and the scans of a closed loop's
-   steps differ.
+   ``default_rng([seed, step])``, so a scan is reproducible. A closed loop passes the step of
+   the first scan taken from the scanner's station (:class:`Stations`): scans from one station
+   share one error field, scans from a new one get their own.
+
+**What a scan costs on a closed loop.** A scan is a sweep of :data:`SCAN_S` seconds taken
+after the machines stop: the observation after a step comes :data:`SCAN_S` of plan time after
+its actions end, and the next actions start no earlier (:func:`scan_seconds`). The first scan
+(the one an open-loop plan is made on too) is taken before the clock starts. And a scan's error
+is not white noise that fresh sweeps average away: a lidar's or a stereo rig's error on a
+patch of ground is mostly set by where the sensor stands (range, incidence, calibration,
+mixed returns at edges), so repeated sweeps from one station repeat it. Here every scan from
+within :data:`STATION_M` of an earlier scan's position repeats that scan's error field exactly;
+scanning the site again from elsewhere costs the drive there and the sweep, as it does on site.
 
 Heights are rounded to 1e-9 m so that a scan is the same on every machine.
 """
@@ -38,6 +49,35 @@ from .world import Heightmap, Pose, Scenario, Sensing
 
 #: Rays cast around the sensor (a quarter of a degree apart).
 RAYS = 1440
+#: Plan seconds one scan after a closed-loop step takes: one sweep of a machine-mounted scanner
+#: building a dense map of the site (a nodding or spinning lidar accumulating returns for about a
+#: second; module docstring).
+SCAN_S = 1.0
+#: A scan from within this distance (m) of an earlier scan's position is taken from the same
+#: station, and repeats that scan's error field.
+STATION_M = 1.0
+
+
+def scan_seconds(truth: Scenario) -> float:
+    """Plan seconds between a closed-loop step's last action and its observation: :data:`SCAN_S`
+    when the scenario is scanned (a ``sensing`` section), 0 when the planner sees the truth."""
+    return SCAN_S if truth.sensing is not None else 0.0
+
+
+class Stations:
+    """The scan positions of one closed loop: each scan's noise step is the step of the first
+    scan taken within :data:`STATION_M` of it (the initial pose is step 0's station)."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[float, float, int]] = []
+
+    def noise_step(self, pose: Pose, step: int) -> int:
+        """The step whose error field a scan from ``pose`` at ``step`` repeats (``step`` itself at a new station)."""
+        for x, y, first in self.seen:
+            if math.hypot(pose.x - x, pose.y - y) <= STATION_M:
+                return first
+        self.seen.append((pose.x, pose.y, step))
+        return step
 
 
 def visible_cells(terrain: Heightmap, sensor: tuple[float, float, float], outside_level: float) -> np.ndarray:
@@ -116,7 +156,7 @@ def scan(truth: Scenario, sensing: Sensing, pose: Pose, step: int = 0) -> Height
 ANONYMOUS_ID = "site"
 
 
-def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0) -> Scenario:
+def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0, stations: Stations | None = None) -> Scenario:
     """The planner's view of ``truth``: its terrain replaced by the scan of its ``sensing``
     section taken from ``pose`` (default: the working machine's initial pose), its soil by the
     material's nominal values (:func:`earthbench.soil.nominal`), and no ``sensing`` section.
@@ -124,7 +164,8 @@ def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0) -> Scen
     Every view is anonymous, on the exact track too: its id is :data:`ANONYMOUS_ID` and its
     ``meta`` is empty (the id and ``meta`` name the suite, family, generator and seed that made
     the truth; with them, a planner could regenerate the hidden world). ``step`` is mixed into
-    the noise's seed: a closed loop passes its step count so that each scan is reproducible and new.
+    the noise's seed; a closed loop passes its step count and its ``stations``, so that a scan
+    from a station already scanned from repeats that scan's error (the module docstring).
     """
     changes: dict = {"id": ANONYMOUS_ID, "meta": {}}
     if truth.soil is None and truth.sensing is None:
@@ -134,5 +175,5 @@ def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0) -> Scen
         changes["soil"] = nominal(truth.soil.material)
     if truth.sensing is not None:
         where = pose if pose is not None else truth.machines.pose(truth.worker)
-        changes["terrain"] = scan(truth, truth.sensing, where, step)
+        changes["terrain"] = scan(truth, truth.sensing, where, step if stations is None else stations.noise_step(where, step))
     return dataclasses.replace(truth, **changes)

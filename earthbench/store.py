@@ -196,6 +196,16 @@ def _rules_version() -> int:
     return RULES_VERSION
 
 
+#: The most a stored plan or scenario document may inflate to: twice the plan-size rule (64 MB
+#: of JSON; a closed loop's joined plan is a little larger than its steps' messages) and three
+#: times the largest scenario document (4,000,000 cells as base64, 43 MB).
+MAX_BLOB_BYTES = 128 * 2**20
+
+
+class BlobTooLargeError(StoreError, ValueError):
+    """A stored blob that inflates past :data:`MAX_BLOB_BYTES`."""
+
+
 def _compress(text: str) -> bytes:
     return zlib.compress(text.encode(), 6)
 
@@ -225,8 +235,29 @@ def decompress(blob: bytes) -> str: ...
 @overload
 def decompress(blob: None) -> None: ...
 def decompress(blob: bytes | None) -> str | None:
-    """The text of a ``plan`` or ``scenarios`` blob as stored (zlib-compressed JSON), or None."""
-    return None if blob is None else zlib.decompress(blob).decode()
+    """The text of a ``plan`` or ``scenarios`` blob as stored (zlib-compressed JSON), or None.
+
+    A blob that inflates past :data:`MAX_BLOB_BYTES` is refused (:class:`BlobTooLargeError`)
+    after inflating at most that much: a submitted store is hostile data, and a megabyte of
+    zeros compressed can claim a gigabyte of memory.
+    """
+    if blob is None:
+        return None
+    inflate = zlib.decompressobj()
+    text = inflate.decompress(blob, MAX_BLOB_BYTES + 1)
+    if len(text) > MAX_BLOB_BYTES or inflate.unconsumed_tail:
+        raise BlobTooLargeError(f"a stored blob of {len(blob):,} bytes inflates to more than {MAX_BLOB_BYTES / 2**20:.0f} MB "
+                                "(no plan or scenario is that large: a decompression bomb?); it was not read")
+    return text.decode()
+
+
+def _write_schema(db: sqlite3.Connection) -> None:
+    """The tables of a new store at the latest version, inside the caller's transaction."""
+    for stmt in _SCHEMA.strip().split(";"):
+        if stmt.strip():
+            db.execute(stmt)
+    db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+    db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
 
 def _now() -> str:
@@ -248,6 +279,8 @@ class Store:
             raise StoreError(f"no results database at {str(self.path)!r}; run `earthbench run SUITE --db {self.path}` first")
         if self.path.is_dir():
             raise StoreError(f"{str(self.path)!r} is a directory, not a results database file")
+        if create and not read_only and not self.path.exists():
+            self._create(timeout)
         try:
             # read-only; without a write-ahead log beside it (no writer, nothing to replay) the file is
             # all there is, and `immutable` keeps SQLite from creating -wal/-shm files next to it
@@ -265,6 +298,30 @@ class Store:
         except StoreError:
             self.db.close()
             raise
+
+    def _create(self, timeout: float) -> None:
+        """Make a new store safe to race: it is built complete beside its path, then linked into
+        place; whoever links second keeps the first one's store and opens it as an existing one
+        (waiting for its lock as any writer does). Where the file system has no hard links the
+        store is created in place, as before."""
+        tmp = self.path.with_name(f".{self.path.name}.new-{os.getpid()}-{os.urandom(4).hex()}")
+        try:
+            db = sqlite3.connect(tmp, timeout=timeout, isolation_level=None)
+            try:
+                db.execute("PRAGMA journal_mode=WAL")
+                with db:
+                    db.execute("BEGIN IMMEDIATE")
+                    _write_schema(db)
+            finally:
+                db.close()
+            os.link(tmp, self.path)
+        except FileExistsError:
+            pass  # another process created it first: open theirs
+        except (OSError, sqlite3.Error):
+            pass  # no hard links (or no such folder): the in-place path below creates it or says why not
+        finally:
+            for p in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm"), Path(f"{tmp}-journal")):
+                p.unlink(missing_ok=True)
 
     def _explain(self, exc: sqlite3.Error) -> str:
         msg = str(exc)
@@ -284,11 +341,7 @@ class Store:
             self.db.execute("BEGIN IMMEDIATE")
             try:
                 if not {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}:
-                    for stmt in _SCHEMA.strip().split(";"):
-                        if stmt.strip():
-                            self.db.execute(stmt)
-                    self.db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
-                    self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                    _write_schema(self.db)
                 self.db.execute("COMMIT")
             except BaseException:
                 self.db.execute("ROLLBACK")

@@ -72,7 +72,7 @@ from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .seal import KEY_BYTES, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
+from .seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -163,9 +163,9 @@ class Suite:
     def scenarios(self) -> tuple[Scenario, ...]:
         """Every scenario of the suite, in file order (family, then target, then seed).
 
-        A sealed suite (``sealing``) calls the same generators with seeds, soil, scan and a
-        site transform drawn from its key (:mod:`earthbench.seal`); its scenarios keep the
-        public seed in ``meta["seed"]`` so ``--seeds`` selects the same draws.
+        A sealed suite (``sealing``) calls the same generators with the seeds of terrain, soil
+        and scan drawn from its key (:mod:`earthbench.seal`); its scenarios keep the public seed
+        in ``meta["seed"]`` so ``--seeds`` selects the same draws.
         """
         from .registry import TERRAINS
 
@@ -200,18 +200,23 @@ class Suite:
         return tuple(out)
 
     def _generate(self, gen: Any, fam: Family, seed: int, target: float) -> Scenario:
-        """One scenario from its generator: public (the seed as given) or sealed (every random
-        choice drawn from the key and the public id, then the site moved)."""
+        """One scenario from its generator: public (the seed as given) or sealed (every seed
+        drawn from the key and the public seed's id, and nothing else changed: a sealed draw is a
+        sample of the same distribution as the public suite, its targets sharing a world per seed
+        as the public ones do, so no feature of it tells it apart)."""
         key = self.sealing
         if key is None:
             return gen(seed, target, **fam.params)
-        public_id = f"{key.suite}/{fam.name}/s{seed}/v{target:g}"
+        # as a public seed serves every target of its family, so does its sealed draw's (a /1 key drew per target)
+        public_id = f"{key.suite}/{fam.name}/s{seed}" + (f"/v{target:g}" if key.schema == LEGACY_SCHEMA else "")
         sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
         if not isinstance(sc, Scenario):
             return sc  # refused by the caller, as for a public suite
         sc = sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
-        allowed = tuple(getattr(gen, "seal_transforms", TRANSFORMS))
-        return SiteTransform.draw(key.derive(public_id, "transform"), allowed, sc.terrain.resolution).apply(sc)
+        if key.schema == LEGACY_SCHEMA:  # a 0.2.0/0.3.0 key: its draw also moved the site (kept so the key still opens)
+            allowed = tuple(getattr(gen, "seal_transforms", TRANSFORMS))
+            sc = SiteTransform.draw(key.derive(public_id, "transform"), allowed, sc.terrain.resolution).apply(sc)
+        return sc
 
     @cached_property
     def digest(self) -> str:
@@ -243,7 +248,7 @@ def new_key(suite: Suite) -> tuple[SealKey, Suite]:
 def _complete(key: SealKey, suite: Suite) -> tuple[SealKey, Suite]:
     """The sealed suite of ``key`` and the key with the commitment those scenarios give."""
     probe = suite.sealed(key)
-    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios])
+    c = commitment(key.key, suite.digest, [s.digest for s in probe.scenarios], key.schema)
     full = dataclasses.replace(key, commitment=c)
     return full, suite.sealed(full, drawn=probe.scenarios)
 

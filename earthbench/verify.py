@@ -34,7 +34,7 @@ from typing import Any
 from .errors import EarthbenchError, UnknownNameError
 from .records import SpotCheck  # a record the store also reads; importable from here as before
 from .harness.steps import step_metrics
-from .store import METRIC_COLUMNS, Store, decompress, stored_steps
+from .store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
 from .suite import suite_digest
 from .plan import Plan
 from .world import Scenario
@@ -314,8 +314,9 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
             continue
         try:
             plan = decompress(r["plan"])
-        except Exception:  # noqa: BLE001 - an edited blob
-            result.broken.append(Finding(r["id"], label, "its stored plan cannot be decompressed"))
+        except Exception as exc:  # noqa: BLE001 - an edited blob
+            why = str(exc) if isinstance(exc, BlobTooLargeError) else type(exc).__name__
+            result.broken.append(Finding(r["id"], label, f"its stored plan cannot be decompressed: {why}"))
             continue
         judged = rejudge(sc, plan, r["threshold"], solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"], steps=stored_steps(r))
         result.judgements[r["id"]] = judged

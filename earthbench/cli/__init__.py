@@ -12,8 +12,11 @@ import importlib
 import os
 import signal
 import sys
+import traceback
+import types
 
-from ..errors import EarthbenchError
+from ..errors import EarthbenchError, printable
+from ._common import PrintableStream
 from ._common import parse_config as parse_config  # public: scripts convert KEY=VALUE settings as --config does
 
 #: Sub-command modules, in the order ``earthbench --help`` lists them.
@@ -63,6 +66,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; everything it prints goes through :class:`PrintableStream`, and so does
+    the traceback of an exception it does not handle (a planner's, under `earthbench plan`)."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = PrintableStream(out), PrintableStream(err)  # type: ignore[assignment]
+    if sys.excepthook is sys.__excepthook__:
+        sys.excepthook = _printable_traceback
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
+def _printable_traceback(kind: type[BaseException], exc: BaseException, tb: types.TracebackType | None) -> None:
+    """An unhandled exception's traceback, its message made printable: it may quote a plugin."""
+    sys.stderr.write(printable("".join(traceback.format_exception(kind, exc, tb))))
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

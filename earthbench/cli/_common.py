@@ -10,9 +10,9 @@ import re
 import types
 import typing
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
-from ..errors import EarthbenchError, UnknownNameError
+from ..errors import EarthbenchError, UnknownNameError, printable
 from ..harness.probe import PlannerInfo, info_of_class, use_plugin_files
 from ..planner import Planner
 from ..registry import TERRAINS
@@ -170,3 +170,23 @@ def plain(doc: str | None) -> str:
     """A module docstring as help text: reStructuredText roles and double backquotes become `code`."""
     text = re.sub(r":(?:func|class|mod|meth|data|attr|exc):`~?([^`]+)`", r"`\1`", doc or "")
     return text.replace("``", "`")
+
+
+class PrintableStream:
+    """A command's stdout or stderr that writes everything as :func:`~earthbench.errors.printable`
+    text: the one place printed text is made safe, so no print of a planner's name, an error, a
+    log tail or a suite name can reach the terminal as a control sequence. ``raw`` is the
+    stream underneath, for earthbench's own progress line (which escapes what it prints)."""
+
+    def __init__(self, raw: TextIO):
+        self.raw = raw
+
+    def write(self, text: str) -> int:
+        return self.raw.write(printable(text))
+
+    def writelines(self, lines: Any) -> None:
+        for line in lines:
+            self.write(line)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.raw, name)

@@ -8,6 +8,12 @@ reproducibility stamp, then one table per family and per target and a history of
 versions), runs.csv, summary.csv, a self-contained index.html and figures/ (PNG and SVG):
 loaded volume against total time, performance profiles (per family too), version histories,
 and terrain before and after for one case per planner.
+
+``--key FILE`` (repeatable) publishes a sealed draw's key with its board: the key is checked
+against the store first (it must reproduce its commitment and the stored draw, as ``verify
+--key`` checks), then written to ``keys/SUITE~sealed-C.key`` beside the tables, so anyone can
+re-judge the board with ``earthbench verify STORE --key FILE`` for as long as the board exists
+(docs/publishing.md). A sealed draw published without its key is named in a note.
 """
 
 from __future__ import annotations
@@ -15,12 +21,17 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..store import default_db
 from ._common import check_filters, plain
 
 #: Where a board goes without ``--out``: never the clone's tracked ``leaderboard/``, which a plain run would overwrite.
 DEFAULT_OUT = "board"
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..seal import SealKey
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -38,6 +49,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seeds", metavar="A-B", default=None,
                    help="only the suite's scenarios of these seeds, e.g. 0-2 (runs and denominators alike; stamped on every table)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="processes drawing figures (default: one per core)")
+    p.add_argument("--key", action="append", default=[], metavar="FILE",
+                   help="a sealed draw's key, checked against the store and published with the board in keys/ (repeatable)")
     p.add_argument("--replays", type=int, default=20, metavar="N",
                    help="runs the page's replay viewer embeds, a success and an invalid run per planner first (default: 20; 0: none)")
     return p
@@ -53,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     with Store(args.db, create=False) as store:
         for suite in args.suite:  # a mistyped name: the close matches
             check_filters(store, args.db, suite, [])
+    keys = _checked_keys(args.db, args.key)
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
                   workers=args.jobs, replays=args.replays, all_versions=args.all_versions,
                   seeds=parse_seed_range(args.seeds) if args.seeds else None)
@@ -68,4 +82,40 @@ def run(args: argparse.Namespace) -> int:
         if partial:
             print(f"leaderboard: note: partial data on {', '.join(partial)}: some planners lack runs on some scenarios "
                   "(counted as failed); each such table says which", file=sys.stderr)
+    _publish_keys(res.out, keys, set() if res.summary is None or res.summary.empty else set(res.summary["suite"]))
     return 0
+
+
+def _checked_keys(db: str, paths: list[str]) -> list[SealKey]:
+    """Each key file read and checked against the store's sealed draw; a key that does not open
+    its draw there is an error, and nothing is published."""
+    from ..seal import SealError, SealKey
+    from ..store import Store
+    from ..verify import check_seal
+
+    keys = [SealKey.read(p) for p in paths]
+    if keys:
+        with Store(db, read_only=True) as store:
+            for key in keys:
+                problems = check_seal(store, key).problems
+                if problems:
+                    raise SealError(f"--key for {key.name}: " + "; ".join(problems[:3]) + ("; …" if len(problems) > 3 else ""))
+    return keys
+
+
+def _publish_keys(out: Path, keys: list[SealKey], suites: set[str]) -> None:
+    """Write each key beside the board (readable by all: it is published), and name every sealed
+    draw on the board whose key was not given."""
+    from ..seal import SealError, public_name
+
+    for key in keys:
+        target = out / "keys" / f"{key.name}.key"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.exists() and target.read_text() != key.to_json():
+            raise SealError(f"{str(target)!r} holds another key for {key.name}; remove it first")
+        target.write_text(key.to_json())
+        print(f"leaderboard: key of {key.name} published in {target}", file=sys.stderr)
+    for name in sorted(n for n in suites - {k.name for k in keys} if public_name(n) is not None):
+        if not (out / "keys" / f"{name}.key").exists():
+            print(f"earthbench: note: sealed draw {name} is published without its key; once the board is final, publish "
+                  "it with --key FILE (docs/publishing.md): a lost key leaves the draw checkable by nobody", file=sys.stderr)

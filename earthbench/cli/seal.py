@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -31,4 +32,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"commitment:   {key.commitment}")
     print(f"key:          {args.key} (secret until the board is published)")
     print(f"next: earthbench run {shlex.quote(args.suite)} --sealed {shlex.quote(str(args.key))}")
+    same = sum(a.terrain.z.tobytes() == b.terrain.z.tobytes() for a, b in zip(suite.scenarios, sealed.scenarios))
+    if same:  # a sealed draw changes only the seeds (docs/sealed-evaluation.md): nothing else may tell it apart
+        print(f"earthbench: note: {same} of {len(sealed.scenarios)} sealed scenarios have their public terrain (a generator "
+              "that ignores its seed, as `file` does): a case can recognise those; sealing hides nothing there", file=sys.stderr)
     return 0

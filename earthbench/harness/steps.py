@@ -24,21 +24,23 @@ from ..motion import ABS_TOL
 from ..plan import Move, Plan, Prediction
 from ..planner import Observation, Planner
 from ..referee import Execution, Verdict
-from ..sensing import observe
+from ..sensing import Stations, observe, scan_seconds
 from ..world import Scenario
 
 
-def observation(truth: Scenario, verdict: Verdict, step: int) -> Observation:
+def observation(truth: Scenario, verdict: Verdict, step: int, stations: Stations | None = None) -> Observation:
     """What the planner sees after the actions ``verdict`` judged: :func:`~earthbench.sensing.observe`
     of the true terrain they left (a scan from where the working machine now stands, seeded
-    with ``step``; the soil's nominal class), the machines where they stand, the truck's load,
-    the plan time they end at, what is left in the bucket."""
+    with ``step`` and the loop's scan ``stations``; the soil's nominal class), the machines
+    where they stand, the truck's load, the plan time the scan ends at (the actions' end plus
+    :func:`~earthbench.sensing.scan_seconds`), what is left in the bucket."""
     m = truth.machines
     poses: dict[str, Any] = {f"{mid}_pose": verdict.final_poses[mid] for mid in m.ids if mid in verdict.final_poses}
     now = dataclasses.replace(truth, terrain=verdict.final_terrain)
-    view = observe(now, pose=verdict.final_poses.get(truth.worker), step=step)
+    view = observe(now, pose=verdict.final_poses.get(truth.worker), step=step, stations=stations)
     view = dataclasses.replace(view, machines=dataclasses.replace(view.machines, **poses))
-    return Observation(view, step, verdict.makespan, verdict.loaded_volume, verdict.final_turn, verdict.final_bucket)
+    t = verdict.makespan + scan_seconds(truth)
+    return Observation(view, step, t, verdict.loaded_volume, verdict.final_turn, verdict.final_bucket)
 
 
 def step_metrics(steps: Sequence[Sequence[float]]) -> dict[str, float | int | None]:
@@ -69,10 +71,13 @@ class StepLoop:
         self.bytes = 0
         self.verdict: Verdict | None = None
         self.ended = ""  # why the harness ended the run before the planner said done
+        self.stations = Stations()  # where scans were taken: a scan from a station repeats its error
+        self.stations.noise_step(truth.machines.pose(truth.worker), 0)  # the first scan's
 
     @property
     def t(self) -> float:
-        return self.verdict.makespan if self.verdict is not None else 0.0
+        """The plan time the next actions may start at: the executed actions' end, and the scan after them."""
+        return self.verdict.makespan + scan_seconds(self.truth) if self.verdict is not None else 0.0
 
     def take(self, plan_json: str, compute_s: float) -> str:
         """Execute one step's plan; returns what is wrong with it ('' when it was executed)."""
@@ -90,7 +95,9 @@ class StepLoop:
         for n, a in enumerate(plan.actions):
             start = a.path[0][0] if isinstance(a, Move) else a.t_start
             if start < t0 - ABS_TOL:
-                return f"step {k}: action {n} starts at t={start:.3f} s, before the executed actions end (t={t0:.3f} s)"
+                scan = scan_seconds(self.truth) if self.verdict is not None else 0.0
+                return (f"step {k}: action {n} starts at t={start:.3f} s, before the executed actions end"
+                        + (f" and the {scan:g} s scan after them" if scan else "") + f" (t={t0:.3f} s)")
         self.steps.append((len(plan.actions), compute_s))
         self.predicted.append(plan.predicted.volume)
         self.verdict = self.execution.execute(plan.actions)
@@ -106,7 +113,7 @@ class StepLoop:
     def next_observation(self) -> bytes:
         """The message that hands the planner its next observation (one line of JSON)."""
         assert self.verdict is not None
-        obs = observation(self.truth, self.verdict, len(self.steps))
+        obs = observation(self.truth, self.verdict, len(self.steps), self.stations)
         return json.dumps(obs.to_dict(compact=True)).encode() + b"\n"
 
     def plan(self) -> Plan:

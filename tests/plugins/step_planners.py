@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from earthbench import PLANNERS, Dump, Move, Plan, Planner
 from earthbench.planner import Observation
@@ -42,7 +42,19 @@ class StepPlanner(Planner):
     def step(self, observation: Observation) -> Plan | None:
         if observation.step == 0:
             self.todo = cycles(observation.scenario)
-        return self.todo.pop(0) if self.todo else None
+        return later(self.todo.pop(0), observation.t) if self.todo else None
+
+
+def later(plan: Plan, t: float) -> Plan:
+    """``plan`` delayed to start no earlier than ``t`` (on a scanned site, the observation comes a
+    sweep after the last actions end: earthbench.sensing.SCAN_S)."""
+    first = min(a.path[0][0] if isinstance(a, Move) else a.t_start for a in plan.actions)
+    dt = max(t - first, 0.0)
+    if dt == 0.0:
+        return plan
+    moved = tuple(replace(a, path=tuple((s[0] + dt, *s[1:]) for s in a.path)) if isinstance(a, Move)
+                  else replace(a, t_start=a.t_start + dt, t_end=a.t_end + dt) for a in plan.actions)
+    return Plan(moved, plan.predicted)
 
 
 class Digs(StepPlanner):
