@@ -143,16 +143,24 @@ def test_printable_escapes_every_control_and_formatting_character():
 
 def test_control_sequences_in_names_errors_and_logs_reach_the_terminal_as_text(tmp_path):
     """The attack: a planner named with a line erase and a fake green "ok", a clipboard write
-    (OSC 52) and a right-to-left override; it prints them to its log and raises with them; the
-    suite's name carries a colour. `run`, `runs`, `runs --id`, `list`, `leaderboard` and the
-    traceback of `plan` (the planner raising in earthbench's own process) print every one of
-    them as escapes."""
+    (OSC 52) and a right-to-left override is refused by the probe, its refusal printed as
+    escapes; planners that print them to their log and raise with them, under a suite whose
+    name carries a colour, go through `run`, `runs`, `runs --id`, `list`, `leaderboard` and the
+    error of `plan`, and every sequence is printed as escapes."""
     sys.path.insert(0, str(Path(ESCAPING).parent))
-    from escaping_planners import TRICKS, Escaping, EscapingQuiet
+    from escaping_planners import HOSTILE_NAME, TRICKS, Escaping, EscapingQuiet
 
     import json
 
     from helpers import tiny_suite_toml
+
+    shown = "\\x1b[2K\\x0d\\x1b[32m ok \\x1b[0m\\x1b]52;c;ZXZpbA==\\x07\\u202e\\x9b31m"
+    named = tmp_path / "named.py"
+    named.write_text("from earthbench import Plan, Planner\n\n\nclass Named(Planner):\n"
+                     f"    name = {HOSTILE_NAME!r}\n    tracks = ('backhoe',)\n\n    def plan(self, scenario):\n        return Plan()\n")
+    refused = _cli("list", "planners", "--plugin", str(named), cwd=tmp_path)
+    assert refused.returncode != 0 and "refused: planner name 't-esc\\x1b[2K" in refused.stderr
+    assert _raw_controls(refused.stdout + refused.stderr) == []
 
     suite = tmp_path / "s.toml"
     suite.write_text("planners = " + json.dumps([Escaping.name, EscapingQuiet.name]) + "\n"
@@ -165,15 +173,13 @@ def test_control_sequences_in_names_errors_and_logs_reach_the_terminal_as_text(t
     for p in outputs:
         assert p.returncode == 0, p.stderr
         assert _raw_controls(p.stdout + p.stderr) == [], p.args
-    in_process = _cli("plan", "--plugin", ESCAPING, Escaping.name, cwd=tmp_path)  # the planner raises here, unhandled
-    assert in_process.returncode == 1 and "RuntimeError: error text \\x1b[2K" in in_process.stderr
+    in_process = _cli("plan", "--plugin", ESCAPING, Escaping.name, cwd=tmp_path)  # the planner raises, in its fence
+    assert in_process.returncode == 2 and "returned no plan (error)" in in_process.stderr and "\\x1b[32m ok" in in_process.stderr
     assert _raw_controls(in_process.stdout + in_process.stderr) == []
-    shown = "\\x1b[2K\\x0d\\x1b[32m ok \\x1b[0m\\x1b]52;c;ZXZpbA==\\x07\\u202e\\x9b31m"
     assert TRICKS not in "".join(p.stdout + p.stderr for p in outputs)
-    run, _, one, listed, _ = outputs
-    assert "t-esc" + shown in run.stderr and "tiny\\x1b[31mred\\x07" in run.stderr
+    run, _, one, _, _ = outputs
+    assert "tiny\\x1b[31mred\\x07" in run.stderr
     assert "error text " + shown in one.stdout and "log line " + shown in one.stdout and "stderr line " + shown in one.stdout
-    assert "t-esc-ok" + shown in listed.stdout
 
 
 # -- two runs on a new store, from the command line, under load ----------------------------------
