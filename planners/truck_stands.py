@@ -1,0 +1,175 @@
+"""Where the truck may stand while an excavator digs, and the stand that costs a cycle least.
+
+The site rules (issue 48, docs/referee.md) keep the truck's body out of the arm's ground shadow
+during a dig (the hull of the base and the bucket's footprint along the drag), keep every
+machine's footprint out of the bucket's, and keep the truck on ground that is traversable and
+not dug under it. A stand off the dig area, on ground level with where the truck started and
+clear of the shadow, keeps all three; issue 49's witness shows what such a stand can still
+save: on the bearing of the dig, beyond the contact, the dump costs no swing. ``greedy`` and
+``singh-cannon-backhoe`` share this: the truck slides along its heading (no slow turn in place)
+during a dig to the stand nearest the dig's bearing, and at a new station it is parked
+broadside to where the material lies (docs/DESIGN.md §6).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from earthbench.cut import footprint
+from earthbench.motion import MARGIN, wrap
+from earthbench.rules import cell_heights, densify
+from earthbench.world import ExcavatorSpec, Pose, Scenario
+
+#: Metres the truck's body keeps from the dig area, the arm's shadow and keep-outs: a cell and
+#: the referee's sampling of motion, so a stand that just clears them in the plan clears them there.
+GAP = 0.15
+#: Largest height (m) the ground under a stand or along the truck's way may differ from the
+#: ground where it started: the truck keeps to its own level (a bench's floor, the open ground).
+LEVEL = 0.25
+#: Spacing (m) of the stands along the truck's heading, and how far either way they go.
+STEP, SPAN = 0.25, 6.0
+
+
+class TruckStands:
+    """The site's geometry for the truck's stands (one per planning session)."""
+
+    def __init__(self, sc: Scenario, spec: ExcavatorSpec):
+        self.sc, self.spec, self.truck = sc, spec, sc.machines.truck
+        self.area = Polygon(sc.site.dig_area).buffer(GAP)
+        self.keep_outs = [Polygon(k).buffer(GAP) for k in sc.site.keep_outs]
+        for p in (self.area, *self.keep_outs):
+            shapely.prepare(p)
+        start = sc.machines.truck_pose
+        self.level = self._ground(np.array([[start.x, start.y]]))[0]
+
+    def _ground(self, xy: np.ndarray) -> np.ndarray:
+        h = cell_heights(self.sc.terrain, self.sc.terrain.z, xy)
+        return np.where(np.isnan(h), self.sc.outside_level, h)
+
+    def bodies(self, poses: np.ndarray) -> np.ndarray:
+        """The truck's body at each of ``poses[k, 3]`` as shapely polygons."""
+        p = np.asarray(poses, dtype=float).reshape(-1, 3)
+        return shapely.polygons(self.truck.body(p[:, 0], p[:, 1], p[:, 2]))
+
+    def ground_ok(self, poses: np.ndarray) -> np.ndarray:
+        """Whether each stand keeps its body off the dig area and keep-outs, on ground at the
+        truck's own level (its corners and centre)."""
+        p = np.asarray(poses, dtype=float).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, dtype=bool)
+        polys = self.bodies(p)
+        ok = ~shapely.intersects(self.area, polys)
+        for k in self.keep_outs:
+            ok &= ~shapely.intersects(k, polys)
+        corners = self.truck.body(p[:, 0], p[:, 1], p[:, 2])
+        pts = np.concatenate([corners, p[:, None, :2]], axis=1).reshape(-1, 2)
+        h = self._ground(pts).reshape(len(p), -1)
+        return ok & (np.abs(h - self.level).max(axis=1) <= LEVEL)
+
+    def way_ok(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """Whether the ground along the straight way from ``a`` to ``b`` keeps the truck's level."""
+        pts = densify(np.array([a, b]), self.sc.terrain.resolution)
+        return bool(np.abs(self._ground(pts) - self.level).max() <= LEVEL)
+
+    def in_reach(self, base: Pose, xy: np.ndarray, clearance_pad: float = 0.1) -> np.ndarray:
+        """Whether truck centres ``xy[k, 2]`` are in dump reach of ``base`` and the clearance from it."""
+        d = np.hypot(xy[:, 0] - base.x, xy[:, 1] - base.y)
+        r, e = self.truck.loading_radius, self.spec
+        return (d - r <= e.reach_max - 0.05) & (d + r >= e.reach_min + 0.05) & (d >= e.clearance + clearance_pad)
+
+    def line(self, truck: Pose, base: Pose) -> np.ndarray:
+        """Stands ``[k, 3]`` along the truck's heading through where it stands, in dump reach of
+        ``base``, with their ground kept; where it stands first when it qualifies."""
+        s = np.concatenate([[0.0], np.arange(STEP, SPAN + 1e-9, STEP), -np.arange(STEP, SPAN + 1e-9, STEP)])
+        p = np.column_stack([truck.x + s * math.cos(truck.yaw), truck.y + s * math.sin(truck.yaw), np.full(len(s), truck.yaw)])
+        keep = self.in_reach(base, p[:, :2]) & self.ground_ok(p)
+        # the way there keeps the truck's level and the excavator's clearance
+        p, s = p[keep], s[keep]
+        ok = np.ones(len(p), dtype=bool)
+        for k in range(len(p)):
+            a = (truck.x, truck.y)
+            ok[k] = self.way_ok(a, (p[k, 0], p[k, 1])) and _segment_distance(base, a, (p[k, 0], p[k, 1])) >= self.spec.clearance + 0.1
+        return p[ok]
+
+    def shadow(self, base: Pose, contact: tuple[float, float], heading: float, drag: float) -> Polygon:
+        """The arm's ground shadow of a dig (the hull of the base and the bucket's footprint
+        along the drag), widened by :data:`GAP`."""
+        fp = footprint(contact, heading, self.spec.bucket_width, drag)
+        return shapely.convex_hull(shapely.multipoints([(base.x, base.y), *fp.exterior.coords])).buffer(GAP)
+
+    def swept_clear(self, shadow: Polygon, start: Pose, stands: np.ndarray) -> np.ndarray:
+        """Whether the truck's body driving straight from ``start`` to each stand (same yaw)
+        stays out of ``shadow``: the hull of its body at both ends is what it sweeps."""
+        if len(stands) == 0:
+            return np.zeros(0, dtype=bool)
+        a = self.truck.body(start.x, start.y, start.yaw)[0]
+        b = self.truck.body(stands[:, 0], stands[:, 1], stands[:, 2])
+        hulls = shapely.convex_hull(shapely.multipoints(np.concatenate([np.broadcast_to(a, b.shape), b], axis=1)))
+        return ~shapely.intersects(shadow, hulls)
+
+    def best_for_dig(self, base: Pose, truck: Pose, stands: np.ndarray, contact: tuple[float, float], heading: float,
+                     drag: float, dig_start: float, dig_end: float) -> tuple[Pose, float, float] | None:
+        """The stand of ``stands`` (driven to straight from ``truck`` during the dig) whose dump
+        after the dig finishes soonest: (stand, its arrival time, the dump's swing in rad).
+        None when the truck cannot stay out of the arm's shadow."""
+        if len(stands) == 0:
+            return None
+        shadow = self.shadow(base, contact, heading, drag)
+        ok = self.swept_clear(shadow, truck, stands)
+        if not ok.any():
+            return None
+        st = stands[ok]
+        dist = np.hypot(st[:, 0] - truck.x, st[:, 1] - truck.y)
+        arrive = dig_start + dist / (self.truck.travel_speed * MARGIN)
+        to_contact = math.atan2(contact[1] - base.y, contact[0] - base.x)
+        swing = np.abs(np.asarray(wrap(np.arctan2(st[:, 1] - base.y, st[:, 0] - base.x) - to_contact)))
+        done = np.maximum(arrive, dig_end) + swing / self.spec.swing_rate
+        k = int(np.argmin(done + 1e-3 * dist))
+        return Pose(float(st[k, 0]), float(st[k, 1]), float(st[k, 2])), float(arrive[k]), float(swing[k])
+
+    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> list[Pose]:
+        """Stands for a truck serving ``base`` whose material lies toward ``bearing``, cheapest
+        first: the truck's time to get there (turn, drive, turn) plus ``buckets`` cycles' swing
+        between that bearing and the stand. Each stand is offered broadside to the bearing (the
+        truck can then slide along the face), radial, or as the truck arrives (no last turn);
+        all keep the truck's ground, off the dig area, in dump reach."""
+        e, t = self.spec, self.truck
+        rad = np.arange(e.reach_max + t.loading_radius - 0.1, e.clearance + 0.2, -0.3)
+        ang = bearing + np.radians(np.arange(-180, 180, 7.5))
+        R, A = np.meshgrid(rad, ang)
+        x, y = base.x + R.ravel() * np.cos(A.ravel()), base.y + R.ravel() * np.sin(A.ravel())
+        travel = np.arctan2(y - truck.y, x - truck.x)
+        turn_in = np.abs(_wrap(travel - truck.yaw))
+        arrive = np.where(turn_in > math.pi / 2, travel + math.pi, travel)  # reversing when shorter
+        turn_in = np.minimum(turn_in, math.pi - turn_in)
+        moved = np.hypot(x - truck.x, y - truck.y) > 1e-6
+        arrive, turn_in = np.where(moved, arrive, truck.yaw), np.where(moved, turn_in, 0.0)
+        poses, costs = [], []
+        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive):
+            turn_out = np.abs(_wrap(yaw - arrive))
+            yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
+            turn_out = np.minimum(turn_out, math.pi - turn_out)
+            time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
+            poses.append(np.column_stack([x, y, _wrap(yaw)]))
+            costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
+        p, c = np.vstack(poses), np.concatenate(costs)
+        ok = self.in_reach(base, p[:, :2], 0.3) & self.ground_ok(p)
+        p, c = p[ok], c[ok]
+        return [Pose(float(a), float(b), float(w)) for a, b, w in p[np.argsort(c, kind="stable")]]
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _segment_distance(p: Pose, a: tuple[float, float], b: tuple[float, float]) -> float:
+    ax, ay = a
+    bx, by = b
+    dx, dy = bx - ax, by - ay
+    n = dx * dx + dy * dy
+    t = 0.0 if n < 1e-12 else max(0.0, min(1.0, ((p.x - ax) * dx + (p.y - ay) * dy) / n))
+    return math.hypot(ax + t * dx - p.x, ay + t * dy - p.y)
