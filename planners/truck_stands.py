@@ -81,9 +81,10 @@ class TruckStands:
         r, e = self.truck.loading_radius, self.spec
         return (d - r <= e.reach_max - 0.05) & (d + r >= e.reach_min + 0.05) & (d >= e.clearance + clearance_pad)
 
-    def line(self, truck: Pose, base: Pose) -> np.ndarray:
+    def line(self, truck: Pose, base: Pose) -> tuple[np.ndarray, np.ndarray]:
         """Stands ``[k, 3]`` along the truck's heading through where it stands, in dump reach of
-        ``base``, with their ground kept; where it stands first when it qualifies."""
+        ``base``, with their ground kept (where it stands first when it qualifies), and what
+        the truck sweeps driving to each (:meth:`swept`)."""
         s = np.concatenate([[0.0], np.arange(STEP, SPAN + 1e-9, STEP), -np.arange(STEP, SPAN + 1e-9, STEP)])
         p = np.column_stack([truck.x + s * math.cos(truck.yaw), truck.y + s * math.sin(truck.yaw), np.full(len(s), truck.yaw)])
         keep = self.in_reach(base, p[:, :2]) & self.ground_ok(p)
@@ -93,36 +94,36 @@ class TruckStands:
         for k in range(len(p)):
             a = (truck.x, truck.y)
             ok[k] = self.way_ok(a, (p[k, 0], p[k, 1])) and _segment_distance(base, a, (p[k, 0], p[k, 1])) >= self.spec.clearance + 0.1
-        return p[ok]
+        return p[ok], self.swept(truck, p[ok])
 
     def shadow(self, base: Pose, contact: tuple[float, float], heading: float, drag: float) -> Polygon:
         """The arm's ground shadow of a dig (the hull of the base and the bucket's footprint
-        along the drag), widened by :data:`GAP`."""
+        along the drag); the truck keeps :data:`GAP` from it."""
         fp = footprint(contact, heading, self.spec.bucket_width, drag)
-        return shapely.convex_hull(shapely.multipoints([(base.x, base.y), *fp.exterior.coords])).buffer(GAP)
+        return shapely.convex_hull(shapely.multipoints([(base.x, base.y), *fp.exterior.coords]))
 
-    def swept_clear(self, shadow: Polygon, start: Pose, stands: np.ndarray) -> np.ndarray:
-        """Whether the truck's body driving straight from ``start`` to each stand (same yaw)
-        stays out of ``shadow``: the hull of its body at both ends is what it sweeps."""
+    def swept(self, start: Pose, stands: np.ndarray) -> np.ndarray:
+        """What the truck's body sweeps driving straight from ``start`` to each stand (same
+        yaw): the hull of its body at both ends."""
         if len(stands) == 0:
-            return np.zeros(0, dtype=bool)
+            return np.zeros(0, dtype=object)
         a = self.truck.body(start.x, start.y, start.yaw)[0]
         b = self.truck.body(stands[:, 0], stands[:, 1], stands[:, 2])
-        hulls = shapely.convex_hull(shapely.multipoints(np.concatenate([np.broadcast_to(a, b.shape), b], axis=1)))
-        return ~shapely.intersects(shadow, hulls)
+        return shapely.convex_hull(shapely.multipoints(np.concatenate([np.broadcast_to(a, b.shape), b], axis=1)))
 
-    def best_for_dig(self, base: Pose, truck: Pose, stands: np.ndarray, contact: tuple[float, float], heading: float,
+    def best_for_dig(self, base: Pose, truck: Pose, stands: tuple[np.ndarray, np.ndarray], contact: tuple[float, float], heading: float,
                      drag: float, dig_start: float, dig_end: float) -> tuple[Pose, float, float] | None:
-        """The stand of ``stands`` (driven to straight from ``truck`` during the dig) whose dump
-        after the dig finishes soonest: (stand, its arrival time, the dump's swing in rad).
-        None when the truck cannot stay out of the arm's shadow."""
-        if len(stands) == 0:
+        """The stand of ``stands`` (:meth:`line`: the stands and what the truck sweeps driving
+        to each straight from ``truck`` during the dig) whose dump after the dig finishes
+        soonest: (stand, its arrival time, the dump's swing in rad). None when the truck
+        cannot stay out of the arm's shadow."""
+        poses, sweeps = stands
+        if len(poses) == 0:
             return None
-        shadow = self.shadow(base, contact, heading, drag)
-        ok = self.swept_clear(shadow, truck, stands)
+        ok = shapely.distance(self.shadow(base, contact, heading, drag), sweeps) > GAP
         if not ok.any():
             return None
-        st = stands[ok]
+        st = poses[ok]
         dist = np.hypot(st[:, 0] - truck.x, st[:, 1] - truck.y)
         arrive = dig_start + dist / (self.truck.travel_speed * MARGIN)
         to_contact = math.atan2(contact[1] - base.y, contact[0] - base.x)

@@ -128,7 +128,7 @@ class _Greedy:
         self.loaded = 0.0
         self.actions: list = []
         self.stands = TruckStands(sc, self.exc)
-        self._line: tuple[tuple[Pose, Pose], np.ndarray] | None = None
+        self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
         xs, ys = self.terrain.cell_centres()
         self.cx, self.cy = np.meshgrid(xs, ys)
         self.in_area = shapely.contains_xy(self.dig_area, self.cx, self.cy)
@@ -276,7 +276,7 @@ class _Greedy:
         best: _Dig | None = None
         fullest: tuple[float, tuple[float, float]] | None = None
         track_level = self.station()[0]
-        stands = self.truck_line()
+        confirmed = []
         for k in order:
             contact, heading = (float(p[k, 0]), float(p[k, 1])), float(h[k])
             cells = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, e.max_drag_length)
@@ -285,9 +285,21 @@ class _Greedy:
             vol = self.trial_cut(contact, heading, float(level[k]), cells)
             if fullest is None or vol > fullest[0] + 1e-9:
                 fullest = (vol, contact)
-            if vol < threshold - 1e-9:
-                continue
-            dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
+            if vol >= threshold - 1e-9:
+                dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
+                confirmed.append((min(vol, want) / (dur + e.min_dump_time), vol, contact, heading, k, dur))
+        # best first by the rate were the truck to wait for nothing at the stand nearest the
+        # dig's bearing: none after can beat a rate found
+        stands = self.truck_line()
+        if len(stands[0]) == 0:
+            return None, fullest
+        bearings = np.arctan2(stands[0][:, 1] - self.base.y, stands[0][:, 0] - self.base.x)
+        for i, c in enumerate(confirmed):
+            least = float(np.abs(_wrap(bearings - math.atan2(c[2][1] - self.base.y, c[2][0] - self.base.x))).min())
+            confirmed[i] = (min(c[1], want) / (c[5] + e.min_dump_time + least / e.swing_rate), *c[1:])
+        for bound, vol, contact, heading, k, dur in sorted(confirmed, key=lambda c: -c[0]):
+            if best is not None and bound <= best.score + 1e-12:
+                break
             stand = self.stands.best_for_dig(self.base, self.truck, stands, contact, heading, e.max_drag_length,
                                              self.t, self.t + dur)
             if stand is None:
@@ -298,7 +310,7 @@ class _Greedy:
                 best = _Dig(score, vol, contact, heading, float(depth[k]), stand[0], stand[1])
         return best, fullest
 
-    def truck_line(self) -> np.ndarray:
+    def truck_line(self) -> tuple[np.ndarray, np.ndarray]:
         """The stands along the truck's heading it may take for a dig here (kept per truck pose)."""
         key = (self.truck, self.base)
         if self._line is None or self._line[0] != key:
