@@ -31,11 +31,12 @@ PUBLIC: dict[str, tuple[str, ...]] = {
                           "loader_dump_excess", "min_dig_time", "min_dump_time", "poses_at", "swing_time",
                           "turn_drive_turn", "wrap"),
     "earthbench.cut": ("apply_cut", "charge_cut", "cut_along", "cut_level", "footprint", "path_cells", "path_window"),
-    "earthbench.rules": ("STEP_FLOOR", "Spec", "bodies_touch", "cell_heights", "densify", "ground_under", "loader_base_level",
-                         "off_map_excess", "reach_of", "rectangles_touch", "step_excess", "track_level_and_tilt",
+    "earthbench.rules": ("STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "bucket_corners", "cell_heights", "densify",
+                         "ground_under", "loader_base_level", "off_map_excess", "overlap_area", "reach_of", "rectangles_touch",
+                         "step_excess", "stroke_start", "track_level_and_tilt", "truck_cells", "truck_ground",
                          "undermining_excess", "wheel_step_excess"),
     # the judge, for metrics (a Verdict) and scripts; a planner calls the rules above, never the judge
-    "earthbench.referee": ("Execution", "RULES", "Verdict", "Violation", "judge"),
+    "earthbench.referee": ("Execution", "RULES", "RULES_VERSION", "Verdict", "Violation", "judge"),
     # the realistic track
     "earthbench.soil": ("MATERIALS", "Material", "draw", "nominal", "slump"),
     "earthbench.sensing": ("observe",),

@@ -86,6 +86,8 @@ class MergeReport:
     unjudged: Counter = field(default_factory=Counter)         #: runs without a plan, by reason (not re-checkable)
     changes: list[str] = field(default_factory=list)           #: with rescore: each re-scored run and what differed
     duplicates: int = 0                                        #: with skip_duplicates: identical runs left out
+    #: runs stored as judged under other rules than this referee's, by version (all merged as judged under its rules)
+    other_rules: Counter = field(default_factory=Counter)
 
 
 def _suites(store: Store) -> list[_SuiteRecord]:
@@ -302,6 +304,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
             if problems:
                 shown = problems[:20] + ([f"… and {len(problems) - 20} more"] if len(problems) > 20 else [])
                 raise MergeError("merge refused, nothing was written:\n  " + "\n  ".join(shown)
+                                 + "".join(f"\n  {a.rules_note()}" for a in audits if a.other_rules and a.differ)
                                  + ("" if rescore or not any(a.differ for a in audits) else
                                     "\n  (runs whose stored figures differ from the re-judged ones merge with --rescore, "
                                     "which replaces them)"))
@@ -311,6 +314,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
                 report.rescored += len(a.differ)
                 report.changes += [f"{a.path}: {f}" for f in a.differ]
                 report.unjudged.update(a.unjudged)
+                report.other_rules.update(a.other_rules)
 
             def fill(out: Store) -> None:
                 for src, a in zip(inputs, audits):

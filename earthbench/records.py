@@ -182,6 +182,9 @@ class CaseResult:
     #: the harness's measurements of that job, never part of the solve time.
     prepare_s: float | None = None
     prepare_cpu_s: float | None = None
+    #: The version of the referee's rules that judged the plan; None: this earthbench's
+    #: (:data:`earthbench.referee.RULES_VERSION`), the store writes it.
+    rules: int | None = None
 
     @classmethod
     def failure(cls, case: Case, reason: str, error: str) -> CaseResult:

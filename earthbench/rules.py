@@ -11,7 +11,10 @@ referee's job alone (docs/DESIGN.md §5).
 - the excavator's stand: :func:`ground_under`, :func:`track_level_and_tilt`,
   :func:`undermining_excess`;
 - the wheel loader's step: :func:`loader_base_level`, :func:`cell_heights`,
-  :func:`wheel_step_excess`, :func:`step_excess`.
+  :func:`wheel_step_excess`, :func:`step_excess`;
+- machines near a dig and the truck's ground (rules version 2): :func:`bucket_corners`,
+  :func:`arm_shadow`, :func:`stroke_start`, :func:`overlap_area`, :func:`truck_ground`,
+  :func:`truck_cells`.
 """
 
 from __future__ import annotations
@@ -20,13 +23,16 @@ import functools
 import math
 
 import numpy as np
+import shapely
+import shapely.geometry
 
-from .motion import arcs, dense_poses
-from .world import ExcavatorSpec, Heightmap, LoaderSpec, Pose, Scenario, TruckSpec
+from .motion import arcs, dense_poses, swing_time
+from .world import ExcavatorSpec, Heightmap, LoaderSpec, Pose, Scenario, TruckSpec, rectangle
 
 __all__ = [
-    "STEP_FLOOR", "Spec", "bodies_touch", "cell_heights", "densify", "ground_under", "loader_base_level", "off_map_excess",
-    "reach_of", "rectangles_touch", "step_excess", "track_level_and_tilt", "undermining_excess", "wheel_step_excess",
+    "STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "bucket_corners", "cell_heights", "densify", "ground_under",
+    "loader_base_level", "off_map_excess", "overlap_area", "reach_of", "rectangles_touch", "step_excess", "stroke_start",
+    "track_level_and_tilt", "truck_cells", "truck_ground", "undermining_excess", "wheel_step_excess",
 ]
 
 #: A machine's specification: anything with an ``outline`` and a ``body``.
@@ -255,3 +261,91 @@ def step_excess(terrain: Heightmap, z: np.ndarray, xy: np.ndarray, base: float, 
     h = np.where(np.isnan(h), -np.inf, h)
     k = int(np.argmax(h))
     return float(h[k]), k
+
+
+# -- machines near the arm and the truck's ground (rules version 2) ----------------------------
+
+def bucket_corners(contact: tuple[float, float], heading: float, width: float, length: float) -> np.ndarray:
+    """Corners ``[4, 2]`` of the bucket's footprint: ``length`` from the contact along
+    ``heading``, ``width`` across (:func:`earthbench.cut.footprint` as an array)."""
+    return rectangle(np.array([contact[0]]), np.array([contact[1]]), np.array([heading]), 0.0, length, width)[0]
+
+
+def arm_shadow(base: Pose, contact: tuple[float, float], heading: float, width: float, length: float) -> np.ndarray:
+    """The arm's ground shadow during a stroke: corners ``[m, 2]`` (counter-clockwise) of the
+    convex hull of the base centre and the bucket's footprint. The boom and stick run from the
+    base to the bucket low over this ground while it digs, so no machine may stand under it."""
+    pts = np.vstack([[base.x, base.y], bucket_corners(contact, heading, width, length)])
+    hull = shapely.geometry.polygon.orient(shapely.MultiPoint(pts).convex_hull, 1.0)  # a bucket has width: a polygon
+    return shapely.get_coordinates(hull.exterior)[:-1]
+
+
+def overlap_area(polygon: np.ndarray, spec: Spec, poses: np.ndarray) -> np.ndarray:
+    """Area (m²) the convex ``polygon[m, 2]`` shares with the body of ``spec`` at each of
+    ``poses[k, 3]`` (x, y, yaw); 0 where they are apart. Poses farther from the polygon than
+    the body's reach are not intersected."""
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    out = np.zeros(len(p))
+    poly = shapely.Polygon(polygon)
+    centre = np.asarray(polygon).mean(axis=0)
+    radius = float(np.max(np.hypot(*(np.asarray(polygon) - centre).T)))
+    near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) < radius + reach_of(spec.body(0.0, 0.0, 0.0))
+    if near.any():
+        corners = spec.body(*p[near].T)
+        bodies = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+        out[near] = shapely.area(shapely.intersection(bodies, poly))
+    return out
+
+
+def stroke_start(base: Pose, turn: float, contact: tuple[float, float], spec: ExcavatorSpec, t_start: float, t_end: float) -> float:
+    """When a dig's stroke begins: after the swing to the contact's bearing at the swing rate
+    (the referee's timing of a dig, :func:`earthbench.motion.min_dig_time`), at most at its end.
+    Before it the bucket swings raised; from then to the end the arm is low over its shadow."""
+    return min(t_start + swing_time(base, turn, contact, spec), t_end)
+
+
+@functools.lru_cache(maxsize=16)
+def _ground_fit(spec: TruckSpec, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points ``[m, 2]`` covering the truck's body in its own frame (along, across), the least-
+    squares map from their heights to a plane's (grade along, grade across, level), and that
+    plane's design matrix."""
+    corners = spec.body(0.0, 0.0, 0.0)[0]
+    a, b, _, d = corners
+    nu = max(int(math.ceil(np.hypot(*(b - a)) / spacing)), 1)
+    nv = max(int(math.ceil(np.hypot(*(d - a)) / spacing)), 1)
+    fu, fv = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
+    pts = a + fu.reshape(-1, 1) * (b - a) + fv.reshape(-1, 1) * (d - a)
+    design = np.column_stack([pts, np.ones(len(pts))])
+    return pts, np.linalg.pinv(design), design
+
+
+def truck_cells(scenario: Scenario, spec: TruckSpec, pose: Pose | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the map's cells the truck stands on at ``pose`` (the cells
+    :func:`truck_ground` reads; off the map there are none)."""
+    p = np.asarray(pose if isinstance(pose, np.ndarray) else (pose.x, pose.y, pose.yaw), dtype=float).reshape(1, 3)
+    t = scenario.terrain
+    pts = _placed(_ground_fit(spec, max(t.resolution, 0.1))[0], np.column_stack([np.zeros(1), p]))
+    i = np.floor((pts[:, 0] - t.origin[0]) / t.resolution).astype(int)
+    j = np.floor((pts[:, 1] - t.origin[1]) / t.resolution).astype(int)
+    ny, nx = t.z.shape
+    ok = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+    return j[ok], i[ok]
+
+
+def truck_ground(scenario: Scenario, z: np.ndarray, spec: TruckSpec, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The truck's ground at each of ``poses[k, 3]``: the grade along its heading and across it
+    (rise over run) of the plane fitted to the ground under its body, and how far (m) that
+    ground departs from the plane (a bank, a hole, a cut's face under its wheels).
+
+    Points every cell (≥ 0.1 m) cover the body; points off the map stand on the open ground's
+    level. The plane is the least-squares fit, the same linear map of the heights at every pose.
+    """
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    t = scenario.terrain
+    pts, fit, design = _ground_fit(spec, max(t.resolution, 0.1))
+    world = _placed(pts, np.column_stack([np.zeros(len(p)), p]))
+    h = cell_heights(t, z, world).reshape(len(p), len(pts))
+    h = np.where(np.isnan(h), scenario.outside_level, h)
+    coef = h @ fit.T
+    step = np.max(np.abs(h - coef @ design.T), axis=1)
+    return np.abs(coef[:, 0]), np.abs(coef[:, 1]), step

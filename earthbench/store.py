@@ -104,6 +104,8 @@ MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("7: the spot re-timings of `earthbench verify --sample`, kept in the store they sampled", (
         "CREATE TABLE IF NOT EXISTS spot_checks (" + _SPOT_CHECK_COLUMNS + ")",
         "ALTER TABLE spot_checks ADD COLUMN context TEXT")),
+    # a run stored before it read as judged under rules version 1 (docs/referee.md "Rules versions")
+    ("9: the version of the referee's rules a run was judged under", ("ALTER TABLE runs ADD COLUMN rules INTEGER NOT NULL DEFAULT 1",)),
 )
 SCHEMA_VERSION = 1 + len(MIGRATIONS)
 APPLICATION_ID = 0x45424E43  # "EBNC"
@@ -172,6 +174,7 @@ CREATE TABLE runs (
     isolation TEXT, processes INTEGER,
     load_before REAL, load_after REAL, steal_share REAL,
     prepare_s REAL, prepare_cpu_s REAL,
+    rules INTEGER NOT NULL DEFAULT 1,
     UNIQUE (scenario_digest, planner, planner_version, config_hash)
 );
 CREATE INDEX runs_planner ON runs (planner, planner_version);
@@ -181,6 +184,13 @@ CREATE TABLE spot_checks (""" + _SPOT_CHECK_COLUMNS + """, context TEXT);
 
 def _columns(db: sqlite3.Connection, table: str) -> set[str]:
     return {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+
+
+def _rules_version() -> int:
+    """The version of the rules this earthbench's referee judges by (loaded with the first run written)."""
+    from .referee import RULES_VERSION
+
+    return RULES_VERSION
 
 
 def _compress(text: str) -> bytes:
@@ -407,6 +417,7 @@ class Store:
                     "sealed": int(bool(sc.meta.get("sealed"))),
                     **{c: result.machine_load.get(c) for c in LOAD_COLUMNS},
                     "prepare_s": result.prepare_s, "prepare_cpu_s": result.prepare_cpu_s,
+                    "rules": result.rules if result.rules is not None else _rules_version(),
                 }
                 cols = ", ".join(row)
                 marks = ", ".join(f":{c}" for c in row)
@@ -467,7 +478,8 @@ class Store:
         return self.db.execute("SELECT id FROM environments WHERE hash=?", (h,)).fetchone()[0]
 
     def update_score(self, run_id: int, reason: str, metrics: dict[str, Any], violations: Iterable[dict[str, Any]]) -> None:
-        """Replace the referee's findings of one run (``earthbench rescore``), in one transaction."""
+        """Replace the referee's findings of one run (``earthbench rescore``), judged under this
+        referee's rules (:data:`~earthbench.referee.RULES_VERSION`), in one transaction."""
         cols = {
             c: (None if c not in metrics else (int(metrics[c]) if isinstance(metrics[c], bool) else metrics[c])) for c in METRIC_COLUMNS
         }
@@ -477,7 +489,7 @@ class Store:
                 self.db.execute("BEGIN IMMEDIATE")
                 self.db.execute(
                     f"UPDATE runs SET reason=:reason, success=:success, metrics=:metrics, violations=:violations,"
-                    f" rescored_at=:at, {sets} WHERE id=:id",
+                    f" rescored_at=:at, rules=:rules, {sets} WHERE id=:id",
                     {
                         **cols,
                         "reason": reason,
@@ -485,9 +497,21 @@ class Store:
                         "metrics": _json(metrics),
                         "violations": _json(list(violations)),
                         "at": _now(),
+                        "rules": _rules_version(),
                         "id": run_id,
                     },
                 )
+        except sqlite3.OperationalError as exc:
+            raise StoreError(self._explain(exc)) from None
+
+    def mark_rules(self, run_ids: Iterable[int]) -> None:
+        """Record that runs without a plan stand under this referee's rules too (``earthbench
+        rescore``: their outcome is the harness's, which no rule changes), in one transaction."""
+        ids = [(_rules_version(), i) for i in run_ids]
+        try:
+            with self.db:
+                self.db.execute("BEGIN IMMEDIATE")
+                self.db.executemany("UPDATE runs SET rules=? WHERE id=?", ids)
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
 
@@ -684,6 +708,7 @@ def _joined_runs(store: Store) -> list[sqlite3.Row]:
     newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
                        *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
     prep = ", ".join(f"r.{c}" if c in have_r else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
+    prep += ", r.rules" if "rules" in have_r else ", 1 AS rules"
     return store.db.execute(
         f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
                   r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
@@ -710,7 +735,8 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     ``config_hash``, ``config`` (JSON text), ``reason`` (ok | invalid | timeout | memory |
     error | crashed), ``success`` (bool), ``threshold``, ``solve_time_s``, ``solve_cpu_s``,
     ``startup_s``, ``peak_rss_mb``, ``prepare_s`` and ``prepare_cpu_s`` (the planner's preparation
-    the run used, NaN without one), then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
+    the run used, NaN without one), ``rules`` (the version of the referee's rules that judged it:
+    1 for a run stored before versions were recorded), then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
     ``n_violations`` (the metric ``violations``, renamed), ``loaded_volume``,
     ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
     ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
@@ -740,7 +766,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
             store.close()
     head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
             "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
-            "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s"]
+            "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s", "rules"]
     tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
             "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
             "plugin_commit", "sealed", *LOAD_COLUMNS, "earthbench_version", "plugin"]
@@ -773,6 +799,27 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
         records.append(d)
     df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)
     return df.infer_objects()
+
+
+def rules_versions(runs: pd.DataFrame) -> list[int]:
+    """The versions of the referee's rules that judged ``runs`` (a :func:`load_runs` frame), lowest first."""
+    return sorted({int(v) for v in runs["rules"].dropna()}) if "rules" in runs and len(runs) else []
+
+
+def check_one_rules(runs: pd.DataFrame, *stores: str | Path | Store) -> None:
+    """Refuse to rank ``runs`` judged under more than one version of the referee's rules: a
+    ranking never mixes them (docs/referee.md "Rules versions"). The error names the command that
+    re-judges ``stores`` under this earthbench's rules."""
+    versions = rules_versions(runs)
+    if len(versions) > 1:
+        from .referee import RULES_VERSION
+
+        counts = runs["rules"].value_counts()
+        judged = ", ".join(f"{int(counts[v])} under rules {v}" for v in versions)
+        fix = "; ".join(f"earthbench rescore --db {getattr(s, 'path', s)}" for s in stores)
+        raise StoreError(f"these runs were judged under different versions of the referee's rules ({judged}); "
+                         f"a ranking never mixes them: re-judge them under this earthbench's rules {RULES_VERSION} "
+                         f"with `{fix}` (it reruns no planner)")
 
 
 def suite_members(db: str | Path | Store, suites: Iterable[str]) -> pd.DataFrame:

@@ -223,6 +223,18 @@ class Audit:
     unjudged: Counter = field(default_factory=Counter)             #: runs without a plan, by reason (harness's word)
     judgements: dict[int, Judgement] = field(default_factory=dict)  #: by run id, every run re-judged
     scenarios: dict[str, Scenario] = field(default_factory=dict)    #: by digest, every stored scenario that reproduces it
+    #: re-judged runs stored as judged under another version of the referee's rules, by that version
+    other_rules: Counter = field(default_factory=Counter)
+
+    def rules_note(self) -> str:
+        """One line on runs judged under other rules than this referee's (empty when there are none)."""
+        if not self.other_rules:
+            return ""
+        from .referee import RULES_VERSION
+
+        older = ", ".join(f"{n} under rules {v}" for v, n in sorted(self.other_rules.items()))
+        return (f"{sum(self.other_rules.values())} run(s) were judged under other rules than this referee's "
+                f"(rules {RULES_VERSION}): {older}; `earthbench rescore --db {self.path}` re-judges them")
 
     def problems(self, *, rescore: bool = False) -> list[str]:
         """Every reason to refuse this store; with ``rescore``, differing figures are not one."""
@@ -265,7 +277,11 @@ def _scenarios(store: Store, digests: Iterable[str]) -> dict[str, Scenario | str
 
 
 def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
-    """Re-check every run of ``store`` (or the given ``runs`` rows); writes nothing."""
+    """Re-check every run of ``store`` (or the given ``runs`` rows); writes nothing. A run stored
+    as judged under other rules than this referee's is counted in ``other_rules``, and its
+    finding says so when its figures differ."""
+    from .referee import RULES_VERSION as current_rules
+
     result = Audit(str(store.path))
     _check_suites(store, result)
     if rows is None:
@@ -304,6 +320,11 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
         judged = rejudge(sc, plan, r["threshold"], solve_time_s=r["solve_time_s"], solve_cpu_s=r["solve_cpu_s"], steps=stored_steps(r))
         result.judgements[r["id"]] = judged
         diff = differences(r, judged)
+        rules = r["rules"] if "rules" in r.keys() else 1
+        if rules != current_rules:
+            result.other_rules[rules] += 1
+            if diff:
+                diff.insert(0, f"judged under rules {rules} (this referee: rules {current_rules})")
         if r["reason"] == "error" and judged.reason == "error":
             diff = []  # the referee fails on it here too: an error either way (its traceback may differ)
         if diff:

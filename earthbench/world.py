@@ -260,6 +260,11 @@ class TruckSpec:
     """A dump truck: the same travel limits as the excavator, a loading radius and a capacity.
 
     Footprint: a ``length`` × ``width`` rectangle centred on its pose (a small site dumper).
+    Its ground (rules version 2, docs/referee.md): wherever it drives or stands the plane fitted
+    to the ground under its body rises at most ``max_grade`` along its heading and
+    ``max_cross_slope`` across it (rise over run: a site dumper's manufacturers allow 25 % and
+    16 %), and that ground departs from the plane by at most ``max_step`` (m): no wheel over a
+    bank, a hole or a cut's face.
     """
 
     travel_speed: float = 0.86
@@ -269,6 +274,9 @@ class TruckSpec:
     chord_tolerance: float = 0.05
     length: float = _later(3.2)
     width: float = _later(1.6)
+    max_grade: float = _later(0.25)
+    max_cross_slope: float = _later(0.16)
+    max_step: float = _later(0.15)
 
     def outline(self, x: Any, y: Any, yaw: Any) -> np.ndarray:
         """Corners ``[k, 4, 2]`` of the truck at each pose."""

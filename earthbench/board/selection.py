@@ -11,14 +11,15 @@ from typing import Any
 
 import pandas as pd
 
-from ..store import Store, load_runs
+from ..store import Store, check_one_rules, load_runs
 
 
 def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) -> pd.DataFrame:
     """The runs of each suite (all suites that ran when ``suites`` is empty), with a ``solver`` label.
 
     Each suite's frame comes from ``load_runs(db, suite)``, so a suite counts every stored run
-    of its scenarios, whichever suite ran them.
+    of its scenarios, whichever suite ran them. Runs judged under different versions of the
+    referee's rules are refused (:func:`earthbench.store.check_one_rules`).
     """
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
@@ -32,6 +33,7 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
     if not frames:
         return load_runs_empty()
     runs = pd.concat(frames, ignore_index=True)
+    check_one_rules(runs, db)
     runs["solver"] = solver_labels(runs)
     return runs
 

@@ -17,6 +17,7 @@ import pandas as pd
 from ..aggregate import RANKING_RULE, RANK_ALPHA, ci_text
 from ..provenance import build_text
 from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
+from ..store import rules_versions
 from ..verify import machine_label
 
 
@@ -153,6 +154,7 @@ class Stamp:
     builds: list[str] = field(default_factory=list)  #: the builds of earthbench the runs came from (:func:`build_text`)
     load: str = ""  #: the machine's load around the runs' cases
     scenarios: int = 0  #: scenarios of the suite's table (for the separation note)
+    rules: str = ""  #: the version of the referee's rules that judged the runs (docs/referee.md "Rules versions")
 
     @property
     def mixed(self) -> bool:
@@ -164,6 +166,7 @@ class Stamp:
         return [
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
+            *([f"referee rules: {self.rules}"] if self.rules else []),
             *([f"scenarios: {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
             *([f"code: {'; '.join(self.builds)}"] if self.builds else [f"project commit: {commits or 'unknown'}"]),
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
@@ -231,7 +234,19 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
     return Stamp(suite, track, ", ".join(digests), float(thr.iloc[0]) if len(thr) else float("nan"), uniq("project_commit"),
                  cpus, started[0] if started else "", finished[-1] if finished else "", generated,
                  max(1, len(uniq("cpu_model"))), solve_machines, spots, max(1, machine.nunique()), seeds,
-                 _isolation(runs), builds_of(runs), load_text(runs), int(runs["scenario_digest"].nunique()) if len(runs) else 0)
+                 _isolation(runs), builds_of(runs), load_text(runs), int(runs["scenario_digest"].nunique()) if len(runs) else 0,
+                 rules_text(runs))
+
+
+def rules_text(runs: pd.DataFrame) -> str:
+    """The version of the referee's rules a table's runs were judged under, and whether it is this earthbench's."""
+    from ..referee import RULES_VERSION
+
+    versions = rules_versions(runs)
+    if not versions:
+        return ""
+    text = "version " + ", ".join(map(str, versions))
+    return text if versions == [RULES_VERSION] else text + f" (this earthbench judges under {RULES_VERSION}: `earthbench rescore`)"
 
 
 def builds_of(runs: pd.DataFrame) -> list[str]:
@@ -373,5 +388,5 @@ def write_csv(path: Path, text: str) -> None:
 
 __all__ = ["BREAKDOWN_NOTE", "FAILURE_COLUMNS", "FORMULA_STARTS", "HISTORY_NOTE", "PROVENANCE", "UNSEPARABLE", "Stamp",
            "builds_of", "load_text", "mark_mixed_solve_columns", "mark_unseparable", "markdown_more_tables", "markdown_page",
-           "markdown_table", "md_escape", "number_text", "section_tables", "slug", "spreadsheet_safe", "stamp", "table_rows",
+           "markdown_table", "md_escape", "number_text", "rules_text", "section_tables", "slug", "spreadsheet_safe", "stamp", "table_rows",
            "table_sections", "write_csv"]

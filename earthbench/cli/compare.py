@@ -44,7 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..compare import DEFAULT_METRICS, SUCCESS, CompareError, Selector, compare, format_comparison
     from ..errors import UnknownNameError
-    from ..store import load_runs
+    import pandas as pd
+
+    from ..store import check_one_rules, load_runs
 
     metrics = tuple(args.metric) or DEFAULT_METRICS
     guard = tuple(m.strip() for m in args.fail_on_regression.split(",") if m.strip())
@@ -58,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         raise CompareError("with one database, name both sides: --a PLANNER[@VERSION][#CONFIG] --b PLANNER[@VERSION][#CONFIG]")
     a = Selector.parse(args.a).pick(runs_a, "A")
     b = Selector.parse(args.b).pick(runs_b, "B")
+    check_one_rules(pd.concat([a, b]), *dict.fromkeys(d for d in (args.db_a, args.db_b) if d))
     if not args.db_b and a.index.equals(b.index):
         raise CompareError("--a and --b select the same configuration")
     res = compare(a, b, metrics, args.alpha)

@@ -55,6 +55,12 @@ def run(args: argparse.Namespace) -> int:
         counts = ", ".join(f"{n} {r}" for r, n in sorted(report.unjudged.items()))
         print(f"{sum(report.unjudged.values())} run(s) without a plan ({counts}) merged with the reason the harness gave; "
               "it cannot be re-checked from a store")
+    if report.other_rules:
+        from ..referee import RULES_VERSION
+
+        older = ", ".join(f"{n} under rules {v}" for v, n in sorted(report.other_rules.items()))
+        print(f"{sum(report.other_rules.values())} run(s) had been judged under other rules ({older}); "
+              f"merged as re-judged under this referee's rules {RULES_VERSION}")
     if report.duplicates:
         print(f"left out {report.duplicates} run(s) already merged from an earlier store with the same plan and outcome")
     print(f"merged {report.runs} run(s) and {report.suites} new suite version(s) into {args.out}")

@@ -84,6 +84,8 @@ def _suites_and_plans(store, keys, *, rejudge_all: bool) -> bool:
         judged = a.agreed + len(a.differ)
         print(f"re-judged {judged} plan(s): {a.agreed} agree with the stored figures"
               + (f"; {sum(a.unjudged.values())} run(s) without a plan" if a.unjudged else ""))
+        if a.other_rules:
+            print(a.rules_note())
         for f in (a.broken + a.differ)[:20]:
             print(f"  {f}")
         failed |= bool(a.broken or a.differ)

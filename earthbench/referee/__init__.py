@@ -20,7 +20,9 @@ re-deriving them:
 - :mod:`earthbench.referee.backhoe` — digs and dumps of the excavator (reach, depth, drag, dig
   area, floor, undermining, tilt, durations);
 - :mod:`earthbench.referee.loader` — the wheel loader's charges, dumps, turning radius and the
-  step of its wheels.
+  step of its wheels;
+- :mod:`earthbench.referee.site` — no machine under a dig's bucket or arm, and the truck's
+  ground (rules version 2, :data:`RULES_VERSION`).
 """
 
 from __future__ import annotations
@@ -33,10 +35,10 @@ from ..errors import PlanFormatError
 from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL
 from ..plan import Action, Charge, Dig, Dump, Move, Plan
-from ..world import LoaderSpec, Scenario
-from .state import RULES, DigRecord, Replay, Verdict, Violation
+from ..world import LoaderSpec, Scenario, TruckSpec
+from .state import RULES, RULES_VERSION, DigRecord, Replay, Verdict, Violation
 
-__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
+__all__ = ["ABS_TOL", "RATE_TOL", "RULES", "RULES_VERSION", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 
 #: The cut model was documented here until 0.1.0 and moved to :mod:`earthbench.cut` (0.2.0);
 #: a plugin that imports it from here still runs, with a DeprecationWarning.
@@ -67,7 +69,7 @@ def _act(r: Replay, indices: Iterable[int], observe: Observer | None = None) -> 
 def _apply(r: Replay, n: int, a: Action) -> None:
     # each track's rules load with the first judgement, not with every planner that calls one
     # of them (a case's start-up, issue 18)
-    from . import backhoe, loader
+    from . import backhoe, loader, site
 
     if a.t_start < r.busy_until[a.machine] - ABS_TOL:
         gap = r.busy_until[a.machine] - a.t_start
@@ -77,6 +79,8 @@ def _apply(r: Replay, n: int, a: Action) -> None:
         arc = r.move(n, a)
         if isinstance(spec, LoaderSpec):
             loader.move(r, n, a, spec, arc)
+        elif isinstance(spec, TruckSpec):
+            site.truck_path(r, n, np.array(a.path, dtype=float), arc)
     elif isinstance(a, Dig):
         backhoe.dig(r, n, a)
     elif isinstance(a, Dump):

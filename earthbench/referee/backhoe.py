@@ -1,5 +1,6 @@
 """The backhoe's rules: digs (reach, depth, drag, dig area, floor, undermining, tilt,
-duration) and dumps into the truck (reach, duration, the truck still)."""
+duration, no machine under the bucket or the arm, the truck's ground left as it was) and dumps
+into the truck (reach, duration, the truck still)."""
 
 from __future__ import annotations
 
@@ -10,9 +11,11 @@ from ..lazy import moved_getattr
 from ..cut import cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
+from ..rules import arm_shadow, bucket_corners, stroke_start
 from ..rules import track_level_and_tilt as _track_level_and_tilt
 from ..rules import undermining_excess as _undermining_excess
 from ..world import ExcavatorSpec, Pose
+from .site import near_dig, truck_stands, undercut
 from .state import DigRecord, Replay
 
 
@@ -42,6 +45,10 @@ def dig(r: Replay, n: int, a: Dig) -> None:
     for ko in r.keep_outs:
         if fp.intersects(ko):
             r.flag(n, "keep_out", max(fp.intersection(ko).area, ABS_TOL), "the bucket footprint enters a keep-out zone")
+    stroke = stroke_start(base, r.turn, a.contact, spec, a.t_start, a.t_end)
+    near_dig(r, n, "excavator", bucket_corners(a.contact, a.heading, spec.bucket_width, a.drag_length),
+             arm_shadow(base, a.contact, a.heading, spec.bucket_width, a.drag_length), stroke, a.t_end)
+    stands = truck_stands(r, stroke, a.t_end)
     need = min_dig_time(base, r.turn, a.contact, spec)
     if a.t_end - a.t_start < need - ABS_TOL:
         r.flag(
@@ -76,6 +83,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
             f" from the tracks (ground under them {level_under:.3f} m)",
         )
     r.settle()
+    undercut(r, n, stands)
     r.bucket += vol
     r.removed += vol
     r.digs.append(DigRecord(n, vol, vol / spec.bucket_capacity, None if nominal is None else nominal.volume))

@@ -31,6 +31,11 @@ from ..rules import reach_of as _reach_of
 from ..world import Pose, Scenario, TruckSpec
 
 
+#: The version of the rules below. Bumped whenever a rule is added or changes what it refuses,
+#: so a stored verdict says which rules judged it (docs/referee.md, "Rules versions"): 1 until
+#: 0.x (no row recorded it), 2 adds the machines near a dig and the truck's ground.
+RULES_VERSION = 2
+
 #: Every rule the referee checks, with the sentence a report shows for it.
 RULES: dict[str, str] = {
     "malformed": "the plan document could not be read",
@@ -60,6 +65,11 @@ RULES: dict[str, str] = {
     "overfill": "the cutting edge pushes on through material after the bucket is full",
     "turning_radius": "a loader move turns tighter than its minimum turning radius",
     "step": "a loader's wheels cross a cell higher than its traversable step above the floor",
+    "arm_over_machine": "during a dig's stroke another machine's body stands in the arm's ground shadow (base to bucket)",
+    "dig_under_machine": "a dig's or charge's bucket footprint reaches under a machine's footprint (the digger's own included)",
+    "truck_tilt": "the truck drives or stands on ground steeper than its grade or cross-slope limit",
+    "truck_step": "the ground under the truck departs from its plane by more than its step (a bank, a hole, a cut's face)",
+    "truck_undercut": "a dig lowers ground the truck stands on",
 }
 
 

@@ -1,0 +1,98 @@
+"""The site's rules around a dig and the truck's ground (rules version 2, docs/referee.md):
+no machine under the arm or the bucket while it digs, and the truck's ground traversable
+where it drives and stands, and not lowered under it while it stands there.
+
+The geometry is public (:mod:`earthbench.rules`: :func:`~earthbench.rules.arm_shadow`,
+:func:`~earthbench.rules.overlap_area`, :func:`~earthbench.rules.truck_ground`,
+:func:`~earthbench.rules.truck_cells`); this module only samples the machines' poses and flags.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..motion import ABS_TOL, dense_poses
+from ..rules import overlap_area, reach_of, truck_cells, truck_ground
+from ..world import TruckSpec
+from .state import Replay
+
+#: What a dig's bucket footprint (and the excavator's arm) is checked against: each machine's body.
+_WHO = {"truck": "the truck", "loader": "the loader", "excavator": "the excavator's tracks"}
+
+
+def _poses_during(r: Replay, machine: str, t0: float, t1: float) -> np.ndarray:
+    """Poses ``[k, 3]`` of ``machine`` from ``t0`` to ``t1``: its samples there and, if it
+    moves, times close enough that no body corner moves more than half a cell between two."""
+    tl = r.timelines[machine]
+    times = [t0, t1, *(t for t in tl.times if t0 < t < t1)]
+    if tl.moving_during(t0, t1):
+        spec = r.specs[machine]
+        fastest = spec.travel_speed + spec.yaw_rate * reach_of(spec.body(0.0, 0.0, 0.0))
+        times.extend(np.linspace(t0, t1, int(math.ceil(fastest * (t1 - t0) / max(r.spacing, 0.025))) + 1))
+    return tl.poses(np.unique(np.asarray(times, dtype=float)))
+
+
+def near_dig(r: Replay, n: int, digger: str, bucket: np.ndarray, shadow: np.ndarray | None, t0: float, t1: float) -> None:
+    """``dig_under_machine`` and ``arm_over_machine`` for a dig (or charge) by ``digger`` from
+    ``t0`` to ``t1``: the bucket's footprint ``bucket[4, 2]`` touches no machine's body (the
+    excavator's own tracks included), and the arm's ``shadow`` (None for a loader) touches no
+    other machine's body. A machine under the bucket is flagged only under it."""
+    for machine, what in _WHO.items():
+        if machine not in r.timelines or (machine == digger and machine != "excavator"):
+            continue
+        poses = _poses_during(r, machine, t0, t1)
+        spec = r.specs[machine]
+        under = overlap_area(bucket, spec, poses)
+        k = int(np.argmax(under))
+        if under[k] > ABS_TOL:
+            r.flag(n, "dig_under_machine", under[k], f"{under[k]:.3f} m² of the bucket's footprint lies under {what}"
+                   f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f})")
+        elif shadow is not None and machine != digger:
+            over = overlap_area(shadow, spec, poses)
+            k = int(np.argmax(over))
+            if over[k] > ABS_TOL:
+                r.flag(n, "arm_over_machine", over[k], f"{what} stands {over[k]:.3f} m² into the arm's ground shadow"
+                       f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f}) while it digs")
+
+
+def truck_stands(r: Replay, t0: float, t1: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The cells the truck stands on at any time from ``t0`` to ``t1`` and their heights now
+    (before a cut, for :func:`undercut`)."""
+    spec = r.specs["truck"]
+    assert isinstance(spec, TruckSpec)
+    cells = [truck_cells(r.sc, spec, p) for p in _poses_during(r, "truck", t0, t1)]
+    jj, ii = np.concatenate([c[0] for c in cells]), np.concatenate([c[1] for c in cells])
+    return (jj, ii), r.z[jj, ii].copy()
+
+
+def undercut(r: Replay, n: int, stands: tuple[tuple[np.ndarray, np.ndarray], np.ndarray]) -> None:
+    """``truck_undercut``: after a cut (and its slump), no cell the truck stood on is lower."""
+    (jj, ii), before = stands
+    if jj.size == 0:
+        return
+    drop = float(np.max(before - r.z[jj, ii]))
+    if drop > ABS_TOL:
+        r.flag(n, "truck_undercut", drop, f"the cut lowers the ground under the truck by {drop:.3f} m")
+
+
+def truck_path(r: Replay, n: int, path: np.ndarray, arc: dict[str, np.ndarray] | None) -> None:
+    """``truck_tilt`` and ``truck_step`` along a truck's move, at poses no body corner moves
+    more than a cell (at least 0.1 m) between, on the ground as the move starts."""
+    spec = r.specs["truck"]
+    assert isinstance(spec, TruckSpec)
+    dense = dense_poses(path, max(r.terrain.resolution, 0.1), reach_of(spec.body(0.0, 0.0, 0.0)), arc=arc)
+    poses = dense[:, 1:4]
+    grade, cross, step = truck_ground(r.sc, r.z, spec, poses)
+    tilt = np.maximum(grade - spec.max_grade, cross - spec.max_cross_slope)
+    k = int(np.argmax(tilt))
+    if tilt[k] > ABS_TOL:
+        r.flag(n, "truck_tilt", tilt[k], f"the truck stands at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f}) on a grade of"
+               f" {100 * grade[k]:.0f} % along and {100 * cross[k]:.0f} % across; limits {100 * spec.max_grade:.0f} %"
+               f" and {100 * spec.max_cross_slope:.0f} %")
+    k = int(np.argmax(step))
+    if step[k] > spec.max_step + ABS_TOL:
+        r.flag(n, "truck_step", step[k] - spec.max_step, f"the ground under the truck at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f})"
+               f" departs {step[k]:.3f} m from its plane; step {spec.max_step} m")
+
