@@ -1,10 +1,10 @@
 """Where the truck may stand while an excavator digs, and the stand that costs a cycle least.
 
-The site rules (issue 48, docs/referee.md) keep the truck's body out of the arm's ground shadow
-during a dig (the hull of the base and the bucket's footprint along the drag), keep every
-machine's footprint out of the bucket's, and keep the truck on ground that is traversable and
-not dug under it. A stand off the dig area, on ground level with where the truck started and
-clear of the shadow, keeps all three; issue 49's witness shows what such a stand can still
+The site rules (rules version 2, docs/referee.md) keep the truck's body out of the arm's ground
+shadow during a dig's stroke (:func:`earthbench.rules.arm_shadow`), every machine's body out of
+the bucket's footprint, and the truck on ground within its grade, cross-slope and step limits
+(:func:`earthbench.rules.truck_ground`) that no dig lowers while it stands there. A stand off
+the dig area, on such ground and clear of the shadow, keeps them all; issue 49's witness shows what such a stand can still
 save: on the bearing of the dig, beyond the contact, the dump costs no swing. ``greedy`` and
 ``singh-cannon-backhoe`` share this: the truck slides along its heading (no slow turn in place)
 during a dig to the stand nearest the dig's bearing, and at a new station it is parked
@@ -14,41 +14,51 @@ broadside to where the material lies (docs/DESIGN.md §6).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.cut import footprint
-from earthbench.motion import MARGIN, wrap
-from earthbench.rules import cell_heights, densify
+from earthbench.motion import MARGIN, dense_poses, wrap
+from earthbench.rules import arm_shadow, reach_of, truck_ground
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 #: Metres the truck's body keeps from the dig area, the arm's shadow and keep-outs: a cell and
 #: the referee's sampling of motion, so a stand that just clears them in the plan clears them there.
 GAP = 0.15
-#: Largest height (m) the ground under a stand or along the truck's way may differ from the
-#: ground where it started: the truck keeps to its own level (a bench's floor, the open ground).
-LEVEL = 0.25
+#: What the truck keeps below its ground limits (grade and cross-slope, rise over run; step, m).
+SLOPE_MARGIN, STEP_MARGIN = 0.02, 0.03
 #: Spacing (m) of the stands along the truck's heading, and how far either way they go.
-STEP, SPAN = 0.25, 6.0
+STEP, SPAN = 0.1, 6.0
 
 
 class TruckStands:
     """The site's geometry for the truck's stands (one per planning session)."""
 
-    def __init__(self, sc: Scenario, spec: ExcavatorSpec):
-        self.sc, self.spec, self.truck = sc, spec, sc.machines.truck
+    def __init__(self, sc: Scenario, spec: ExcavatorSpec, z: np.ndarray):
+        """``z``: the planner's grid as it digs (read, never written)."""
+        self.sc, self.spec, self.truck, self.z = sc, spec, sc.machines.truck, z
         self.area = Polygon(sc.site.dig_area).buffer(GAP)
         self.keep_outs = [Polygon(k).buffer(GAP) for k in sc.site.keep_outs]
         for p in (self.area, *self.keep_outs):
             shapely.prepare(p)
-        start = sc.machines.truck_pose
-        self.level = self._ground(np.array([[start.x, start.y]]))[0]
 
-    def _ground(self, xy: np.ndarray) -> np.ndarray:
-        h = cell_heights(self.sc.terrain, self.sc.terrain.z, xy)
-        return np.where(np.isnan(h), self.sc.outside_level, h)
+    def ground_kept(self, poses: np.ndarray) -> np.ndarray:
+        """Whether the truck's ground at each of ``poses[k, 3]`` keeps its grade, cross-slope and
+        step limits (:func:`earthbench.rules.truck_ground`, with margins)."""
+        t = self.truck
+        grade, cross, step = truck_ground(self.sc, self.z, t, poses)
+        return (grade <= t.max_grade - SLOPE_MARGIN) & (cross <= t.max_cross_slope - SLOPE_MARGIN) & (step <= t.max_step - STEP_MARGIN)
+
+    def path_ok(self, samples: list[tuple[float, float, float, float]] | np.ndarray) -> bool:
+        """Whether the truck's ground keeps its limits all along the move ``samples[k, 4]``."""
+        p = np.asarray(samples, dtype=float).reshape(-1, 4)
+        reach = reach_of(self.truck.body(0.0, 0.0, 0.0))
+        for spacing in (1.0, max(self.sc.terrain.resolution, 0.1)):  # most ways that fail, fail coarsely
+            if not self.ground_kept(dense_poses(p, spacing, reach)[:, 1:4]).all():
+                return False
+        return True
 
     def bodies(self, poses: np.ndarray) -> np.ndarray:
         """The truck's body at each of ``poses[k, 3]`` as shapely polygons."""
@@ -56,8 +66,8 @@ class TruckStands:
         return shapely.polygons(self.truck.body(p[:, 0], p[:, 1], p[:, 2]))
 
     def ground_ok(self, poses: np.ndarray) -> np.ndarray:
-        """Whether each stand keeps its body off the dig area and keep-outs, on ground at the
-        truck's own level (its corners and centre)."""
+        """Whether each stand keeps its body off the dig area and keep-outs, on ground within
+        its limits."""
         p = np.asarray(poses, dtype=float).reshape(-1, 3)
         if len(p) == 0:
             return np.zeros(0, dtype=bool)
@@ -65,15 +75,9 @@ class TruckStands:
         ok = ~shapely.intersects(self.area, polys)
         for k in self.keep_outs:
             ok &= ~shapely.intersects(k, polys)
-        corners = self.truck.body(p[:, 0], p[:, 1], p[:, 2])
-        pts = np.concatenate([corners, p[:, None, :2]], axis=1).reshape(-1, 2)
-        h = self._ground(pts).reshape(len(p), -1)
-        return ok & (np.abs(h - self.level).max(axis=1) <= LEVEL)
-
-    def way_ok(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
-        """Whether the ground along the straight way from ``a`` to ``b`` keeps the truck's level."""
-        pts = densify(np.array([a, b]), self.sc.terrain.resolution)
-        return bool(np.abs(self._ground(pts) - self.level).max() <= LEVEL)
+        if ok.any():
+            ok[ok] = self.ground_kept(p[ok])
+        return ok
 
     def in_reach(self, base: Pose, xy: np.ndarray, clearance_pad: float = 0.1) -> np.ndarray:
         """Whether truck centres ``xy[k, 2]`` are in dump reach of ``base`` and the clearance from it."""
@@ -87,20 +91,22 @@ class TruckStands:
         the truck sweeps driving to each (:meth:`swept`)."""
         s = np.concatenate([[0.0], np.arange(STEP, SPAN + 1e-9, STEP), -np.arange(STEP, SPAN + 1e-9, STEP)])
         p = np.column_stack([truck.x + s * math.cos(truck.yaw), truck.y + s * math.sin(truck.yaw), np.full(len(s), truck.yaw)])
-        keep = self.in_reach(base, p[:, :2]) & self.ground_ok(p)
-        # the way there keeps the truck's level and the excavator's clearance
-        p, s = p[keep], s[keep]
-        ok = np.ones(len(p), dtype=bool)
-        for k in range(len(p)):
-            a = (truck.x, truck.y)
-            ok[k] = self.way_ok(a, (p[k, 0], p[k, 1])) and _segment_distance(base, a, (p[k, 0], p[k, 1])) >= self.spec.clearance + 0.1
-        return p[ok], self.swept(truck, p[ok])
+        # stands the truck reaches on kept ground, one after the other either way from where it is
+        good = self.ground_ok(p)
+        run = np.zeros(len(s), dtype=bool)
+        for side in (s >= 0, s <= 0):
+            idx = np.flatnonzero(side)
+            idx = idx[np.argsort(np.abs(s[idx]))]
+            run[idx] = np.cumprod(good[idx]).astype(bool)
+        keep = run & self.in_reach(base, p[:, :2])
+        # the way there keeps the excavator's clearance
+        keep &= np.array([_segment_distance(base, (truck.x, truck.y), (x, y)) >= self.spec.clearance + 0.1 for x, y in p[:, :2]])
+        return p[keep], self.swept(truck, p[keep])
 
     def shadow(self, base: Pose, contact: tuple[float, float], heading: float, drag: float) -> Polygon:
-        """The arm's ground shadow of a dig (the hull of the base and the bucket's footprint
-        along the drag); the truck keeps :data:`GAP` from it."""
-        fp = footprint(contact, heading, self.spec.bucket_width, drag)
-        return shapely.convex_hull(shapely.multipoints([(base.x, base.y), *fp.exterior.coords]))
+        """The arm's ground shadow of a dig (:func:`earthbench.rules.arm_shadow`); the truck
+        keeps :data:`GAP` from it."""
+        return Polygon(arm_shadow(base, contact, heading, self.spec.bucket_width, drag))
 
     def swept(self, start: Pose, stands: np.ndarray) -> np.ndarray:
         """What the truck's body sweeps driving straight from ``start`` to each stand (same
@@ -132,7 +138,7 @@ class TruckStands:
         k = int(np.argmin(done + 1e-3 * dist))
         return Pose(float(st[k, 0]), float(st[k, 1]), float(st[k, 2])), float(arrive[k]), float(swing[k])
 
-    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> list[Pose]:
+    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> Iterator[Pose]:
         """Stands for a truck serving ``base`` whose material lies toward ``bearing``, cheapest
         first: the truck's time to get there (turn, drive, turn) plus ``buckets`` cycles' swing
         between that bearing and the stand. Each stand is offered broadside to the bearing (the
@@ -158,9 +164,13 @@ class TruckStands:
             poses.append(np.column_stack([x, y, _wrap(yaw)]))
             costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
         p, c = np.vstack(poses), np.concatenate(costs)
-        ok = self.in_reach(base, p[:, :2], 0.3) & self.ground_ok(p)
+        ok = self.in_reach(base, p[:, :2], 0.3)
         p, c = p[ok], c[ok]
-        return [Pose(float(a), float(b), float(w)) for a, b, w in p[np.argsort(c, kind="stable")]]
+        p = p[np.argsort(c, kind="stable")]
+        for start in range(0, len(p), 64):  # the ground is looked at only as far as it is needed
+            block = p[start:start + 64]
+            for a, b, w in block[self.ground_ok(block)]:
+                yield Pose(float(a), float(b), float(w))
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:

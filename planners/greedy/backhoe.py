@@ -26,6 +26,7 @@ way to a station is tested before the tilt, as most rejected stations fail the t
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,7 +128,7 @@ class _Greedy:
         self.truck_ready = 0.0  # when the truck stands still where it is going
         self.loaded = 0.0
         self.actions: list = []
-        self.stands = TruckStands(sc, self.exc)
+        self.stands = TruckStands(sc, self.exc, self.z)
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
         xs, ys = self.terrain.cell_centres()
         self.cx, self.cy = np.meshgrid(xs, ys)
@@ -514,7 +515,7 @@ class _Greedy:
             return base.yaw
         return math.atan2(float((w * dy / np.maximum(d, 1e-9)).sum()), float((w * dx / np.maximum(d, 1e-9)).sum()))
 
-    def _truck_spots(self, base: Pose, toward: tuple[float, float] | None = None) -> list[Pose]:
+    def _truck_spots(self, base: Pose, toward: tuple[float, float] | None = None) -> Iterator[Pose]:
         """Stands for the truck serving ``base``, nearest the bearing of its material (or of
         ``toward``) first (:meth:`..truck_stands.TruckStands.parking`)."""
         bearing = (math.atan2(toward[1] - base.y, toward[0] - base.x) if toward is not None
@@ -522,12 +523,10 @@ class _Greedy:
         buckets = (self.sc.task.target_volume - self.loaded) / self.exc.bucket_capacity
         return self.stands.parking(base, self.truck, bearing, max(buckets, 1.0))
 
-    def _clear(self, a: tuple[float, float], b: tuple[float, float], static: Pose, truck: bool = False) -> bool:
+    def _clear(self, a: tuple[float, float], b: tuple[float, float], static: Pose) -> bool:
         seg = LineString([a, b]) if a != b else Point(a)
         if any(seg.intersects(ko) for ko in self.keep_outs):
             return False
-        if truck and not self.stands.way_ok(a, b):
-            return False  # the truck keeps to its own ground
         return seg.distance(Point(static.x, static.y)) >= self.exc.clearance + 0.05
 
     def _truck_move(self, new_base: Pose, toward: tuple[float, float] | None = None) -> tuple[str, Pose] | None:
@@ -536,14 +535,26 @@ class _Greedy:
         here = (self.base.x, self.base.y)
         dest = (new_base.x, new_base.y)
         truck_here = (self.truck.x, self.truck.y)
-        for tpose in self._truck_spots(new_base, toward)[:60]:
+        tried = 0
+        for tpose in self._truck_spots(new_base, toward):
             spot = (tpose.x, tpose.y)
             # excavator first (truck parked where it is), then truck; or the other way round
-            if self._clear(here, dest, self.truck) and self._clear(truck_here, spot, Pose(*dest), truck=True):
-                return "excavator", tpose
-            if self._clear(truck_here, spot, self.base, truck=True) and self._clear(here, dest, tpose):
-                return "truck", tpose
+            if self._clear(here, dest, self.truck) and self._clear(truck_here, spot, Pose(*dest)):
+                first = "excavator"
+            elif self._clear(truck_here, spot, self.base) and self._clear(here, dest, tpose):
+                first = "truck"
+            else:
+                continue
+            tried += 1
+            if self.stands.path_ok(self._truck_path(tpose, 0.0)):
+                return first, tpose  # the truck's way keeps its ground limits
+            if tried >= 12:
+                break
         return None
+
+    def _truck_path(self, spot: Pose, t0: float) -> list[tuple[float, float, float, float]]:
+        return turn_drive_turn(self.truck, (spot.x, spot.y), t0, self.truck_spec.travel_speed, self.truck_spec.yaw_rate,
+                               final_yaw=spot.yaw)
 
     def _go(self, new_base: Pose, toward: tuple[float, float] | None = None) -> bool:
         """Bring the truck (and the excavator) for a base at ``new_base``; False if no spot works."""
