@@ -103,6 +103,13 @@ class TruckStands:
         keep &= np.array([_segment_distance(base, (truck.x, truck.y), (x, y)) >= self.spec.clearance + 0.1 for x, y in p[:, :2]])
         return p[keep], self.swept(truck, p[keep])
 
+    def sweep_of(self, samples: list[tuple[float, float, float, float]] | np.ndarray) -> Polygon:
+        """What the truck's body covers along the move ``samples[k, 4]`` (its bodies at poses a
+        cell apart, joined)."""
+        p = np.asarray(samples, dtype=float).reshape(-1, 4)
+        dense = dense_poses(p, max(self.sc.terrain.resolution, 0.1), reach_of(self.truck.body(0.0, 0.0, 0.0)))
+        return shapely.union_all(self.bodies(dense[:, 1:4]))
+
     def shadow(self, base: Pose, contact: tuple[float, float], heading: float, drag: float) -> Polygon:
         """The arm's ground shadow of a dig (:func:`earthbench.rules.arm_shadow`); the truck
         keeps :data:`GAP` from it."""
@@ -118,20 +125,25 @@ class TruckStands:
         return shapely.convex_hull(shapely.multipoints(np.concatenate([np.broadcast_to(a, b.shape), b], axis=1)))
 
     def best_for_dig(self, base: Pose, truck: Pose, stands: tuple[np.ndarray, np.ndarray], contact: tuple[float, float], heading: float,
-                     drag: float, dig_start: float, dig_end: float) -> tuple[Pose, float, float] | None:
+                     drag: float, dig_start: float, dig_end: float, free_at: float = 0.0,
+                     pending: Polygon | None = None) -> tuple[Pose, float, float] | None:
         """The stand of ``stands`` (:meth:`line`: the stands and what the truck sweeps driving
         to each straight from ``truck`` during the dig) whose dump after the dig finishes
         soonest: (stand, its arrival time, the dump's swing in rad). None when the truck
-        cannot stay out of the arm's shadow."""
+        cannot stay out of the arm's shadow. The truck sets off at ``free_at`` at the earliest;
+        ``pending`` is what it still sweeps on its way to ``truck`` (None: it stands there)."""
         poses, sweeps = stands
         if len(poses) == 0:
             return None
-        ok = shapely.distance(self.shadow(base, contact, heading, drag), sweeps) > GAP
+        shadow = self.shadow(base, contact, heading, drag)
+        if pending is not None and shapely.distance(shadow, pending) <= GAP:
+            return None
+        ok = shapely.distance(shadow, sweeps) > GAP
         if not ok.any():
             return None
         st = poses[ok]
         dist = np.hypot(st[:, 0] - truck.x, st[:, 1] - truck.y)
-        arrive = dig_start + dist / (self.truck.travel_speed * MARGIN)
+        arrive = max(dig_start, free_at) + dist / (self.truck.travel_speed * MARGIN)
         to_contact = math.atan2(contact[1] - base.y, contact[0] - base.x)
         swing = np.abs(np.asarray(wrap(np.arctan2(st[:, 1] - base.y, st[:, 0] - base.x) - to_contact)))
         done = np.maximum(arrive, dig_end) + swing / self.spec.swing_rate
@@ -163,6 +175,9 @@ class TruckStands:
             time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
             poses.append(np.column_stack([x, y, _wrap(yaw)]))
             costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
+        here = abs(_wrap(np.array([math.atan2(truck.y - base.y, truck.x - base.x) - bearing])))
+        poses.append(np.array([[truck.x, truck.y, truck.yaw]]))
+        costs.append(buckets * 2 * here / e.swing_rate)  # staying where it is
         p, c = np.vstack(poses), np.concatenate(costs)
         ok = self.in_reach(base, p[:, :2], 0.3)
         p, c = p[ok], c[ok]
