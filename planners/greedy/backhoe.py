@@ -38,6 +38,7 @@ from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_t
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
+from earthbench.soil import reach_cells, slump
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..backhoe_loop import BackhoeLoopPlanner
@@ -351,8 +352,16 @@ class _Greedy:
         contact, heading, depth = best.contact, best.heading, best.depth
         dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
         level = self.terrain.height_at(contact[0], contact[1], self.z) - depth
+        rows, cols = self._window(contact, heading)
+        if self.sc.soil is not None:  # the faces the cut leaves slump (the referee's soil model)
+            pad = reach_cells(2 * e.max_cut_depth + e.max_drag_length, self.terrain.resolution, self.sc.soil.repose_deg)
+            rows = slice(max(rows.start - pad, 0), min(rows.stop + pad, self.z.shape[0]))
+            cols = slice(max(cols.start - pad, 0), min(cols.stop + pad, self.z.shape[1]))
+            before = self.z[rows, cols].copy()
         self.bucket = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
-        self._cut_since.append(self._window(contact, heading))
+        if self.sc.soil is not None:
+            slump(self.z, self.terrain.resolution, self.sc.soil.repose_deg, before, (rows.start, rows.stop, cols.start, cols.stop))
+        self._cut_since.append((rows, cols))
         self._dug_since.append(self._cut_since[-1])
         if math.hypot(best.stand.x - self.truck.x, best.stand.y - self.truck.y) > 1e-9:
             # the truck slides along its heading during the dig, clear of the arm's shadow
@@ -548,7 +557,7 @@ class _Greedy:
             tried += 1
             if self.stands.path_ok(self._truck_path(tpose, 0.0)):
                 return first, tpose  # the truck's way keeps its ground limits
-            if tried >= 12:
+            if tried >= 40:
                 break
         return None
 

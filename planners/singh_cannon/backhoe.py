@@ -473,7 +473,7 @@ class Session:
             tried += 1
             if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw)):
                 return route, stand.yaw  # its way keeps the truck's ground limits
-            if tried >= 12:
+            if tried >= 40:
                 break
         return None
 
