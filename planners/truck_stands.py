@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import MARGIN, dense_poses, wrap
+from earthbench.motion import MARGIN, dense_poses, poses_at, wrap
 from earthbench.rules import arm_shadow, reach_of, truck_ground
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
@@ -103,12 +103,16 @@ class TruckStands:
         keep &= np.array([_segment_distance(base, (truck.x, truck.y), (x, y)) >= self.spec.clearance + 0.1 for x, y in p[:, :2]])
         return p[keep], self.swept(truck, p[keep])
 
-    def sweep_of(self, samples: list[tuple[float, float, float, float]] | np.ndarray) -> Polygon:
-        """What the truck's body covers along the move ``samples[k, 4]`` (its bodies at poses a
-        cell apart, joined)."""
+    def sweep_between(self, samples: list[tuple[float, float, float, float]] | np.ndarray, t0: float, t1: float) -> Polygon | None:
+        """What the truck's body covers from ``t0`` to ``t1`` on the move ``samples[k, 4]`` (its
+        bodies at poses a cell apart, joined); None when it stands still by then."""
         p = np.asarray(samples, dtype=float).reshape(-1, 4)
+        if t0 >= p[-1, 0] or t1 < t0:
+            return None
         dense = dense_poses(p, max(self.sc.terrain.resolution, 0.1), reach_of(self.truck.body(0.0, 0.0, 0.0)))
-        return shapely.union_all(self.bodies(dense[:, 1:4]))
+        inside = dense[(dense[:, 0] > t0) & (dense[:, 0] < t1), 1:4]
+        ends = poses_at(p, np.array([t0, t1]))
+        return shapely.union_all(self.bodies(np.vstack([ends, inside])))
 
     def shadow(self, base: Pose, contact: tuple[float, float], heading: float, drag: float) -> Polygon:
         """The arm's ground shadow of a dig (:func:`earthbench.rules.arm_shadow`); the truck

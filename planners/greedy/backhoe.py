@@ -1,12 +1,16 @@
 """``greedy``: the floor every other backhoe planner must beat.
 
-From where it stands, the excavator digs the reachable stroke that fills the bucket best,
-swings to the truck and dumps, and repeats. When nothing in reach is worth a dig (less than
-``min_fill`` of a bucket), it drives to the station with the most material in reach (less a
-travel penalty) and the truck follows to a spot within dump reach, outside the dig area and
-clear of the excavator. Every action is sequential: one machine acts at a time. Dig volumes
-are screened with a vectorised estimate and the best few confirmed with the referee's own cut
-model, so the planner's predicted volume equals the referee's.
+From where it stands, the excavator digs the reachable stroke that loads the truck fastest
+(its volume over the time until its dump ends, among strokes filling at least ``min_fill`` of a
+bucket), swings to the truck and dumps, and repeats. During each dig the truck slides along its
+heading to the stand nearest the dig's bearing that keeps its body out of the arm's shadow, off
+the dig area and on ground within its limits (``planners/truck_stands.py``, rules version 2), so
+a dump swings little. When nothing in reach is worth a dig, it drives to the station with the
+most material in reach (less a travel penalty) and the truck is parked toward that material,
+broadside to it (the cheapest stand in travel and swing). Relocations are sequential: one
+machine drives at a time. Dig volumes are screened with a vectorised estimate and the best few
+confirmed with the referee's own cut model (and, on the realistic track, the soil's slump), so
+the planner's predicted volume equals the referee's.
 
 Closed loop (``closed_loop = true``, docs/DESIGN.md §6): each step plans from the observation
 (the terrain as it now is, the machines where they stand, the load the truck reports) up to

@@ -26,11 +26,20 @@ Coarse planner (:meth:`Session.coarse_plan`)
     ``station_buckets`` buckets)) minus ``travel_value`` per second of travel, and drives
     (``earthbench.motion.turn_drive_turn``) to the best station, among those whose path keeps
     the clearance from the truck, from which the refined planner finds a feasible dig; a new
-    coarse plan is made there. The truck follows when needed to a spot within dump reach, clear
-    of the excavator by the clearance along its whole path (detouring round the excavator if
-    necessary), preferring spots outside the dig area. Both drive at once only when a dense
-    check (every 0.05 s) keeps them the clearance apart; otherwise the truck waits until the
-    excavator has arrived. The excavator never drives while the truck is still on its way.
+    coarse plan is made there. The truck is parked for the new station toward the coarse plan's
+    material (``planners/truck_stands.py``: off the dig area, on ground within its limits, the
+    cheapest stand in travel and swing, broadside so it can slide along the face), clear of the
+    excavator by the clearance along its whole path (detouring round the excavator if
+    necessary). Both drive at once only when a dense check (every 0.05 s) keeps them the
+    clearance apart; otherwise the truck waits until the excavator has arrived. The excavator
+    never drives while the truck is still on its way, and a dig whose arm's shadow the truck's
+    way would cross waits for it to arrive.
+
+Serving each dig (rules version 2; not in the paper)
+    A dig is taken only if the truck can stay out of its arm's shadow: during the dig the truck
+    slides along its heading to the stand whose dump ends soonest (least swing, least wait).
+    When no dig of the current regions can be served from the truck's line, the truck is
+    parked anew toward the first one before the region is given up.
 
 Refined planner (:mod:`.backhoe_model`)
     ``n_d × n_alpha`` (20 × 10 = 200) candidates over the region's radial bounds and the approach
@@ -69,7 +78,7 @@ from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
-from earthbench.rules import track_level_and_tilt, undermining_excess
+from earthbench.rules import stroke_start, track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from ..backhoe_loop import BackhoeLoopPlanner
@@ -247,7 +256,7 @@ class Session:
         self.depleted = np.zeros(self.z.shape, dtype=bool)
         self.stands = TruckStands(sc, self.spec, self.z)
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
-        self.pending: Polygon | None = None  # what the truck still sweeps on a move under way
+        self.pending: np.ndarray | None = None  # the truck's move under way (samples), if any
 
     # -- coarse planner ---------------------------------------------------------------------------
     def coarse_plan(self, base: Pose, v_min: float) -> list[Region]:
@@ -336,14 +345,16 @@ class Session:
         key = (self.truck, base)
         if self._line is None or self._line[0] != key:
             self._line = (key, self.stands.line(self.truck, base))
-        for start, pending in ((self.t, self.pending), (max(self.t, self.truck_ready), None)):
+        for start in dict.fromkeys((self.t, max(self.t, self.truck_ready))):
+            pending = None
+            if self.pending is not None:  # where the truck still drives during the stroke
+                stroke = stroke_start(base, turn, contact, e, start, start + duration)
+                pending = self.stands.sweep_between(self.pending, stroke, start + duration)
             got = self.stands.best_for_dig(base, self.truck, self._line[1], contact, heading, ch.drag, start,
                                            start + duration, self.truck_ready, pending)
             if got is not None:
                 ch.stand, ch.start = got[0], start
                 return True
-            if self.pending is None:
-                break
         return False
 
     def dig_geometry(self, ch: _Choice, base: Pose) -> tuple[tuple[float, float], float]:
@@ -449,32 +460,37 @@ class Session:
         ring = e.clearance + 1.0
         vias = [(base.x + ring * math.cos(a), base.y + ring * math.sin(a)) for a in np.linspace(-math.pi, math.pi, 16, endpoint=False)]
         buckets = max((self.sc.task.target_volume - self.loaded) / self.cap, 1.0)
-        tried = 0
-        for stand in self.stands.parking(base, self.truck, bearing, buckets):
-            p = (stand.x, stand.y)
-            if stand == self.truck:
-                return [], None
-            if not self.truck_in_reach(base, p) or any(k.buffer(0.5).contains(Point(p)) for k in self.keep_outs):
-                continue
-            route = None
-            if self.clear(here, p, b):
-                route = [p]
-            else:
-                best = None
-                for v in vias:
-                    if self.clear(here, v, b) and self.clear(v, p, b):
-                        length = math.dist(here, v) + math.dist(v, p)
-                        if best is None or length < best[0]:
-                            best = (length, v)
-                if best is not None:
-                    route = [best[1], p]
-            if route is None:
-                continue
-            tried += 1
-            if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw)):
-                return route, stand.yaw  # its way keeps the truck's ground limits
-            if tried >= 40:
-                break
+        # the cheapest stands in travel and swing first; failing those, the nearest ones
+        for weight in (buckets, 0.0):
+            tried, failed = 0, set()
+            for stand in self.stands.parking(base, self.truck, bearing, weight):
+                p = (stand.x, stand.y)
+                if stand == self.truck:
+                    return [], None
+                if (round(p[0], 2), round(p[1], 2)) in failed:
+                    continue  # the same place, another yaw: its way fails as well
+                if not self.truck_in_reach(base, p) or any(k.buffer(0.5).contains(Point(p)) for k in self.keep_outs):
+                    continue
+                route = None
+                if self.clear(here, p, b):
+                    route = [p]
+                else:
+                    best = None
+                    for v in vias:
+                        if self.clear(here, v, b) and self.clear(v, p, b):
+                            length = math.dist(here, v) + math.dist(v, p)
+                            if best is None or length < best[0]:
+                                best = (length, v)
+                    if best is not None:
+                        route = [best[1], p]
+                if route is None:
+                    continue
+                tried += 1
+                if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw)):
+                    return route, stand.yaw  # its way keeps the truck's ground limits
+                failed.add((round(p[0], 2), round(p[1], 2)))
+                if tried >= 40:
+                    break
         return None
 
     def truck_path(self, route: list[tuple[float, float]], t0: float, yaw: float | None = None) -> list[tuple[float, float, float, float]]:
@@ -505,8 +521,8 @@ class Session:
         self.actions.append(Move("truck", tuple(samples)))
         self.truck = Pose(samples[-1][1], samples[-1][2], samples[-1][3])
         self.truck_ready = samples[-1][0]
-        # what it sweeps on the way, kept out of the arm's shadow by any dig before it arrives
-        self.pending = self.stands.sweep_of(samples) if self.truck_ready > self.t else None
+        # its way, kept out of the arm's shadow by any dig's stroke before it arrives
+        self.pending = np.asarray(samples, dtype=float) if self.truck_ready > self.t else None
 
     def bring_truck(self, route: list[tuple[float, float]], yaw: float | None, t0: float) -> None:
         self.add_truck_path(self.truck_path(route, max(t0, self.truck_ready), yaw))
@@ -625,13 +641,16 @@ class Session:
             if digs >= self.cfg.max_digs:
                 status = "dig limit"
                 break
+            ptr = self.ptr
             if not self.truck_in_reach(self.base, (self.truck.x, self.truck.y)):
-                found = self.truck_route(self.base, self.material_bearing(self.regions, self.base))
-                if found is None:  # only when the start left it out of reach
+                # only when the start left it out of reach: brought toward the first dig, if any here
+                _, probe = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min)
+                found = None if probe is None else self.truck_route(self.base, probe.region.bearing)
+                if probe is not None and found is None:
                     status = "truck cannot reach"
                     break
-                self.bring_truck(*found, self.t)
-            ptr = self.ptr
+                if found is not None:
+                    self.bring_truck(*found, self.t)
             self.ptr, ch = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min, serve=True)
             if ch is None and not parked:
                 # a dig the truck cannot serve from where it stands: park it anew toward it
