@@ -31,7 +31,7 @@ PUBLIC: dict[str, tuple[str, ...]] = {
                           "loader_dump_excess", "min_dig_time", "min_dump_time", "poses_at", "swing_time",
                           "turn_drive_turn", "wrap"),
     "earthbench.cut": ("apply_cut", "charge_cut", "cut_along", "cut_level", "footprint", "path_cells", "path_window"),
-    "earthbench.rules": ("STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "bucket_corners", "cell_heights", "densify",
+    "earthbench.rules": ("STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "body_reach", "bucket_corners", "cell_heights", "densify",
                          "ground_under", "loader_base_level", "off_map_excess", "overlap_area", "reach_of", "rectangles_touch",
                          "step_excess", "stroke_start", "track_level_and_tilt", "truck_cells", "truck_ground",
                          "undermining_excess", "wheel_step_excess"),

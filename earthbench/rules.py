@@ -30,7 +30,7 @@ from .motion import arcs, dense_poses, swing_time
 from .world import ExcavatorSpec, Heightmap, LoaderSpec, Pose, Scenario, TruckSpec, rectangle
 
 __all__ = [
-    "STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "bucket_corners", "cell_heights", "densify", "ground_under",
+    "STEP_FLOOR", "Spec", "arm_shadow", "bodies_touch", "body_reach", "bucket_corners", "cell_heights", "densify", "ground_under",
     "loader_base_level", "off_map_excess", "overlap_area", "reach_of", "rectangles_touch", "step_excess", "stroke_start",
     "track_level_and_tilt", "truck_cells", "truck_ground", "undermining_excess", "wheel_step_excess",
 ]
@@ -44,6 +44,12 @@ Spec = ExcavatorSpec | TruckSpec | LoaderSpec
 def reach_of(corners: np.ndarray) -> float:
     """Farthest footprint corner from the pose (corners of the footprint at the origin)."""
     return float(np.max(np.hypot(corners[..., 0], corners[..., 1])))
+
+
+@functools.lru_cache(maxsize=16)
+def body_reach(spec: Spec) -> float:
+    """Farthest corner of the machine's body from its pose (:func:`reach_of` its body), once per spec."""
+    return reach_of(spec.body(0.0, 0.0, 0.0))
 
 
 def rectangles_touch(a: np.ndarray, b: np.ndarray, margin: float = 0.0) -> np.ndarray:
@@ -289,7 +295,7 @@ def overlap_area(polygon: np.ndarray, spec: Spec, poses: np.ndarray) -> np.ndarr
     poly = shapely.Polygon(polygon)
     centre = np.asarray(polygon).mean(axis=0)
     radius = float(np.max(np.hypot(*(np.asarray(polygon) - centre).T)))
-    near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) < radius + reach_of(spec.body(0.0, 0.0, 0.0))
+    near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) < radius + body_reach(spec)
     if near.any():
         corners = spec.body(*p[near].T)
         bodies = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))

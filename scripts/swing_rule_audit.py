@@ -49,7 +49,7 @@ from earthbench.cut import cut_along, footprint, path_cells
 from earthbench.motion import swing_time, turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan
 from earthbench.referee import judge
-from earthbench.rules import track_level_and_tilt, undermining_excess
+from earthbench.rules import arm_shadow, track_level_and_tilt, undermining_excess
 from earthbench.scoring import evaluate
 from earthbench.referee.replay import Replay
 from earthbench.store import Store, decompress
@@ -88,8 +88,7 @@ def audit_plan(sc: Scenario, plan: Plan) -> dict[str, object]:
         if isinstance(a, Dig) and a.machine == "excavator":
             base = exc.pose(a.t_start)
             base_on_area += bool(area.contains(Point(base.x, base.y)))
-            bucket = footprint(a.contact, a.heading, spec.bucket_width, a.drag_length)
-            shadow = MultiPoint([(base.x, base.y), *bucket.exterior.coords]).convex_hull
+            shadow = Polygon(arm_shadow(base, a.contact, a.heading, spec.bucket_width, a.drag_length))  # the referee's since rules 2
             times = np.unique(np.concatenate([np.linspace(a.t_start, a.t_end, 9),
                                               truck.path[(truck.path[:, 0] > a.t_start) & (truck.path[:, 0] < a.t_end), 0]]))
             poses = truck.poses(times)

@@ -11,7 +11,7 @@ from ..lazy import moved_getattr
 from ..cut import cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
-from ..rules import arm_shadow, bucket_corners, stroke_start
+from ..rules import stroke_start
 from ..rules import track_level_and_tilt as _track_level_and_tilt
 from ..rules import undermining_excess as _undermining_excess
 from ..world import ExcavatorSpec, Pose
@@ -46,8 +46,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
         if fp.intersects(ko):
             r.flag(n, "keep_out", max(fp.intersection(ko).area, ABS_TOL), "the bucket footprint enters a keep-out zone")
     stroke = stroke_start(base, r.turn, a.contact, spec, a.t_start, a.t_end)
-    near_dig(r, n, "excavator", bucket_corners(a.contact, a.heading, spec.bucket_width, a.drag_length),
-             arm_shadow(base, a.contact, a.heading, spec.bucket_width, a.drag_length), stroke, a.t_end)
+    near_dig(r, n, "excavator", a.contact, a.heading, spec.bucket_width, a.drag_length, base, stroke, a.t_end)
     stands = truck_stands(r, stroke, a.t_end)
     need = min_dig_time(base, r.turn, a.contact, spec)
     if a.t_end - a.t_start < need - ABS_TOL:

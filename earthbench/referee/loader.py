@@ -20,7 +20,6 @@ from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL, arcs, loader_dump_excess, wrap
 from ..plan import Charge, Dump, Move
 from ..world import LoaderSpec, Pose
-from ..rules import bucket_corners
 from ..rules import loader_base_level as _loader_base_level
 from ..rules import wheel_step_excess as _wheel_step_excess
 from .site import near_dig, truck_stands, undercut
@@ -95,7 +94,7 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     path = np.array([[a.t_start, x, y, yaw], [max(a.t_end, a.t_start + ABS_TOL), ex, ey, yaw]])
     charge_arc = arcs(path)
     r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
-    near_dig(r, n, a.machine, bucket_corners(edge, yaw, spec.bucket_width, a.penetration), None, a.t_start, a.t_end)
+    near_dig(r, n, a.machine, edge, yaw, spec.bucket_width, a.penetration, None, a.t_start, a.t_end)
     stands = truck_stands(r, a.t_start, a.t_end)
     level = r.sc.site.floor if r.sc.site.floor is not None else _loader_base_level(r.sc)
     cells = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, a.penetration)  # the edge's path (charge_along's)

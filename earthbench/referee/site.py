@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ..motion import ABS_TOL, dense_poses
-from ..rules import overlap_area, reach_of, truck_cells, truck_ground
-from ..world import TruckSpec
+from ..rules import arm_shadow, body_reach, bucket_corners, overlap_area, truck_cells, truck_ground
+from ..world import Pose, TruckSpec
 from .state import Replay
 
 #: What a dig's bucket footprint (and the excavator's arm) is checked against: each machine's body.
@@ -23,38 +23,66 @@ _WHO = {"truck": "the truck", "loader": "the loader", "excavator": "the excavato
 
 
 def _poses_during(r: Replay, machine: str, t0: float, t1: float) -> np.ndarray:
-    """Poses ``[k, 3]`` of ``machine`` from ``t0`` to ``t1``: its samples there and, if it
-    moves, times close enough that no body corner moves more than half a cell between two."""
+    """Poses ``[k, 3]`` of ``machine`` from ``t0`` to ``t1``: where it stands, or if it moves,
+    its samples there and times close enough that no body corner moves more than half a cell
+    between two."""
     tl = r.timelines[machine]
+    if not tl.moving_during(t0, t1):
+        p = tl.pose(t0)
+        return np.array([[p.x, p.y, p.yaw]])
+    spec = r.specs[machine]
+    fastest = spec.travel_speed + spec.yaw_rate * body_reach(spec)
     times = [t0, t1, *(t for t in tl.times if t0 < t < t1)]
-    if tl.moving_during(t0, t1):
-        spec = r.specs[machine]
-        fastest = spec.travel_speed + spec.yaw_rate * reach_of(spec.body(0.0, 0.0, 0.0))
-        times.extend(np.linspace(t0, t1, int(math.ceil(fastest * (t1 - t0) / max(r.spacing, 0.025))) + 1))
+    times.extend(np.linspace(t0, t1, int(math.ceil(fastest * (t1 - t0) / max(r.spacing, 0.025))) + 1))
     return tl.poses(np.unique(np.asarray(times, dtype=float)))
 
 
-def near_dig(r: Replay, n: int, digger: str, bucket: np.ndarray, shadow: np.ndarray | None, t0: float, t1: float) -> None:
+def _apart(poses: np.ndarray, a: tuple[float, float], b: tuple[float, float], room: float) -> bool:
+    """Whether every pose's centre lies farther than ``room`` from the segment ``a``–``b``."""
+    ax, ay = a
+    dx, dy = b[0] - ax, b[1] - ay
+    span = max(dx * dx + dy * dy, 1e-12)
+    for x, y, _ in poses.tolist():  # one pose, or a few dozen along a move: plain floats beat numpy here
+        f = min(max(((x - ax) * dx + (y - ay) * dy) / span, 0.0), 1.0)
+        if math.hypot(x - ax - f * dx, y - ay - f * dy) <= room:
+            return False
+    return True
+
+
+def near_dig(r: Replay, n: int, digger: str, contact: tuple[float, float], heading: float, width: float, length: float,
+             base: Pose | None, t0: float, t1: float) -> None:
     """``dig_under_machine`` and ``arm_over_machine`` for a dig (or charge) by ``digger`` from
-    ``t0`` to ``t1``: the bucket's footprint ``bucket[4, 2]`` touches no machine's body (the
-    excavator's own tracks included), and the arm's ``shadow`` (None for a loader) touches no
-    other machine's body. A machine under the bucket is flagged only under it."""
+    ``t0`` to ``t1``: the bucket's footprint (``width`` × ``length`` from ``contact`` along
+    ``heading``) touches no machine's body (the excavator's own tracks included), and the arm's
+    shadow from ``base`` (None for a loader) touches no other machine's body. A machine under
+    the bucket is flagged only under it. Machines whose centre stays farther from the bucket
+    (or the shadow, which lies within its circumradius of the segment from the base to the
+    bucket's centre) than that radius plus their body's reach are clear without intersecting."""
+    mid = (contact[0] + math.cos(heading) * length / 2, contact[1] + math.sin(heading) * length / 2)
+    radius = math.hypot(length / 2, width / 2)
+    bucket = shadow = None
     for machine, what in _WHO.items():
         if machine not in r.timelines or (machine == digger and machine != "excavator"):
             continue
-        poses = _poses_during(r, machine, t0, t1)
         spec = r.specs[machine]
-        under = overlap_area(bucket, spec, poses)
-        k = int(np.argmax(under))
-        if under[k] > ABS_TOL:
-            r.flag(n, "dig_under_machine", under[k], f"{under[k]:.3f} m² of the bucket's footprint lies under {what}"
-                   f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f})")
-        elif shadow is not None and machine != digger:
-            over = overlap_area(shadow, spec, poses)
-            k = int(np.argmax(over))
-            if over[k] > ABS_TOL:
-                r.flag(n, "arm_over_machine", over[k], f"{what} stands {over[k]:.3f} m² into the arm's ground shadow"
-                       f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f}) while it digs")
+        poses = _poses_during(r, machine, t0, t1)
+        room = radius + body_reach(spec)
+        if not _apart(poses, mid, mid, room):
+            bucket = bucket_corners(contact, heading, width, length) if bucket is None else bucket
+            under = overlap_area(bucket, spec, poses)
+            k = int(np.argmax(under))
+            if under[k] > ABS_TOL:
+                r.flag(n, "dig_under_machine", under[k], f"{under[k]:.3f} m² of the bucket's footprint lies under {what}"
+                       f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f})")
+                continue
+        if base is None or machine == digger or _apart(poses, (base.x, base.y), mid, room):
+            continue
+        shadow = arm_shadow(base, contact, heading, width, length) if shadow is None else shadow
+        over = overlap_area(shadow, spec, poses)
+        k = int(np.argmax(over))
+        if over[k] > ABS_TOL:
+            r.flag(n, "arm_over_machine", over[k], f"{what} stands {over[k]:.3f} m² into the arm's ground shadow"
+                   f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f}) while it digs")
 
 
 def truck_stands(r: Replay, t0: float, t1: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
@@ -62,9 +90,16 @@ def truck_stands(r: Replay, t0: float, t1: float) -> tuple[tuple[np.ndarray, np.
     (before a cut, for :func:`undercut`)."""
     spec = r.specs["truck"]
     assert isinstance(spec, TruckSpec)
-    cells = [truck_cells(r.sc, spec, p) for p in _poses_during(r, "truck", t0, t1)]
-    jj, ii = np.concatenate([c[0] for c in cells]), np.concatenate([c[1] for c in cells])
-    return (jj, ii), r.z[jj, ii].copy()
+    poses = _poses_during(r, "truck", t0, t1)
+    if len(poses) == 1:  # a parked truck: the same cells dig after dig
+        key = ("truck_cells", *poses[0])
+        if key not in r.memo:
+            r.memo[key] = truck_cells(r.sc, spec, poses[0])
+        jj, ii = r.memo[key]
+    else:
+        cells = [truck_cells(r.sc, spec, p) for p in poses]
+        jj, ii = np.concatenate([c[0] for c in cells]), np.concatenate([c[1] for c in cells])
+    return (jj, ii), r.z[jj, ii]
 
 
 def undercut(r: Replay, n: int, stands: tuple[tuple[np.ndarray, np.ndarray], np.ndarray]) -> None:
@@ -82,7 +117,7 @@ def truck_path(r: Replay, n: int, path: np.ndarray, arc: dict[str, np.ndarray] |
     more than a cell (at least 0.1 m) between, on the ground as the move starts."""
     spec = r.specs["truck"]
     assert isinstance(spec, TruckSpec)
-    dense = dense_poses(path, max(r.terrain.resolution, 0.1), reach_of(spec.body(0.0, 0.0, 0.0)), arc=arc)
+    dense = dense_poses(path, max(r.terrain.resolution, 0.1), body_reach(spec), arc=arc)
     poses = dense[:, 1:4]
     grade, cross, step = truck_ground(r.sc, r.z, spec, poses)
     tilt = np.maximum(grade - spec.max_grade, cross - spec.max_cross_slope)

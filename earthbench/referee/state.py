@@ -241,6 +241,7 @@ class Replay:
         self.load_curve: list[tuple[float, float]] = []
         self.travel = {mid: 0.0 for mid in m.ids}
         self.station: tuple[Pose, float, float] | None = None  # excavator: pose, track level, tilt
+        self.memo: dict[Any, Any] = {}  # what a rule computes once per judgement (e.g. the cells under a parked truck)
         self.soil = scenario.soil
         #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
         self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
