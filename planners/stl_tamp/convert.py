@@ -319,11 +319,16 @@ class Converter:
         for tried, stand in enumerate(stands.parking(st.exc, st.truck, bearing, PARK_BUCKETS)):
             if tried >= 40:
                 break
-            for start, other in (((t0, np.asarray(exc_path, dtype=float)),) if exc_path is not None else ()) + ((st.t, st.exc),):
+            for start in ((t0, st.t) if exc_path is not None else (st.t,)):
                 path = turn_drive_turn(st.truck, (stand.x, stand.y), start, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
                 if not stands.path_ok(path):
                     break
-                if self.clear(other, np.asarray(path, dtype=float)):
+                # clear of the excavator where it ends up, and (setting off together) of its way,
+                # the truck standing at its end once there (clear() compares shared times only)
+                ok = self.clear(st.exc, path)
+                if ok and start < st.t:
+                    ok = self.clear(exc_path, path) and self.clear(exc_path, Pose(*path[-1][1:]))
+                if ok:
                     st.actions.append(Move("truck", tuple(path)))
                     st.truck, st.t = Pose(*path[-1][1:]), max(st.t, float(path[-1][0]))
                     return True
