@@ -645,7 +645,7 @@ class Session:
             if not self.truck_in_reach(self.base, (self.truck.x, self.truck.y)):
                 # only when the start left it out of reach: brought toward the first dig, if any here
                 _, probe = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min)
-                found = None if probe is None else self.truck_route(self.base, probe.region.bearing)
+                found = None if probe is None else self.truck_route(self.base, self.material_bearing(self.regions, self.base))
                 if probe is not None and found is None:
                     status = "truck cannot reach"
                     break
