@@ -58,6 +58,9 @@ PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cel
 class GreedyConfig:
     min_fill: float = 0.6
     """A dig must fill at least this fraction of the bucket, else the excavator relocates."""
+    full_share: float = 0.9
+    """A stroke must load at least this share of what the fullest one would (up to what is
+    still needed); among those the one that loads fastest is dug."""
     radial_step: float = 0.25
     """Spacing (m) of candidate contacts along the radius."""
     arc_step: float = 0.35
@@ -154,7 +157,7 @@ class _Greedy:
         while self.loaded < goal - 1e-9 and len(self.actions) < self.cfg.max_actions:
             need = goal - self.loaded
             threshold = min(self.cfg.min_fill * self.exc.bucket_capacity, need)
-            best, fullest = self.best_dig(min(need, self.exc.bucket_capacity), threshold)
+            best, fullest = self.best_dig(min(need, self.exc.bucket_capacity), threshold, need)
             if best is None and fullest is not None and fullest[0] >= threshold - 1e-9 and not parked:
                 # soil worth a dig, but the truck stands nowhere it may from here: park it anew
                 parked = True
@@ -259,16 +262,19 @@ class _Greedy:
         self._estimates = (key, level, vol)
         return np.minimum(vol, self.exc.bucket_capacity)
 
-    def best_dig(self, want: float, threshold: float) -> tuple[_Dig | None, tuple[float, tuple[float, float]] | None]:
+    def best_dig(self, want: float, threshold: float,
+                 need: float | None = None) -> tuple[_Dig | None, tuple[float, tuple[float, float]] | None]:
         """The stroke that loads fastest (its volume, up to ``want``, over the time until its dump
-        ends) among those filling at least ``threshold`` with the truck out of the arm's shadow
-        at a stand on its way (:mod:`..truck_stands`); and the fullest stroke with its contact,
+        ends) among those filling at least ``threshold`` and nearly as much as the fullest
+        (``full_share``; none leaving more whole buckets of ``need`` to dig) with the truck out
+        of the arm's shadow at a stand on its way (:mod:`..truck_stands`); and the fullest stroke with its contact,
         whether or not the truck can serve it from there.
 
         The candidates: the fullest few, and the few that load fastest were the truck to stay
         where it stands (the swing to the truck's bearing priced), confirmed with the referee's
         cut model and undermining rule.
         """
+        need = want if need is None else need
         p, h, depth, level, est = self.candidates()
         if len(p) == 0:
             return None, None
@@ -294,6 +300,14 @@ class _Greedy:
             if vol >= threshold - 1e-9:
                 dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
                 confirmed.append((min(vol, want) / (dur + e.min_dump_time), vol, contact, heading, k, dur))
+        # a part bucket costs a whole cycle: only strokes nearly as full as the fullest, and
+        # none that leaves more buckets to dig than the fullest would
+        if fullest is not None and confirmed:
+            most = min(fullest[0], want)
+            cap = self.exc.bucket_capacity
+            left = math.ceil((need - most) / cap - 1e-6)
+            confirmed = [c for c in confirmed if min(c[1], want) >= self.cfg.full_share * most - 1e-9
+                         and math.ceil((need - min(c[1], want)) / cap - 1e-6) <= left]
         # best first by the rate were the truck to wait for nothing at the stand nearest the
         # dig's bearing: none after can beat a rate found
         stands = self.truck_line()
