@@ -371,13 +371,17 @@ class _Greedy:
         dur = min_dig_time(self.base, self.turn, contact, e) + _EPS_T
         level = self.terrain.height_at(contact[0], contact[1], self.z) - depth
         rows, cols = self._window(contact, heading)
-        if self.sc.soil is not None:  # the faces the cut leaves slump (the referee's soil model)
+        # the faces the cut leaves slump (the referee's soil model); modelled where it matters to
+        # the undermining rule, a cut below the tracks' ground (elsewhere greedy 1.2's plans stand)
+        slumps = self.sc.soil is not None and level < self.station()[0] + self.margins.undermining
+        if slumps:
             pad = reach_cells(2 * e.max_cut_depth + e.max_drag_length, self.terrain.resolution, self.sc.soil.repose_deg)
             rows = slice(max(rows.start - pad, 0), min(rows.stop + pad, self.z.shape[0]))
             cols = slice(max(cols.start - pad, 0), min(cols.stop + pad, self.z.shape[1]))
             before = self.z[rows, cols].copy()
         self.bucket = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity)
-        if self.sc.soil is not None:
+        if slumps:
+            assert self.sc.soil is not None
             slump(self.z, self.terrain.resolution, self.sc.soil.repose_deg, before, (rows.start, rows.stop, cols.start, cols.stop))
         self._cut_since.append((rows, cols))
         self._dug_since.append(self._cut_since[-1])
