@@ -59,15 +59,16 @@ def truck_to(sc: Scenario, goal: tuple[float, float]) -> tuple[Move, float]:
     return Move("truck", tuple(path)), path[-1][0]
 
 
-def test_a_cycle_can_swing_zero_with_the_truck_on_the_dig_area():
+def test_a_cycle_can_swing_zero_with_the_truck_on_the_dig_area_only_under_rules_1():
     """The truck stands on the slab beyond the contacts, on their bearing: after the first, every
-    bucket takes exactly the fastest cycle (t_s + t_d); no per-cycle swing is forced."""
+    bucket takes exactly the fastest cycle (t_s + t_d); rules 1 forced no per-cycle swing. Rules 2
+    refuse the plan: its last bucket digs under the truck (docs/referee.md)."""
     base = Pose(4.0, 9.0, -math.pi / 2)
     sc = slab(1.0, base, Pose(9.0, 9.0, math.pi), target=1.68)
     move, arrive = truck_to(sc, (4.0, 2.5))  # 6.5 m from the base, straight south of it
     acts = cycles(sc, [(4.0, y, h) for y in (5.6, 4.9, 4.2) for h in (0.0, math.pi)], (4.0, 2.5), arrive)
     v = judge(sc, Plan((move, *acts)))
-    assert v.valid, v.violations
+    assert {x.rule for x in v.violations} == {"dig_under_machine", "truck_undercut"}, v.violations
     spec = sc.machines.excavator
     dumps = [a for a in acts if isinstance(a, Dump)]
     cycle = (dumps[-1].t_end - dumps[0].t_end) / (len(dumps) - 1)
@@ -77,14 +78,15 @@ def test_a_cycle_can_swing_zero_with_the_truck_on_the_dig_area():
     assert ttt >= lower_bound_time_to_target(sc) - 1e-9
 
 
-def test_a_cycle_can_swing_zero_with_the_truck_off_the_dig_area():
-    """Keeping the truck off the dig area would not force a swing either: the arm reaches over it."""
+def test_a_cycle_can_swing_zero_with_the_truck_off_the_dig_area_only_under_rules_1():
+    """Keeping the truck off the dig area would not force a swing either under rules 1: the arm
+    reaches over it. Rules 2 refuse exactly that (``arm_over_machine``)."""
     base = Pose(4.0, 10.5, -math.pi / 2)
     sc = slab(1.0, base, Pose(9.0, 7.5, math.pi), target=0.84)
     move, arrive = truck_to(sc, (4.0, 6.95))  # 3.55 m from the base, its footprint north of the slab
     acts = cycles(sc, [(4.0, 5.6, 0.0), (4.0, 5.6, math.pi), (4.0, 4.9, 0.0)], (4.0, 6.95), arrive)
     v = judge(sc, Plan((move, *acts)))
-    assert v.valid, v.violations
+    assert {x.rule for x in v.violations} == {"arm_over_machine"}, v.violations
     spec = sc.machines.excavator
     assert all(a.t_end - a.t_start == pytest.approx(spec.min_dump_time + 1e-6) for a in acts if isinstance(a, Dump))
     assert time_to_target(v.load_curve, 0.84) >= lower_bound_time_to_target(sc) - 1e-9

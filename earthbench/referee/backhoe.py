@@ -47,7 +47,7 @@ def dig(r: Replay, n: int, a: Dig) -> None:
             r.flag(n, "keep_out", max(fp.intersection(ko).area, ABS_TOL), "the bucket footprint enters a keep-out zone")
     stroke = stroke_start(base, r.turn, a.contact, spec, a.t_start, a.t_end)
     near_dig(r, n, "excavator", a.contact, a.heading, spec.bucket_width, a.drag_length, base, stroke, a.t_end)
-    stands = truck_stands(r, stroke, a.t_end)
+    stands = truck_stands(r, stroke, a.t_end, a.contact, a.heading, spec.bucket_width, a.drag_length)
     need = min_dig_time(base, r.turn, a.contact, spec)
     if a.t_end - a.t_start < need - ABS_TOL:
         r.flag(

@@ -95,7 +95,7 @@ def charge(r: Replay, n: int, a: Charge) -> None:
     charge_arc = arcs(path)
     r.swept(n, a.machine, path, charge_arc)  # the outline reaches to the cutting edge: keep-out zones, map edge
     near_dig(r, n, a.machine, edge, yaw, spec.bucket_width, a.penetration, None, a.t_start, a.t_end)
-    stands = truck_stands(r, a.t_start, a.t_end)
+    stands = truck_stands(r, a.t_start, a.t_end, edge, yaw, spec.bucket_width, a.penetration)
     level = r.sc.site.floor if r.sc.site.floor is not None else _loader_base_level(r.sc)
     cells = path_cells(r.terrain, r.z.shape, edge, yaw, spec.bucket_width, a.penetration)  # the edge's path (charge_along's)
     cut, nominal = r.cut(edge, yaw, spec.bucket_width, a.penetration, level, spec.bucket_capacity, None, cells)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..motion import ABS_TOL, dense_poses
+from ..motion import ABS_TOL, arcs, dense_poses
 from ..rules import arm_shadow, body_reach, bucket_corners, overlap_area, truck_cells, truck_ground
 from ..world import Pose, TruckSpec
 from .state import Replay
@@ -85,12 +85,20 @@ def near_dig(r: Replay, n: int, digger: str, contact: tuple[float, float], headi
                    f" at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f}) while it digs")
 
 
-def truck_stands(r: Replay, t0: float, t1: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+def truck_stands(r: Replay, t0: float, t1: float, contact: tuple[float, float], heading: float, width: float,
+                 length: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
     """The cells the truck stands on at any time from ``t0`` to ``t1`` and their heights now
-    (before a cut, for :func:`undercut`)."""
+    (before the cut along ``contact``, ``heading``, ``width``, ``length``, for :func:`undercut`).
+    Without soil a cut lowers only cells whose centre lies in its footprint, so a truck whose
+    body stays farther than a cell's half-diagonal from it stands on none of them."""
     spec = r.specs["truck"]
     assert isinstance(spec, TruckSpec)
     poses = _poses_during(r, "truck", t0, t1)
+    mid = (contact[0] + math.cos(heading) * length / 2, contact[1] + math.sin(heading) * length / 2)
+    room = math.hypot(length / 2, width / 2) + body_reach(spec) + r.terrain.resolution
+    if r.soil is None and _apart(poses, mid, mid, room):
+        nothing = np.zeros(0, dtype=int)
+        return (nothing, nothing), np.zeros(0)
     if len(poses) == 1:  # a parked truck: the same cells dig after dig
         key = ("truck_cells", *poses[0])
         if key not in r.memo:
@@ -117,6 +125,8 @@ def truck_path(r: Replay, n: int, path: np.ndarray, arc: dict[str, np.ndarray] |
     more than a cell (at least 0.1 m) between, on the ground as the move starts."""
     spec = r.specs["truck"]
     assert isinstance(spec, TruckSpec)
+    if _level_enough(r, spec, path, arc):
+        return
     dense = dense_poses(path, max(r.terrain.resolution, 0.1), body_reach(spec), arc=arc)
     poses = dense[:, 1:4]
     grade, cross, step = truck_ground(r.sc, r.z, spec, poses)
@@ -131,3 +141,25 @@ def truck_path(r: Replay, n: int, path: np.ndarray, arc: dict[str, np.ndarray] |
         r.flag(n, "truck_step", step[k] - spec.max_step, f"the ground under the truck at ({poses[k, 0]:.2f}, {poses[k, 1]:.2f})"
                f" departs {step[k]:.3f} m from its plane; step {spec.max_step} m")
 
+
+def _level_enough(r: Replay, spec: TruckSpec, path: np.ndarray, arc: dict[str, np.ndarray] | None) -> bool:
+    """Whether the ground within the body's reach of a move's samples (and of the arcs between,
+    which stay within half their length of a sample) varies so little that no pose can break
+    ``truck_tilt`` or ``truck_step``. If the heights under the body span ``h``, the fitted
+    plane's grade along is at most ``h·√3 / length`` and across ``h·√3 / width`` (a slope
+    is at most the heights' spread over twice the points' spread along it), and the ground
+    departs from the plane by at most ``h (1 + √3)``; so ``h`` at most a third of
+    ``max_step``, ``max_grade × length`` and ``max_cross_slope × width`` keeps both rules."""
+    t = r.terrain
+    p = np.asarray(path, dtype=float).reshape(-1, 4)
+    lengths = arcs(p)["length"] if arc is None and len(p) > 1 else arc["length"] if arc is not None else np.zeros(0)
+    reach = body_reach(spec) + float(np.max(lengths, initial=0.0)) / 2 + t.resolution
+    xmin, xmax, ymin, ymax = t.extent
+    x0, x1, y0, y1 = p[:, 1].min() - reach, p[:, 1].max() + reach, p[:, 2].min() - reach, p[:, 2].max() + reach
+    i0, i1 = (max(int(math.floor((v - t.origin[0]) / t.resolution)), 0) for v in (x0, x1))
+    j0, j1 = (max(int(math.floor((v - t.origin[1]) / t.resolution)), 0) for v in (y0, y1))
+    window = r.z[j0:j1 + 1, i0:i1 + 1]
+    lo, hi = (float(window.min()), float(window.max())) if window.size else (math.inf, -math.inf)
+    if x0 < xmin or x1 > xmax or y0 < ymin or y1 > ymax or not window.size:  # open ground beyond the map
+        lo, hi = min(lo, r.sc.outside_level), max(hi, r.sc.outside_level)
+    return hi - lo <= min(spec.max_step, spec.max_grade * spec.length, spec.max_cross_slope * spec.width) / 3
