@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import MARGIN, dense_poses, poses_at, wrap
+from earthbench.motion import dense_poses, poses_at, wrap
 from earthbench.rules import arm_shadow, reach_of, truck_ground
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
@@ -147,7 +147,7 @@ class TruckStands:
             return None
         st = poses[ok]
         dist = np.hypot(st[:, 0] - truck.x, st[:, 1] - truck.y)
-        arrive = max(dig_start, free_at) + dist / (self.truck.travel_speed * MARGIN)
+        arrive = max(dig_start, free_at) + dist / self.truck.travel_speed  # for the choice; the plan times the real drive
         to_contact = math.atan2(contact[1] - base.y, contact[0] - base.x)
         swing = np.abs(np.asarray(wrap(np.arctan2(st[:, 1] - base.y, st[:, 0] - base.x) - to_contact)))
         done = np.maximum(arrive, dig_end) + swing / self.spec.swing_rate

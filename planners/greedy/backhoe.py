@@ -42,7 +42,7 @@ from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_t
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
-from earthbench.soil import reach_cells, slump
+from earthbench.soil import slump
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..backhoe_loop import BackhoeLoopPlanner
@@ -375,7 +375,8 @@ class _Greedy:
         # the undermining rule, a cut below the tracks' ground (elsewhere greedy 1.2's plans stand)
         slumps = self.sc.soil is not None and level < self.station()[0] + self.margins.undermining
         if slumps:
-            pad = reach_cells(2 * e.max_cut_depth + e.max_drag_length, self.terrain.resolution, self.sc.soil.repose_deg)
+            run = (2 * e.max_cut_depth + e.max_drag_length) / math.tan(math.radians(self.sc.soil.repose_deg))  # the slope's run
+            pad = int(math.ceil(run / self.terrain.resolution)) + 2
             rows = slice(max(rows.start - pad, 0), min(rows.stop + pad, self.z.shape[0]))
             cols = slice(max(cols.start - pad, 0), min(cols.stop + pad, self.z.shape[1]))
             before = self.z[rows, cols].copy()
