@@ -53,9 +53,10 @@ def test_the_margin_is_a_setting(planner):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("planner", "family", "target"), [
-    (GreedyPlanner, "bench-sand-survey", 4.0), (GreedyPlanner, "bench-sand-cab", 4.0), (SinghCannonBackhoe, "bench-clay-cab", 8.0)])
+    (GreedyPlanner, "bench-sand-cab", 8.0), (SinghCannonBackhoe, "bench-clay-cab", 8.0)])
 def test_a_plan_made_on_the_scan_keeps_the_stability_rules_on_the_truth(planner, family, target):
-    """Open loop on the scenarios where trusting the scan undermined the tracks (greedy 1.1,
+    """Open loop on the scenarios where trusting the scan undermined the tracks (greedy 1.1 on
+    sand 4 m³ and 1.3, which digs elsewhere and models the faces' slump, on sand 8 m³;
     singh-cannon-backhoe 1.2): with the derived margin the plan is valid on the true ground;
     without one (``scan_margin = 0``) it is not."""
     sc = next(s for s in load_suite("bench-realistic").scenarios if f"/{family}/" in s.id and s.task.target_volume == target)

@@ -280,7 +280,9 @@ class SeparatePlanner(Planner):
     #: 0.4.3: ties in the tour and in the rule's highest point broken in the site's own frame
     #: (:func:`site_frame`), and stl-tamp 0.10.2's rounding-proof tiling; plans on the public
     #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.
-    version = "0.4.3"
+    #: 0.4.4: stl-tamp 0.10.5's conversion (no truck under the arm, the truck's ground kept; rules
+    #: version 2); its pinned plans and those of standard seed 0 are unchanged.
+    version = "0.4.4"
     tracks = ("backhoe",)
     Config = Config
 

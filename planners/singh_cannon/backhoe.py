@@ -26,11 +26,20 @@ Coarse planner (:meth:`Session.coarse_plan`)
     ``station_buckets`` buckets)) minus ``travel_value`` per second of travel, and drives
     (``earthbench.motion.turn_drive_turn``) to the best station, among those whose path keeps
     the clearance from the truck, from which the refined planner finds a feasible dig; a new
-    coarse plan is made there. The truck follows when needed to a spot within dump reach, clear
-    of the excavator by the clearance along its whole path (detouring round the excavator if
-    necessary), preferring spots outside the dig area. Both drive at once only when a dense
-    check (every 0.05 s) keeps them the clearance apart; otherwise the truck waits until the
-    excavator has arrived. The excavator never drives while the truck is still on its way.
+    coarse plan is made there. The truck is parked for the new station toward the coarse plan's
+    material (``planners/truck_stands.py``: off the dig area, on ground within its limits, the
+    cheapest stand in travel and swing, broadside so it can slide along the face), clear of the
+    excavator by the clearance along its whole path (detouring round the excavator if
+    necessary). Both drive at once only when a dense check (every 0.05 s) keeps them the
+    clearance apart; otherwise the truck waits until the excavator has arrived. The excavator
+    never drives while the truck is still on its way, and a dig whose arm's shadow the truck's
+    way would cross waits for it to arrive.
+
+Serving each dig (rules version 2; not in the paper)
+    A dig is taken only if the truck can stay out of its arm's shadow: during the dig the truck
+    slides along its heading to the stand whose dump ends soonest (least swing, least wait).
+    When no dig of the current regions can be served from the truck's line, the truck is
+    parked anew toward the first one before the region is given up.
 
 Refined planner (:mod:`.backhoe_model`)
     ``n_d × n_alpha`` (20 × 10 = 200) candidates over the region's radial bounds and the approach
@@ -69,11 +78,12 @@ from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
-from earthbench.rules import track_level_and_tilt, undermining_excess
+from earthbench.rules import stroke_start, track_level_and_tilt, undermining_excess
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
+from ..truck_stands import TruckStands
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
 
 _EPS_T = 1e-6
@@ -157,13 +167,17 @@ class _Choice:
     time: float
     quality: float
     swing: float
+    stand: Pose | None = None
+    """Where the truck stands for the dump (it slides there along its heading during the dig)."""
+    start: float = 0.0
+    """When the dig starts (later than the clock when it waits for the truck to pass)."""
 
 
 class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]"]):
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.3"
+    version = "1.4"
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -240,6 +254,9 @@ class Session:
         self.events: list[dict] = []
         self._lines: dict[tuple[float, float, float], RadialLine] = {}
         self.depleted = np.zeros(self.z.shape, dtype=bool)
+        self.stands = TruckStands(sc, self.spec, self.z)
+        self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
+        self.pending: np.ndarray | None = None  # the truck's move under way (samples), if any
 
     # -- coarse planner ---------------------------------------------------------------------------
     def coarse_plan(self, base: Pose, v_min: float) -> list[Region]:
@@ -295,7 +312,11 @@ class Session:
             line = self._lines[key] = RadialLine(self.terrain, self.spec, (base.x, base.y), bearing, self.area_inner, self.keep_outs_pad)
         return line
 
-    def refine(self, region: Region, base: Pose, turn: float, v_min: float, line: RadialLine | None = None) -> _Choice | None:
+    def refine(self, region: Region, base: Pose, turn: float, v_min: float, line: RadialLine | None = None,
+               serve: bool = False) -> _Choice | None:
+        """The best dig of ``region`` from ``base`` by the paper's quality whose workspace the
+        referee accepts; with ``serve``, also one the truck can serve out of the arm's shadow
+        (:meth:`serve`)."""
         e = self.spec
         line = line or self.line(base, region.bearing)
         swing = abs(wrap(region.bearing - (base.yaw + turn))) / e.swing_rate
@@ -309,10 +330,32 @@ class Session:
                 return None
             ch = _Choice(region, line, float(cand.d[k]), float(cand.alpha[k]), float(cand.depth[k]), float(cand.drag[k]),
                          float(cand.volume[k]), float(cand.energy[k]), float(cand.time[k]), float(q[k]), swing)
-            if self.exact_ok(ch, base):
+            if self.exact_ok(ch, base) and (not serve or self.serve(ch, base, turn)):
                 return ch
             q[k] = 0.0
         return None
+
+    def serve(self, ch: _Choice, base: Pose, turn: float) -> bool:
+        """Find the stand the truck takes for ``ch``'s dump (:mod:`..truck_stands`): sliding
+        along its heading during the dig, out of the arm's shadow, the dump done soonest. A dig
+        whose shadow the truck's move still under way would cross waits for it to arrive."""
+        e = self.spec
+        contact, heading = self.dig_geometry(ch, base)
+        duration = max(ch.time, min_dig_time(base, turn, contact, e)) + _EPS_T
+        key = (self.truck, base)
+        if self._line is None or self._line[0] != key:
+            self._line = (key, self.stands.line(self.truck, base))
+        for start in dict.fromkeys((self.t, max(self.t, self.truck_ready))):
+            pending = None
+            if self.pending is not None:  # where the truck still drives during the stroke
+                stroke = stroke_start(base, turn, contact, e, start, start + duration)
+                pending = self.stands.sweep_between(self.pending, stroke, start + duration)
+            got = self.stands.best_for_dig(base, self.truck, self._line[1], contact, heading, ch.drag, start,
+                                           start + duration, self.truck_ready, pending)
+            if got is not None:
+                ch.stand, ch.start = got[0], start
+                return True
+        return False
 
     def dig_geometry(self, ch: _Choice, base: Pose) -> tuple[tuple[float, float], float]:
         ux, uy = math.cos(ch.region.bearing), math.sin(ch.region.bearing)
@@ -347,10 +390,12 @@ class Session:
         self.z[window] = saved
         return excess <= -max(ABS_TOL, self.margins.undermining)
 
-    def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float) -> tuple[int, _Choice | None]:
-        """The first region from ``start`` on with a feasible dig, and that dig."""
+    def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float,
+                 serve: bool = False) -> tuple[int, _Choice | None]:
+        """The first region from ``start`` on with a feasible dig (with ``serve``, one the truck
+        can serve: :meth:`serve`), and that dig."""
         for k in range(start, len(regions)):
-            ch = self.refine(regions[k], base, turn, v_min)
+            ch = self.refine(regions[k], base, turn, v_min, serve=serve)
             if ch is not None:
                 return k, ch
         return len(regions), None
@@ -358,7 +403,13 @@ class Session:
     # -- execution ----------------------------------------------------------------------------------
     def do_dig(self, ch: _Choice) -> float:
         e = self.spec
+        self.t = max(self.t, ch.start)
         contact, heading = self.dig_geometry(ch, self.base)
+        if ch.stand is not None and math.hypot(ch.stand.x - self.truck.x, ch.stand.y - self.truck.y) > 1e-9:
+            # the truck slides along its heading during the dig, clear of the arm's shadow
+            self.add_truck_path(turn_drive_turn(self.truck, (ch.stand.x, ch.stand.y), max(self.t, self.truck_ready),
+                                                self.truck_spec.travel_speed, self.truck_spec.yaw_rate))
+        self.pending = None
         level = cut_level(self.terrain, self.z, contact, ch.depth)
         vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap)
         duration = max(ch.time, min_dig_time(self.base, self.turn, contact, e)) + _EPS_T
@@ -396,47 +447,60 @@ class Session:
             return False
         return seg.distance(Point(other)) >= self.spec.clearance + 0.05
 
-    def truck_route(self, base: Pose) -> list[tuple[float, float]] | None:
-        """Waypoints taking the truck within dump reach of ``base`` ([] if it is already)."""
+    def truck_route(self, base: Pose, bearing: float, force: bool = False) -> tuple[list[tuple[float, float]], float | None] | None:
+        """Waypoints taking the truck to a stand serving ``base`` whose material lies toward
+        ``bearing``, and its yaw there (:meth:`..truck_stands.TruckStands.parking`: off the dig
+        area on ground within its limits, the cheapest in travel and swing first); ``([], None)``
+        when it stays where it is (without ``force``: whenever it is in reach already)."""
         here = (self.truck.x, self.truck.y)
-        if self.truck_in_reach(base, here):
-            return []
+        if not force and self.truck_in_reach(base, here):
+            return [], None
         e = self.spec
         b = (base.x, base.y)
-        radii = sorted({self.cfg.truck_distance, self.cfg.truck_distance + 0.8, self.cfg.truck_distance - 0.8,
-                        e.clearance + 0.4, e.reach_max + self.truck_spec.loading_radius - 0.3})
-        spots = []
-        for rad in radii:
-            for a in np.linspace(-math.pi, math.pi, 36, endpoint=False):
-                p = (base.x + rad * math.cos(a), base.y + rad * math.sin(a))
-                if not self.truck_in_reach(base, p) or any(k.buffer(0.5).contains(Point(p)) for k in self.keep_outs):
-                    continue
-                cost = math.hypot(p[0] - here[0], p[1] - here[1]) / self.truck_spec.travel_speed
-                if self.area.contains(Point(p)):
-                    cost += 30.0
-                spots.append((cost, p))
-        spots.sort()
         ring = e.clearance + 1.0
         vias = [(base.x + ring * math.cos(a), base.y + ring * math.sin(a)) for a in np.linspace(-math.pi, math.pi, 16, endpoint=False)]
-        for _, p in spots[:40]:
-            if self.clear(here, p, b):
-                return [p]
-            best = None
-            for v in vias:
-                if self.clear(here, v, b) and self.clear(v, p, b):
-                    length = math.dist(here, v) + math.dist(v, p)
-                    if best is None or length < best[0]:
-                        best = (length, v)
-            if best is not None:
-                return [best[1], p]
+        buckets = max((self.sc.task.target_volume - self.loaded) / self.cap, 1.0)
+        # the cheapest stands in travel and swing first; failing those, the nearest ones
+        for weight in (buckets, 0.0):
+            tried, failed = 0, set()
+            for stand in self.stands.parking(base, self.truck, bearing, weight):
+                p = (stand.x, stand.y)
+                if stand == self.truck:
+                    return [], None
+                if (round(p[0], 2), round(p[1], 2)) in failed:
+                    continue  # the same place, another yaw: its way fails as well
+                if not self.truck_in_reach(base, p) or any(k.buffer(0.5).contains(Point(p)) for k in self.keep_outs):
+                    continue
+                route = None
+                if self.clear(here, p, b):
+                    route = [p]
+                else:
+                    best = None
+                    for v in vias:
+                        if self.clear(here, v, b) and self.clear(v, p, b):
+                            length = math.dist(here, v) + math.dist(v, p)
+                            if best is None or length < best[0]:
+                                best = (length, v)
+                    if best is not None:
+                        route = [best[1], p]
+                if route is None:
+                    continue
+                tried += 1
+                if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw)):
+                    return route, stand.yaw  # its way keeps the truck's ground limits
+                failed.add((round(p[0], 2), round(p[1], 2)))
+                if tried >= 40:
+                    break
         return None
 
-    def truck_path(self, route: list[tuple[float, float]], t0: float) -> list[tuple[float, float, float, float]]:
-        """Samples of the truck driving through ``route`` from its current pose, starting at ``t0``."""
+    def truck_path(self, route: list[tuple[float, float]], t0: float, yaw: float | None = None) -> list[tuple[float, float, float, float]]:
+        """Samples of the truck driving through ``route`` from its current pose, starting at ``t0``,
+        turning to ``yaw`` at the end."""
         pose, t = self.truck, t0
         samples = [(t0, pose.x, pose.y, pose.yaw)]
-        for p in route:
-            seg = turn_drive_turn(pose, p, t, self.truck_spec.travel_speed, self.truck_spec.yaw_rate)
+        for k, p in enumerate(route):
+            seg = turn_drive_turn(pose, p, t, self.truck_spec.travel_speed, self.truck_spec.yaw_rate,
+                                  final_yaw=yaw if k == len(route) - 1 else None)
             samples.extend(seg[1:])
             pose, t = Pose(seg[-1][1], seg[-1][2], seg[-1][3]), seg[-1][0]
         return samples
@@ -457,9 +521,19 @@ class Session:
         self.actions.append(Move("truck", tuple(samples)))
         self.truck = Pose(samples[-1][1], samples[-1][2], samples[-1][3])
         self.truck_ready = samples[-1][0]
+        # its way, kept out of the arm's shadow by any dig's stroke before it arrives
+        self.pending = np.asarray(samples, dtype=float) if self.truck_ready > self.t else None
 
-    def bring_truck(self, route: list[tuple[float, float]], t0: float) -> None:
-        self.add_truck_path(self.truck_path(route, max(t0, self.truck_ready)))
+    def bring_truck(self, route: list[tuple[float, float]], yaw: float | None, t0: float) -> None:
+        self.add_truck_path(self.truck_path(route, max(t0, self.truck_ready), yaw))
+
+    def material_bearing(self, regions: list[Region], base: Pose) -> float:
+        """The bearing of the coarse plan's material from ``base`` (its regions' volumes)."""
+        if not regions:
+            return base.yaw
+        w = np.array([r.volume for r in regions])
+        b = np.array([r.bearing for r in regions])
+        return math.atan2(float((w * np.sin(b)).sum()), float((w * np.cos(b)).sum()))
 
     # -- relocation ---------------------------------------------------------------------------------
     def stations(self) -> tuple[np.ndarray, np.ndarray]:
@@ -525,16 +599,17 @@ class Session:
             idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
             if ch is None:
                 continue
-            route = self.truck_route(pose)
-            if route is None:
+            found = self.truck_route(pose, self.material_bearing(regions, pose), force=True)
+            if found is None:
                 continue
+            route, yaw = found
             # the truck drives at the same time when the two stay the clearance apart throughout,
             # else once the excavator has arrived (its route keeps clear of the new station)
             t0 = max(self.t, self.truck_ready)
             epath = turn_drive_turn(self.base, goal, t0, e.travel_speed, e.yaw_rate)
-            tpath = self.truck_path(route, t0) if route else []
+            tpath = self.truck_path(route, t0, yaw) if route else []
             if tpath and not self.apart(epath, tpath):
-                tpath = self.truck_path(route, epath[-1][0])
+                tpath = self.truck_path(route, epath[-1][0], yaw)
             if len(epath) > 1:
                 self.actions.append(Move("excavator", tuple(epath)))
                 self.base = Pose(epath[-1][1], epath[-1][2], epath[-1][3])  # ``turn`` is relative
@@ -558,7 +633,7 @@ class Session:
         self.regions = self.coarse_plan(self.base, self.v_min)
         self.ptr = 0
         status = "target reached"
-        digs = 0
+        digs, parked = 0, False
         while self.loaded < target - 1e-9:
             if self.loaded >= self.truck_spec.capacity - 1e-9:
                 status = "truck full"
@@ -566,7 +641,27 @@ class Session:
             if digs >= self.cfg.max_digs:
                 status = "dig limit"
                 break
-            self.ptr, ch = self.best_dig(self.regions, self.ptr, self.base, self.turn, self.v_min)
+            ptr = self.ptr
+            if not self.truck_in_reach(self.base, (self.truck.x, self.truck.y)):
+                # only when the start left it out of reach: brought toward the first dig, if any here
+                _, probe = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min)
+                found = None if probe is None else self.truck_route(self.base, self.material_bearing(self.regions, self.base))
+                if probe is not None and found is None:
+                    status = "truck cannot reach"
+                    break
+                if found is not None:
+                    self.bring_truck(*found, self.t)
+            self.ptr, ch = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min, serve=True)
+            if ch is None and not parked:
+                # a dig the truck cannot serve from where it stands: park it anew toward it
+                _, probe = self.best_dig(self.regions, ptr, self.base, self.turn, self.v_min)
+                found = None if probe is None else self.truck_route(self.base, probe.region.bearing, force=True)
+                parked = True
+                if found is not None and found[0]:
+                    self.bring_truck(*found, self.t)
+                    self.ptr = ptr
+                    continue
+            parked = False
             if ch is None:
                 self.events.append({"event": "exhausted", "t": self.t, "station": self.station, "v_min": self.v_min})
                 dist = np.hypot(self.X - self.base.x, self.Y - self.base.y)
@@ -580,12 +675,6 @@ class Session:
                 self.v_min = fills[level] * self.cap
                 self.regions, self.ptr = self.coarse_plan(self.base, self.v_min), 0
                 continue
-            if not self.truck_in_reach(self.base, (self.truck.x, self.truck.y)):
-                route = self.truck_route(self.base)  # only when the start left it out of reach
-                if route is None:
-                    status = "truck cannot reach"
-                    break
-                self.bring_truck(route, self.t)
             vol = self.do_dig(ch)
             digs += 1
             self.do_dump(vol)

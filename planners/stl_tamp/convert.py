@@ -27,6 +27,11 @@ action:
   heading and modelled depth, the full drag, no repair and no trimming.
 - Durations: a dig lasts the swing to its bearing plus the minimum stroke time, a dump the
   swing to the truck plus the minimum dump time (plus 1 µs each, never less).
+- Site rules the NLP does not model (rules version 2): a dig whose arm's shadow
+  (:func:`earthbench.rules.arm_shadow`) comes within :data:`SHADOW_GAP` of the truck's body is
+  rejected like one out of reach (and repaired if it can be); a phase-0 truck move whose way
+  leaves the truck's grade, cross-slope or step limits (:func:`earthbench.rules.truck_ground`)
+  is replaced by a drive to a stand of ``planners/truck_stands.py`` (:meth:`Converter.park_truck`).
 """
 
 from __future__ import annotations
@@ -39,13 +44,19 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at
+from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move
-from earthbench.rules import bodies_touch, reach_of, track_level_and_tilt, undermining_excess
+from earthbench.rules import arm_shadow, bodies_touch, reach_of, track_level_and_tilt, undermining_excess
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
+from ..truck_stands import TruckStands
+
 EPS_T = 1e-6
+#: How far (m) the truck's body keeps from a dig's arm shadow (the referee's samples and a cell).
+SHADOW_GAP = 0.05
+#: Buckets whose swing a truck stand chosen by the converter is priced for (an area's digs).
+PARK_BUCKETS = 5.0
 #: How far (rad) under the referee's tilt limit a stand must be for the converter to work from it.
 TILT_MARGIN = 0.01
 
@@ -231,6 +242,15 @@ class Converter:
         nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
         e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
         t_moves = np.max(np.hypot(nt[:, 0] - nt[0, 0], nt[:, 1] - nt[0, 1])) > 1e-6 or abs(nt[-1, 2] - nt[0, 2]) > 1e-6
+        if t_moves and not self.stands(st).path_ok(_samples(nt, st.t + np.concatenate([[0.0], np.cumsum(dts)]))):
+            # the truck's way crosses ground beyond its limits (rules version 2): the excavator
+            # moves alone, then the truck drives to a stand of its own in dump reach
+            self._skip("truck_ground")
+            t0, n = st.t, len(st.actions)
+            if not self.move_excavator(st, ve, we, dts):
+                return self._blocked()
+            moved = st.actions[n].path if len(st.actions) > n else None  # type: ignore[union-attr]
+            return "excavator" if self.park_truck(st, Pose(*nt[-1]), t0, moved) else "truck_kept"
         if not t_moves:  # the NLP's own durations: move_excavator integrates them again, then retimes
             return "excavator" if self.move_excavator(st, ve, we, dts) else self._blocked()
         if self.retime:  # the slower machine sets each shared step's duration
@@ -279,6 +299,41 @@ class Converter:
             return "excavator-first"
         return self._blocked()
 
+    def stands(self, st: SimState) -> TruckStands:
+        """The truck's stands on the grid as it now is (``planners/truck_stands.py``)."""
+        return TruckStands(self.sc, self.exc_spec, st.z)
+
+    def park_truck(self, st: SimState, wanted: Pose, t0: float, exc_path: Any = None) -> bool:
+        """Drive the truck to a stand serving the excavator where it now stands, near the
+        bearing of ``wanted`` (the NLP's stand) and cheap in travel, on ground within its limits
+        all the way (``planners/truck_stands.py``): from ``t0`` alongside the excavator's move
+        ``exc_path`` when the two keep the clearance, else after it. False (the truck stays)
+        when it is in dump reach already or no stand works."""
+        d = math.hypot(st.truck.x - st.exc.x, st.truck.y - st.exc.y)
+        r = self.truck_spec.loading_radius
+        if d - r <= self.exc_spec.reach_max - 1e-3 and d + r >= self.exc_spec.reach_min + 1e-3:
+            return False
+        stands = self.stands(st)
+        bearing = math.atan2(wanted.y - st.exc.y, wanted.x - st.exc.x)
+        ts = self.truck_spec
+        for tried, stand in enumerate(stands.parking(st.exc, st.truck, bearing, PARK_BUCKETS)):
+            if tried >= 40:
+                break
+            for start in ((t0, st.t) if exc_path is not None else (st.t,)):
+                path = turn_drive_turn(st.truck, (stand.x, stand.y), start, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
+                if not stands.path_ok(path):
+                    break
+                # clear of the excavator where it ends up, and (setting off together) of its way,
+                # the truck standing at its end once there (clear() compares shared times only)
+                ok = self.clear(st.exc, path)
+                if ok and start < st.t:
+                    ok = self.clear(exc_path, path) and self.clear(exc_path, Pose(*path[-1][1:]))
+                if ok:
+                    st.actions.append(Move("truck", tuple(path)))
+                    st.truck, st.t = Pose(*path[-1][1:]), max(st.t, float(path[-1][0]))
+                    return True
+        return False
+
     def _blocked(self) -> str:
         self._skip("move_blocked")
         return "blocked"
@@ -302,6 +357,9 @@ class Converter:
         r = self.truck_spec.loading_radius
         if d - r > es.reach_max - 1e-4 or d + r < es.reach_min + 1e-4:
             return "dump_reach"
+        shadow = Polygon(arm_shadow(st.exc, contact, heading, es.bucket_width, es.max_drag_length))
+        if shadow.distance(Polygon(self.truck_spec.body(st.truck.x, st.truck.y, st.truck.yaw)[0])) <= SHADOW_GAP:
+            return "arm_over_machine"  # rules version 2: no truck under the arm (nor the bucket)
         if self.station(st)[1] > es.max_tilt - TILT_MARGIN:
             return "tilt"
         return None

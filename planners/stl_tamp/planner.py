@@ -172,10 +172,17 @@ class StlTampPlanner(Planner):
     0.10.4: an NLP's key leaves out the truck's capacity, which no constraint reads
     (:func:`.model.nlp_truck`): the ``scale`` ladder's larger trucks had solved every NLP
     uncompiled. The same plans (the same NLPs), in less CPU on such sites.
+
+    0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
+    model. A dig whose arm's shadow would touch the truck is repaired or skipped like any other
+    the referee would reject; a phase-0 truck move whose way crosses ground beyond the truck's
+    grade, cross-slope or step limits is replaced by a drive to a stand of
+    ``planners/truck_stands.py`` (off the dig area, near the bearing of the NLP's stand),
+    alongside the excavator's move when they keep the clearance. The NLPs are unchanged.
     """
 
     name = "stl-tamp"
-    version = "0.10.4"
+    version = "0.10.5"
     tracks = ("backhoe",)
     Config = Config
 
