@@ -31,6 +31,15 @@ class UnknownNameError(EarthbenchError, KeyError):
         return self.args[0]
 
 
+def not_stored(kind: str, name: str, stored: Iterable[str], db: object) -> str:
+    """The message for a ``kind`` (suite, planner) that names nothing in the store ``db``, with
+    close matches: a typo would otherwise be an empty table that looks like an answer."""
+    known = sorted(set(stored))
+    close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
+    return (f"{kind} {name!r} has no runs in {str(db)!r}" + (f"; did you mean {', '.join(map(repr, close))}?" if close else ".")
+            + f" {kind.capitalize()}s there: {', '.join(known) or '(none)'}")
+
+
 class PlanFormatError(EarthbenchError, ValueError):
     """A plan document that cannot be read: unknown action, missing field, NaN, bad times."""
 

@@ -30,7 +30,6 @@ recorded).
 
 from __future__ import annotations
 
-import difflib
 import json
 import os
 from collections import Counter
@@ -41,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from . import identity
-from .errors import StoreError
+from .errors import StoreError, not_stored
 from .records import Case, CaseResult, PlannerRef
 from .store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
@@ -355,22 +354,11 @@ def export(db: str | Path, out_path: str | Path, suite: str, planners: Sequence[
     with Store(db, read_only=True) as src:
         ver = src.suite_version(suite)
         if ver is None:
-            known = src.suite_names()
-            close = difflib.get_close_matches(suite, known, n=3, cutoff=0.5)
-            raise MergeError(
-                f"suite {suite!r} has no runs in {str(db)!r}"
-                + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
-                + f" Suites there: {', '.join(known) or '(none)'}"
-            )
+            raise MergeError(not_stored("suite", suite, src.suite_names(), db))
         stored = src.planner_names()
         for p in planners:
             if p not in stored:
-                close = difflib.get_close_matches(p, stored, n=3, cutoff=0.5)
-                raise MergeError(
-                    f"planner {p!r} has no runs in {str(db)!r}"
-                    + (f"; did you mean {', '.join(map(repr, close))}?" if close else "")
-                    + f" Planners there: {', '.join(stored) or '(none)'}"
-                )
+                raise MergeError(not_stored("planner", p, stored, db))
         members = {r["scenario_digest"] for r in src.suite_members(ver["id"])}
         rows = [r for r in sorted(src.query(planner=planners), key=lambda r: r["id"]) if r["scenario_digest"] in members]
         if not rows:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import difflib
 import inspect
 import json
 import re
@@ -12,7 +11,7 @@ import typing
 from pathlib import Path
 from typing import Any, TextIO
 
-from ..errors import EarthbenchError, UnknownNameError, printable
+from ..errors import EarthbenchError, UnknownNameError, not_stored, printable
 from ..harness.probe import PlannerInfo, info_of_class, use_plugin_files
 from ..planner import Planner
 from ..registry import TERRAINS
@@ -25,16 +24,11 @@ def plural(n: int, word: str, many: str | None = None) -> str:
 
 
 def refuse_unstored(kind: str, names: typing.Iterable[str], stored: typing.Iterable[str], db: object) -> None:
-    """Refuse a ``--suite`` or ``--planner`` that names nothing in the store ``db``, with close matches:
-    a typo would otherwise be an empty table that looks like an answer."""
-    known = sorted(set(stored))
+    """Refuse a ``--suite`` or ``--planner`` that names nothing in the store ``db``, with close matches."""
+    known = set(stored)
     for name in names:
         if name not in known:
-            close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
-            raise EarthbenchError(
-                f"{kind} {name!r} has no runs in {str(db)!r}"
-                + (f"; did you mean {', '.join(map(repr, close))}?" if close else ".")
-                + f" {kind.capitalize()}s there: {', '.join(known) or '(none)'}")
+            raise EarthbenchError(not_stored(kind, name, known, db))
 
 
 def check_filters(store: Any, db: object, suite: str | None, planners: typing.Iterable[str]) -> None:

@@ -12,6 +12,7 @@ import os
 import platform
 import socket
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 from .. import provenance
@@ -58,3 +59,13 @@ def environment(planner_source: str = "") -> dict[str, Any]:
     env["plugin"] = plugin
     env["plugin_commit"] = plugin.get("commit") if plugin else None
     return env
+
+
+def cache_folder(env: str, leaf: str) -> Path:
+    """Where this machine keeps one of earthbench's caches: ``$env`` when set, else
+    ``$XDG_CACHE_HOME/earthbench/leaf`` (``~/.cache`` without it)."""
+    chosen = os.environ.get(env, "").strip()
+    if chosen:
+        return Path(chosen).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "earthbench" / leaf

@@ -50,6 +50,7 @@ from ..registry import OWN_DISTRIBUTION
 from ..world import Budget
 from ..records import Case, CaseResult, PlannerRef, utc_now
 from .cases import Prepared
+from .environment import cache_folder
 
 ENV = "EARTHBENCH_PREPARED"
 #: ``EARTHBENCH_PREPARE=off``: no preparation is run or used; cases run without their planner's
@@ -69,11 +70,7 @@ class PrepareError(EarthbenchError):
 
 def root() -> Path:
     """Where preparations are kept (see the module's docstring)."""
-    env = os.environ.get(ENV, "").strip()
-    if env:
-        return Path(env).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "earthbench" / "prepared"
+    return cache_folder(ENV, "prepared")
 
 
 @functools.lru_cache(maxsize=1)

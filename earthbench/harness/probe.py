@@ -37,6 +37,7 @@ from ..registry import PLANNERS, class_digest, distribution_of, file_digest
 from ..records import PlannerRef
 from ..world import TRACKS, Budget, canonical_json
 from .describe import Setting, overrides_key, settings_of
+from .environment import cache_folder
 
 ENV = "EARTHBENCH_PROBES"
 #: The probe's protocol: a change of what it answers makes every cached answer stale.
@@ -166,11 +167,8 @@ def _dist_digest(dist: Any, eps: Sequence[tuple[str, str]]) -> str:
 
 
 def cache_root() -> Path:
-    env = os.environ.get(ENV, "").strip()
-    if env:
-        return Path(env).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "earthbench" / "probes"
+    """Where probe answers are kept: ``$EARTHBENCH_PROBES``, else the user's cache folder."""
+    return cache_folder(ENV, "probes")
 
 
 def _version() -> str:
