@@ -27,6 +27,9 @@ from datetime import datetime, UTC
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pandas as pd
+
 from .errors import EarthbenchError
 from .store import Store
 from .suite import Suite
@@ -254,6 +257,52 @@ def producer_text(producer: dict[str, Any]) -> str:
     return str(producer.get("name") or producer.get("kind") or "unknown")
 
 
-__all__ = ["DEFAULT_DIR", "FIGURES", "FORMAT", "BestError", "Candidate", "Outcome", "all_kept", "brackets", "check",
-           "entry_path", "file_candidates", "judged_figures", "kept", "producer_text", "read_doc", "store_candidates",
-           "update", "write_doc"]
+
+
+# -- on the boards (earthbench.publish) ---------------------------------------------------------
+
+#: The per-run column of the boards: time per target m³ over the scenario's best known one.
+BEST_RATIO = "time_per_target_m3_best_ratio"
+
+
+def with_best_known(runs: pd.DataFrame, root: str | Path | None) -> pd.DataFrame:
+    """``runs`` with each scenario's best known time per target m³ (``best_known_s_per_m3``) and each
+    run's ratio to it (:data:`BEST_RATIO`); NaN where none is kept, unchanged without ``root``."""
+    if root is None or not len(runs):
+        return runs
+    best = {d: float(doc["time_per_target_m3"]) for d, doc in all_kept(root).items()}
+    known = runs["scenario_digest"].map(best).astype(float)
+    tpt = pd.to_numeric(runs["time_per_target_m3"], errors="coerce") if "time_per_target_m3" in runs else math.nan
+    return runs.assign(best_known_s_per_m3=known, **{BEST_RATIO: tpt / known})
+
+
+def bracket_table(root: str | Path | None, suites: Iterable[str]) -> pd.DataFrame:
+    """The brackets (:func:`brackets`) of these suites' kept scenarios, one row each (``best.csv``)."""
+    rows = [r for s in sorted(set(suites)) for r in brackets(root, s)] if root is not None else []
+    return pd.DataFrame.from_records(rows, columns=BRACKET_COLUMNS)
+
+
+BRACKET_COLUMNS = ["suite", "scenario_id", "family", "target_volume", "scenario_digest", "bound_s_per_m3",
+                   "best_known_s_per_m3", "best_over_bound", "best_time_to_target_s", "rules", "producer", "recorded"]
+
+
+def bracket_markdown(table: pd.DataFrame, sizes: dict[str, int]) -> str:
+    """The README's section on best known plans: per suite, how many scenarios have one and the
+    median best known / target bound per family (every bracket: ``best.csv``)."""
+    if not len(table):
+        return ""
+    lines = ["## Best known plans", "",
+             "Each scenario's bracket [target bound, best known time per target m³]: the fastest valid plan anyone has "
+             "produced (any planner, any run, or a constructive witness), re-judged by `earthbench best check` and "
+             "replaced only through `earthbench best update` (docs/publishing.md). The tables' \"× best known\" is a "
+             "planner's median time per target m³ over it. Every bracket: [best.csv](best.csv).", ""]
+    for suite, g in table.groupby("suite", sort=True):
+        fams = "; ".join(f"{f} {np.median(h['best_over_bound']):.2f} ({len(h)})" for f, h in g.groupby("family", sort=True))
+        lines += [f"- suite {suite}: {len(g)} of {sizes.get(str(suite), len(g))} scenarios have a best known plan; "
+                  f"median best known / target bound by family (scenarios): {fams}"]
+    return "\n".join(lines) + "\n\n"
+
+
+__all__ = ["BEST_RATIO", "BRACKET_COLUMNS", "DEFAULT_DIR", "FIGURES", "FORMAT", "BestError", "Candidate", "Outcome", "all_kept",
+           "bracket_markdown", "bracket_table", "brackets", "check", "entry_path", "file_candidates", "judged_figures", "kept",
+           "producer_text", "read_doc", "store_candidates", "update", "with_best_known", "write_doc"]

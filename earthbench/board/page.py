@@ -55,11 +55,12 @@ RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner")
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
                ("time_per_target_m3_ratio", "× lower bound"), ("time_per_target_m3_bound_ratio", "× target bound"),
+               ("time_per_target_m3_best_ratio", "× best known"),
                ("solve_cpu_s", "Solve CPU s"), ("solve_time_s", "Solve wall s"),
                ("load_before", "Load before"), ("violation_rules", "Violations"), ("cpu_model", "CPU"), ("hostname", "Host"),
                ("isolation", "Isolation")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio",
-                "time_per_target_m3_bound_ratio", "solve_cpu_s", "solve_time_s", "load_before"}
+                "time_per_target_m3_bound_ratio", "time_per_target_m3_best_ratio", "solve_cpu_s", "solve_time_s", "load_before"}
 
 
 def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
