@@ -61,12 +61,13 @@ class Candidate:
 
 @dataclass
 class Outcome:
-    """What :func:`update` did: kept candidates, refusals (with why), and entries dropped as stale."""
+    """What :func:`update` did: kept candidates, refusals (with why), entries dropped as stale or refreshed."""
 
     accepted: list[str] = field(default_factory=list)
     refused: list[tuple[Candidate, str]] = field(default_factory=list)
     not_better: int = 0
     dropped: list[str] = field(default_factory=list)
+    refreshed: list[str] = field(default_factory=list)  #: kept entries whose target bound was re-recorded
     judged: int = 0
 
 
@@ -185,17 +186,13 @@ def _refusal(c: Candidate, scenarios: dict[str, Scenario], threshold: float) -> 
 def update(root: str | Path, suite: Suite, candidates: Iterable[Candidate], *, now: str | None = None) -> Outcome:
     """Keep each candidate that is valid under today's rules, reaches the target and beats the kept plan.
 
-    Kept entries judged under other rules are dropped first (they are no longer known valid).
+    The kept entries are judged again first (:func:`_settle`): those no longer known valid are
+    dropped, and a changed target bound is re-recorded.
     """
     now = now or datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     scenarios = {sc.digest: sc for sc in suite.scenarios}
     out = Outcome()
-    best = kept(root, suite.name)
-    for digest, doc in list(best.items()):
-        if doc.get("rules") != _rules() or digest not in scenarios:
-            entry_path(root, suite.name, digest).unlink()
-            del best[digest]
-            out.dropped.append(f"{digest[:12]}… ({'rules ' + str(doc.get('rules')) if digest in scenarios else 'not in the suite'})")
+    best = _settle(root, suite, scenarios, out)
     for c in candidates:
         out.judged += 1
         figures, why = _refusal(c, scenarios, suite.success_threshold)
@@ -215,6 +212,26 @@ def update(root: str | Path, suite: Suite, candidates: Iterable[Candidate], *, n
         out.accepted.append(f"{sc.id}: {figures['time_per_target_m3']:.3f} s/m³"
                             + (f" (was {float(old['time_per_target_m3']):.3f})" if old is not None else "") + f" from {c.source}")
     return out
+
+
+def _settle(root: str | Path, suite: Suite, scenarios: dict[str, Scenario], out: Outcome) -> dict[str, dict[str, Any]]:
+    """The kept entries that still hold: one for another scenario, judged under other rules, or that
+    re-judges invalid or with other times is dropped (deleted); one whose target bound moved (a
+    metric's change, not the plan's) is written again with the new bound."""
+    best = kept(root, suite.name)
+    for digest, doc in list(best.items()):
+        path = entry_path(root, suite.name, digest)
+        figures, why = _refusal(_candidate(doc, path.name), scenarios, suite.success_threshold)
+        if figures is None or doc.get("rules") != _rules():
+            path.unlink()
+            del best[digest]
+            out.dropped.append(f"{doc.get('scenario_id') or digest[:12]}: {why or 'no rules version recorded'}")
+        elif not same(doc.get("time_per_target_m3_lower_bound"), figures["time_per_target_m3_lower_bound"]):
+            best[digest] = {**doc, "time_per_target_m3_lower_bound": figures["time_per_target_m3_lower_bound"]}
+            write_doc(path, best[digest])
+            out.refreshed.append(f"{doc.get('scenario_id')}: target bound {doc.get('time_per_target_m3_lower_bound')} → "
+                                 f"{figures['time_per_target_m3_lower_bound']:.6g}")
+    return best
 
 
 def check(root: str | Path, suite: Suite) -> tuple[int, list[str]]:

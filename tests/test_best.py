@@ -110,17 +110,25 @@ def test_update_refuses_invalid_tampered_foreign_and_stale_candidates(smoke, pla
     assert main(["best", "update", "--plans", str(bad[0]), "--suite", "smoke", "--dir", str(root)]) == 1
 
 
-def test_check_finds_a_tampered_or_stale_kept_entry_and_update_drops_a_stale_one(smoke, plans, tmp_path):
+def test_check_finds_a_tampered_or_stale_kept_entry_and_update_settles_them(smoke, plans, tmp_path):
     root = tmp_path / "best"
     digest = smoke.scenarios[0].digest
     update(root, smoke, file_candidates([_file(tmp_path / "fast.json", digest, plans[digest][0])]))
     assert main(["best", "check", "--dir", str(root)]) == 0
     path = next((root / "smoke").glob("*.json.gz"))
     doc = json.loads(gzip.decompress(path.read_bytes()))
-    path.write_bytes(gzip.compress(json.dumps({**doc, "time_to_target_s": doc["time_to_target_s"] - 1}).encode()))
+
+    def kept_as(**changes):
+        path.write_bytes(gzip.compress(json.dumps({**doc, **changes}).encode()))
+
+    kept_as(time_per_target_m3_lower_bound=1.0)  # a bound that moved (a metric's change): re-recorded, the plan stays
+    assert "target bound" in check(root, smoke)[1][0]
+    out = update(root, smoke, [])
+    assert len(out.refreshed) == 1 and not out.dropped and check(root, smoke) == (1, [])
+    kept_as(time_to_target_s=doc["time_to_target_s"] - 1)
     n, problems = check(root, smoke)
     assert n == 1 and len(problems) == 1 and "time_to_target_s" in problems[0]
-    path.write_bytes(gzip.compress(json.dumps({**doc, "rules": RULES_VERSION - 1}).encode()))
+    kept_as(rules=RULES_VERSION - 1)
     assert main(["best", "check", "--dir", str(root), "--suite", "smoke"]) == 1
     out = update(root, smoke, [])
     assert len(out.dropped) == 1 and kept(root, "smoke") == {}

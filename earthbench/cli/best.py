@@ -8,7 +8,8 @@ scenario of that digest; nothing a store or a file says is taken on trust. A can
 replacing the kept plan, only when it is valid under this earthbench's rules, reaches the target
 and its time to the target is strictly shorter. A candidate judged under other rules, for another
 scenario, or stating figures re-judging does not give, is refused; kept entries judged under other
-rules are dropped. Exit 1 when a plan file was refused.
+rules, or that no longer re-judge valid with their recorded times, are dropped (a changed target
+bound is re-recorded). Exit 1 when a plan file was refused.
 
 ``check`` re-judges every kept plan (``--suite``, default every suite folder): valid under this
 earthbench's rules, its figures as recorded. Exit 1 when one does not hold.
@@ -83,6 +84,8 @@ def _update(args: argparse.Namespace, suites: list[Suite]) -> int:
         out = update(args.dir, suite, candidates)
         for line in out.dropped:
             print(f"dropped {line}")
+        for line in out.refreshed:
+            print(f"re-recorded {line}")
         for line in out.accepted:
             print(f"kept {line}")
         for c, why in out.refused:
