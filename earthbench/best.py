@@ -104,7 +104,13 @@ def write_doc(path: Path, doc: dict[str, Any]) -> None:
 def kept(root: str | Path, suite: str) -> dict[str, dict[str, Any]]:
     """The kept entries of one suite, by scenario digest (empty when the folder does not exist)."""
     folder = Path(root) / suite
-    return {doc["scenario_digest"]: doc for doc in map(read_doc, sorted(folder.glob("*.json.gz")))} if folder.is_dir() else {}
+    out = {}
+    for path in sorted(folder.glob("*.json.gz")) if folder.is_dir() else ():
+        doc = read_doc(path)
+        if path.name != f"{doc['scenario_digest']}.json.gz":
+            raise BestError(f"{path}: holds the plan of scenario {doc['scenario_digest'][:12]}…; a kept file is named by its digest")
+        out[doc["scenario_digest"]] = doc
+    return out
 
 
 def all_kept(root: str | Path) -> dict[str, dict[str, Any]]:
