@@ -309,23 +309,35 @@ BRACKET_COLUMNS = ["suite", "scenario_id", "family", "target_volume", "scenario_
                    "best_known_s_per_m3", "best_over_bound", "best_time_to_target_s", "rules", "producer", "recorded"]
 
 
-def bracket_markdown(table: pd.DataFrame, sizes: dict[str, int]) -> str:
-    """The README's section on best known plans: per suite, how many scenarios have one and the
-    median best known / target bound per family (every bracket: ``best.csv``)."""
-    if not len(table):
-        return ""
-    lines = ["## Best known plans", "",
-             "Each scenario's bracket [target bound, best known time per target m³]: the fastest valid plan anyone has "
-             "produced (any planner, any run, or a constructive witness), re-judged by `earthbench best check` and "
-             "replaced only through `earthbench best update` (docs/publishing.md). The tables' \"× best known\" is a "
-             "planner's median time per target m³ over it. Every bracket: [best.csv](best.csv).", ""]
+def bracket_lines(table: pd.DataFrame, sizes: dict[str, int]) -> dict[str, str]:
+    """Per suite, one line: how many scenarios have a best known plan and the median best known /
+    target bound per family (the README's section and the page say it under each suite)."""
+    out = {}
     for suite, g in table.groupby("suite", sort=True):
         fams = "; ".join(f"{f} {np.median(h['best_over_bound']):.2f} ({len(h)})" for f, h in g.groupby("family", sort=True))
-        lines += [f"- suite {suite}: {len(g)} of {sizes.get(str(suite), len(g))} scenarios have a best known plan; "
-                  f"median best known / target bound by family (scenarios): {fams}"]
+        out[str(suite)] = (f"{len(g)} of {sizes.get(str(suite), len(g))} scenarios have a best known plan; "
+                           f"median best known / target bound by family (scenarios): {fams}")
+    return out
+
+
+#: What the board says of its best known plans (README section and page).
+BRACKET_NOTE = ("Each scenario's bracket [target bound, best known time per target m³]: the fastest valid plan anyone has "
+                "produced (any planner, any run, or a constructive witness), re-judged by `earthbench best check` and "
+                "replaced only through `earthbench best update` (docs/publishing.md). The tables' \"× best known\" is a "
+                "planner's median time per target m³ over it.")
+
+
+def bracket_markdown(table: pd.DataFrame, sizes: dict[str, int]) -> str:
+    """The README's section on best known plans (every bracket: ``best.csv``)."""
+    if not len(table):
+        return ""
+    lines = ["## Best known plans", "", BRACKET_NOTE + " Every bracket: [best.csv](best.csv).", ""]
+    lines += [f"- suite {suite}: {line}" for suite, line in bracket_lines(table, sizes).items()]
     return "\n".join(lines) + "\n\n"
 
-
-__all__ = ["BEST_RATIO", "BRACKET_COLUMNS", "DEFAULT_DIR", "FIGURES", "FORMAT", "BestError", "Candidate", "Outcome", "all_kept",
-           "bracket_markdown", "bracket_table", "brackets", "check", "entry_path", "file_candidates", "judged_figures", "kept",
-           "producer_text", "read_doc", "store_candidates", "update", "with_best_known", "write_doc"]
+__all__ = [
+    "BEST_RATIO", "BRACKET_COLUMNS", "BRACKET_NOTE", "DEFAULT_DIR", "FIGURES", "FORMAT", "BestError", "Candidate",
+    "Outcome", "all_kept", "bracket_lines", "bracket_markdown", "bracket_table", "brackets", "check", "entry_path",
+    "file_candidates", "judged_figures", "kept", "producer_text", "read_doc", "store_candidates", "update",
+    "with_best_known", "write_doc",
+]

@@ -59,7 +59,7 @@ from typing import Any
 import pandas as pd
 
 from .aggregate import REASONS, SCOPES, aggregate, latest_versions
-from .best import bracket_markdown, bracket_table, with_best_known
+from .best import bracket_lines, bracket_markdown, bracket_table, with_best_known
 from .board.figures import (FIGURE_COLUMNS, RUN_FIGURES, Renderer, families_figure, figure_jobs, history_figure,
                             profiles_figure, terrain_figure, volume_time_figure)
 from .board.page import (FILTERS, RUN_COLUMNS, filter_bar, fold_zero_failures, html_more_tables, html_page, html_table,
@@ -151,6 +151,9 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     if len(members):  # the scenarios this board covers (a --seeds board: those seeds only)
         brackets = brackets[brackets["scenario_digest"].isin(set(members["scenario_digest"]))]
     sizes = {str(k): int(v) for k, v in members.groupby("suite").size().items()} if len(members) else {}
+    lines = bracket_lines(brackets, sizes)
+    for sec in sections:
+        sec["best"] = lines.get(str(sec["suite"]), "")
     _write(result, runs, summary, sections, captions, renderer, generated, bracket_markdown(brackets, sizes) + gap_markdown(gaps),
            viewer)
     result.files += write_gaps(gaps, out)

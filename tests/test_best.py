@@ -169,6 +169,8 @@ def test_update_from_a_store_and_the_board_column(smoke, plans, tmp_path):
     assert greedy["time_per_target_m3_best_ratio"].isna().sum() == len(smoke.scenarios) - 2
     readme = (tmp_path / "board" / "README.md").read_text()
     assert "× best known" in readme and "## Best known plans" in readme and "2 of 4 scenarios" in readme
+    page = (tmp_path / "board" / "index.html").read_text()
+    assert "× best known" in page and 'href="best.csv"' in page and "2 of 4 scenarios" in page
     brackets = pd.read_csv(tmp_path / "board" / "best.csv")
     assert len(brackets) == 2 and (brackets["best_over_bound"] > 1).all()
     assert np.allclose(brackets["best_known_s_per_m3"] / brackets["bound_s_per_m3"], brackets["best_over_bound"])

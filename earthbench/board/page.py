@@ -185,6 +185,9 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
             parts.append(f'<p class="partial"><strong>{e(s["partial"])}</strong></p>')
         parts.append(html_table(fold_zero_failures(s["rows"])))
         parts.append(replay_links(s.get("replay_runs", [])))
+        if s.get("best"):
+            parts.append(f'<p class="best">Best known plans: {e(s["best"])} (every bracket [target bound, best known]: '
+                         '<a href="best.csv">best.csv</a>).</p>')
         parts.append(f'<details class="stamp-box"><summary>How this table is ranked, and what it rests on: suite digest, '
                      f'machines, spot checks</summary><p class="rule">Ranking: {e(RANKING_RULE)}.</p>'
                      f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div></details>')
