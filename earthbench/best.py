@@ -259,20 +259,6 @@ def check(root: str | Path, suite: Suite) -> tuple[int, list[str]]:
     return len(entries), problems
 
 
-def brackets(root: str | Path, suite: str) -> list[dict[str, Any]]:
-    """Each kept scenario's bracket [target bound, best known] per target m³, by scenario id."""
-    rows = []
-    for doc in kept(root, suite).values():
-        bound, best = float(doc["time_per_target_m3_lower_bound"]), float(doc["time_per_target_m3"])
-        producer = doc.get("producer") or {}
-        rows.append({"suite": suite, "scenario_id": doc.get("scenario_id"), "family": doc.get("family"),
-                     "target_volume": doc.get("target_volume"), "scenario_digest": doc["scenario_digest"],
-                     "bound_s_per_m3": bound, "best_known_s_per_m3": best, "best_over_bound": best / bound,
-                     "best_time_to_target_s": float(doc["time_to_target_s"]), "rules": doc.get("rules"),
-                     "producer": producer_text(producer), "recorded": doc.get("recorded")})
-    return sorted(rows, key=lambda r: str(r["scenario_id"]))
-
-
 def producer_text(producer: dict[str, Any]) -> str:
     """Who produced a kept plan, in one line: ``greedy 1.3 (config 1a2b3c4d)`` or the witness's name."""
     if producer.get("kind") == "planner":
@@ -299,14 +285,30 @@ def with_best_known(runs: pd.DataFrame, root: str | Path | None) -> pd.DataFrame
     return runs.assign(best_known_s_per_m3=known, **{BEST_RATIO: tpt / known})
 
 
-def bracket_table(root: str | Path | None, suites: Iterable[str]) -> pd.DataFrame:
-    """The brackets (:func:`brackets`) of these suites' kept scenarios, one row each (``best.csv``)."""
-    rows = [r for s in sorted(set(suites)) for r in brackets(root, s)] if root is not None else []
-    return pd.DataFrame.from_records(rows, columns=BRACKET_COLUMNS)
+def bracket_table(root: str | Path | None, scenarios: pd.DataFrame) -> pd.DataFrame:
+    """Each scenario's bracket [target bound, best known] per target m³ (``best.csv``), for the
+    ``scenarios`` (columns ``suite``, ``scenario_id``, ``scenario_digest``, ``family``,
+    ``target_volume``) that have a kept plan in any suite folder: a scenario is one problem by its
+    digest, so a board of ``bench`` reads the plans kept for ``standard``, which includes it."""
+    best = all_kept(root) if root is not None else {}
+    rows = []
+    if not best or not len(scenarios):
+        return pd.DataFrame(columns=BRACKET_COLUMNS)
+    for r in scenarios.drop_duplicates(["suite", "scenario_digest"]).itertuples(index=False):
+        doc = best.get(str(r.scenario_digest))
+        if doc is None:
+            continue
+        bound, known = float(doc["time_per_target_m3_lower_bound"]), float(doc["time_per_target_m3"])
+        rows.append({"suite": r.suite, "scenario_id": r.scenario_id, "family": r.family, "target_volume": r.target_volume,
+                     "scenario_digest": r.scenario_digest, "bound_s_per_m3": bound, "best_known_s_per_m3": known,
+                     "best_over_bound": known / bound, "best_time_to_target_s": float(doc["time_to_target_s"]),
+                     "rules": doc.get("rules"), "producer": producer_text(doc.get("producer") or {}),
+                     "kept_in": doc.get("suite"), "recorded": doc.get("recorded")})
+    return pd.DataFrame.from_records(sorted(rows, key=lambda r: (str(r["suite"]), str(r["scenario_id"]))), columns=BRACKET_COLUMNS)
 
 
 BRACKET_COLUMNS = ["suite", "scenario_id", "family", "target_volume", "scenario_digest", "bound_s_per_m3",
-                   "best_known_s_per_m3", "best_over_bound", "best_time_to_target_s", "rules", "producer", "recorded"]
+                   "best_known_s_per_m3", "best_over_bound", "best_time_to_target_s", "rules", "producer", "kept_in", "recorded"]
 
 
 def bracket_lines(table: pd.DataFrame, sizes: dict[str, int]) -> dict[str, str]:
@@ -337,7 +339,7 @@ def bracket_markdown(table: pd.DataFrame, sizes: dict[str, int]) -> str:
 
 __all__ = [
     "BEST_RATIO", "BRACKET_COLUMNS", "BRACKET_NOTE", "DEFAULT_DIR", "FIGURES", "FORMAT", "BestError", "Candidate",
-    "Outcome", "all_kept", "bracket_lines", "bracket_markdown", "bracket_table", "brackets", "check", "entry_path",
+    "Outcome", "all_kept", "bracket_lines", "bracket_markdown", "bracket_table", "check", "entry_path",
     "file_candidates", "judged_figures", "kept", "producer_text", "read_doc", "store_candidates", "update",
     "with_best_known", "write_doc",
 ]

@@ -147,9 +147,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     path = base.parent / f"{base.name}-history-{slug(planner)}"
                     renderer.add(("history", str(path), (hist, f"{planner} on suite {sec['suite']}")))
                     captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
-    brackets = bracket_table(best, sorted(set(runs["suite"]))) if len(runs) else bracket_table(None, ())
-    if len(members):  # the scenarios this board covers (a --seeds board: those seeds only)
-        brackets = brackets[brackets["scenario_digest"].isin(set(members["scenario_digest"]))]
+    # the brackets of the board's scenarios (a --seeds board: those seeds only)
+    brackets = bracket_table(best, members if len(members) else runs)
     sizes = {str(k): int(v) for k, v in members.groupby("suite").size().items()} if len(members) else {}
     lines = bracket_lines(brackets, sizes)
     for sec in sections:
