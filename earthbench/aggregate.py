@@ -21,7 +21,9 @@ its CSVs alike:
   and ``time_per_target_m3_ratio`` (to the scenario's lower bound per m³) and
   ``time_per_target_m3_bound_ratio`` (to its lower bound per target m³, which counts whole
   buckets, the fill factor and the travel to the first dump; NaN in stores not rescored since it
-  was added), and over runs that loaded
+  was added) and ``time_per_target_m3_best_ratio`` (to the scenario's best known plan,
+  :mod:`earthbench.best`: over the valid runs of scenarios that have one; NaN without a best-known
+  folder), and over runs that loaded
   something (the others are counted in ``loaded_nothing``) ``time_per_m3``.
 * ``target_share_mean``: the mean over valid runs of the share of the target loaded, capped at 1
   (:func:`earthbench.scoring.target_share`): the tie-break among runs short of the target.
@@ -80,7 +82,8 @@ SUMMARY_COLUMNS = [
     "target_share_mean", "time_per_target_m3_median", "time_per_target_m3_lo", "time_per_target_m3_hi", "time_per_target_m3_q1",
     "time_per_target_m3_q3", "time_per_target_m3_ratio_median", "time_per_target_m3_ratio_lo",
     "time_per_target_m3_ratio_hi", "time_per_target_m3_bound_ratio_median", "time_per_target_m3_bound_ratio_lo",
-    "time_per_target_m3_bound_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
+    "time_per_target_m3_bound_ratio_hi", "time_per_target_m3_best_ratio_median", "time_per_target_m3_best_ratio_lo",
+    "time_per_target_m3_best_ratio_hi", "time_per_m3_median", "time_per_m3_lo", "time_per_m3_hi", "time_per_m3_q1",
     "time_per_m3_q3", "time_per_m3_iqr", "time_per_m3_ratio_median", "loaded_nothing", "short_of_target",
     "solve_cpu_median", "solve_cpu_lo", "solve_cpu_hi", "solve_time_median", "solve_time_lo", "solve_time_hi", "solve_time_p90",
     "prepare_max",
@@ -137,6 +140,7 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
     over = over[np.isfinite(over)]
     tpt, tpt_ratio = _num(g, PRIMARY)[ok], _num(g, "time_per_target_m3_ratio")[ok]
     tpt_bound_ratio = _num(g, "time_per_target_m3_bound_ratio")[ok]
+    tpt_best_ratio = _num(g, "time_per_target_m3_best_ratio")[ok]
     tpm, tpm_ratio = _num(g, "time_per_m3")[ok], _num(g, "time_per_m3_ratio")[ok]
     tpt_f, tpm_f = tpt[~np.isnan(tpt)], tpm[np.isfinite(tpm)]  # the primary metric keeps its infinities: they rank
     st = _num(g, "solve_time_s")
@@ -154,6 +158,7 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
     tpt_med, tpt_lo, tpt_hi = _median_ci(tpt_f)
     r_med, r_lo, r_hi = _median_ci(tpt_ratio[~np.isnan(tpt_ratio)])
     b_med, b_lo, b_hi = _median_ci(tpt_bound_ratio[~np.isnan(tpt_bound_ratio)])
+    k_med, k_lo, k_hi = _median_ci(tpt_best_ratio[~np.isnan(tpt_best_ratio)])
     tpm_med, tpm_lo, tpm_hi = _median_ci(tpm_f)
     st_med, st_lo, st_hi = _median_ci(st)
     cpu_med, cpu_lo, cpu_hi = _median_ci(cpu)
@@ -174,6 +179,8 @@ def _summarise(g: pd.DataFrame, of: int | None) -> dict[str, Any]:
         "time_per_target_m3_ratio_median": r_med, "time_per_target_m3_ratio_lo": r_lo, "time_per_target_m3_ratio_hi": r_hi,
         "time_per_target_m3_bound_ratio_median": b_med, "time_per_target_m3_bound_ratio_lo": b_lo,
         "time_per_target_m3_bound_ratio_hi": b_hi,
+        "time_per_target_m3_best_ratio_median": k_med, "time_per_target_m3_best_ratio_lo": k_lo,
+        "time_per_target_m3_best_ratio_hi": k_hi,
         "time_per_m3_median": tpm_med, "time_per_m3_lo": tpm_lo, "time_per_m3_hi": tpm_hi,
         "time_per_m3_q1": float(q1), "time_per_m3_q3": float(q3), "time_per_m3_iqr": float(q3 - q1),
         "time_per_m3_ratio_median": float(np.median(tr)) if len(tr) else math.nan,

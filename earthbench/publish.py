@@ -13,6 +13,9 @@
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
+* ``best.csv`` — with a folder of best known plans (``best``, :mod:`earthbench.best`): each kept
+  scenario's bracket [target bound, best known time per target m³] and who produced the plan; the
+  runs and tables then carry each run's ratio to its scenario's best known time (``× best known``);
 * ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
   ``scope`` = suite | family | target and ``group``), medians and rates with their 95 % intervals
   (:data:`earthbench.stats.INTERVAL_NOTE`); a table with too few scenarios for any paired test to
@@ -56,6 +59,7 @@ from typing import Any
 import pandas as pd
 
 from .aggregate import REASONS, SCOPES, aggregate, latest_versions
+from .best import bracket_lines, bracket_markdown, bracket_table, with_best_known
 from .board.figures import (FIGURE_COLUMNS, RUN_FIGURES, Renderer, families_figure, figure_jobs, history_figure,
                             profiles_figure, terrain_figure, volume_time_figure)
 from .board.page import (FILTERS, RUN_COLUMNS, filter_bar, fold_zero_failures, html_more_tables, html_page, html_table,
@@ -89,7 +93,7 @@ Captions = list[tuple[dict[str, Any], str, Path]]
 def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[str] | None = None, *,
             figures: bool = True, terrain: bool = True, generated: str | None = None,
             workers: int | None = None, replays: int = 20, all_versions: bool = False,
-            seeds: Sequence[int] | None = None) -> Published:
+            seeds: Sequence[int] | None = None, best: str | Path | None = None) -> Published:
     """Write the leaderboard of ``db`` (the suites in ``suites``, default all) into ``out``.
 
     ``seeds``: limit the board to the suite's scenarios of these seeds (runs and denominators
@@ -98,7 +102,9 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
 
     ``workers``: processes drawing the figures (default: one per core this process may use);
     ``replays``: how many runs the page's replay viewer embeds (0: none);
-    ``all_versions``: rank every stored version, not only each planner's latest.
+    ``all_versions``: rank every stored version, not only each planner's latest;
+    ``best``: the folder of best known plans (:mod:`earthbench.best`): each run's ratio to its
+    scenario's best known time per target m³ (a "× best known" column) and ``best.csv`` (the brackets).
     """
     from .playback import pick_runs, viewer_section
 
@@ -110,6 +116,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         suites = with_sealed_draws(store, suites)  # a suite's sealed draws are published beside it
         runs = published_runs(store, suites)
         runs, members, seed_note = limit_to_seeds(runs, suite_members(store, runs["suite"].unique()), seeds)
+        runs = with_best_known(runs, best)
         (out / "figures").mkdir(parents=True, exist_ok=True)  # only now: a refused leaderboard writes nothing
         groups = list(runs.groupby(["suite", "track"], sort=True))
         sections: list[dict[str, Any]] = [{"suite": suite, "track": track, "figures": [], "md_figures": []}
@@ -140,8 +147,18 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
                     path = base.parent / f"{base.name}-history-{slug(planner)}"
                     renderer.add(("history", str(path), (hist, f"{planner} on suite {sec['suite']}")))
                     captions.append((sec, f"History of {planner}: success rate and median time per target m³ by version", path))
-    _write(result, runs, summary, sections, captions, renderer, generated, gap_markdown(gaps), viewer)
+    # the brackets of the board's scenarios (a --seeds board: those seeds only)
+    brackets = bracket_table(best, members if len(members) else runs)
+    sizes = {str(k): int(v) for k, v in members.groupby("suite").size().items()} if len(members) else {}
+    lines = bracket_lines(brackets, sizes)
+    for sec in sections:
+        sec["best"] = lines.get(str(sec["suite"]), "")
+    _write(result, runs, summary, sections, captions, renderer, generated, bracket_markdown(brackets, sizes) + gap_markdown(gaps),
+           viewer)
     result.files += write_gaps(gaps, out)
+    if len(brackets):
+        write_csv(out / "best.csv", spreadsheet_safe(brackets).to_csv(index=False))
+        result.files.append(out / "best.csv")
     result.files += [out / "README.md", out / "runs.csv", out / "summary.csv", out / "index.html"]
     result.removed = _remove_stale_figures(out / "figures", result.files)
     return result

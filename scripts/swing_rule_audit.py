@@ -21,7 +21,7 @@ that is not being dug). Not a rule of the referee: this measures what it would d
 
     python scripts/swing_rule_audit.py plans   STORE.db [--suite standard]
     python scripts/swing_rule_audit.py forced  STORE.db [--suite standard] [--family F] [--largest] [--strict]
-    python scripts/swing_rule_audit.py witness STORE.db [--suite standard] [--family bench.bench] [--spread 20]
+    python scripts/swing_rule_audit.py witness STORE.db [--suite standard] [--family bench.bench] [--spread 20] [--out DIR]
 
 ``witness`` builds, for each scenario of a family whose truck starts in dump reach of the
 excavator and off the dig area (the bench family), a plan that never moves the excavator and
@@ -31,15 +31,19 @@ at its least duration; when none is left the truck drives along its heading, dur
 the next stand off the dig area in dump reach. It
 reports the referee's verdict, R's breaches and the plan's time per target m³ against both
 bounds. A plan valid under R at r × ``time_per_m3_lower_bound`` shows that no bound holding for
-every plan valid under R can exceed r × that bound on the scenario.
+every plan valid under R can exceed r × that bound on the scenario. ``--out DIR`` writes each
+plan as a candidate file (``DIR/<scenario digest>.json``) for ``earthbench best update --plans DIR
+--suite S``, which judges it again before keeping it as a best known plan.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import shapely
@@ -328,6 +332,14 @@ def witness_plan(sc: Scenario, spread_deg: float) -> Plan:
     return Plan(tuple(acts))
 
 
+def _write_candidate(out: Path, digest: str, plan: Plan, spread: float) -> None:
+    """A candidate file for ``earthbench best update --plans``: the plan, its scenario's digest and who made it."""
+    out.mkdir(parents=True, exist_ok=True)
+    producer = {"kind": "witness", "name": f"scripts/swing_rule_audit.py witness --spread {spread:g}", "config": {"spread": spread}}
+    doc = {"scenario_digest": digest, "producer": producer, "plan": json.loads(plan.to_json())}
+    (out / f"{digest}.json").write_text(json.dumps(doc))
+
+
 def cmd_witness(args: argparse.Namespace) -> None:
     store = Store(args.store, read_only=True)
     rows = [(digest, sid, target) for digest, sid, family, target in _maps(store, args.suite) if family == args.family]
@@ -341,6 +353,8 @@ def cmd_witness(args: argparse.Namespace) -> None:
         out = audit_plan(sc, plan)
         sw = np.degrees(np.array(out["swings"]))  # type: ignore[arg-type]
         ok = v.valid and not out["under_arm"] and not out["on_area"]
+        if args.out:
+            _write_candidate(Path(args.out), digest, plan, args.spread)
         if ok:
             ratios.append(m["time_per_target_m3_ratio"])
         print(f"{sid}: {'valid' if v.valid else 'INVALID ' + ','.join(sorted({x.rule for x in v.violations}))}, "
@@ -376,6 +390,7 @@ def main() -> None:
     w.add_argument("--suite", default="standard")
     w.add_argument("--family", default="bench.bench")
     w.add_argument("--spread", type=float, default=10.0, help="largest swing (degrees) a dig may take from the truck's bearing")
+    w.add_argument("--out", default="", help="write each plan here as a candidate file for `earthbench best update --plans`")
     args = ap.parse_args()
     {"plans": cmd_plans, "forced": cmd_forced, "witness": cmd_witness}[args.cmd](args)
 

@@ -141,7 +141,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "identity",
                 "provenance"),
     "running": ("harness", "playback", "figures", "scaling", "replay", "runner", "dask_executor"),
-    "publishing": ("verify", "merge", "board", "publish", "compare"),
+    "publishing": ("verify", "merge", "best", "board", "publish", "compare"),
     "commands": ("cli", "__main__"),
 }
 #: The layers a plugin may import at run time: a planner or a terrain builds on the contract

@@ -55,11 +55,12 @@ RUN_COLUMNS = [("id", "Run"), ("scenario_id", "Scenario"), ("solver", "Planner")
                ("success", "Success"), ("volume_ratio", "Volume ratio"),
                ("time_per_target_m3", "Time per target m³, s"), ("time_per_m3", "Time per m³, s"),
                ("time_per_target_m3_ratio", "× lower bound"), ("time_per_target_m3_bound_ratio", "× target bound"),
+               ("time_per_target_m3_best_ratio", "× best known"),
                ("solve_cpu_s", "Solve CPU s"), ("solve_time_s", "Solve wall s"),
                ("load_before", "Load before"), ("violation_rules", "Violations"), ("cpu_model", "CPU"), ("hostname", "Host"),
                ("isolation", "Isolation")]
 _NUMERIC_RUN = {"id", "volume_ratio", "time_per_target_m3", "time_per_m3", "time_per_target_m3_ratio",
-                "time_per_target_m3_bound_ratio", "solve_cpu_s", "solve_time_s", "load_before"}
+                "time_per_target_m3_bound_ratio", "time_per_target_m3_best_ratio", "solve_cpu_s", "solve_time_s", "load_before"}
 
 
 def run_rows(runs: pd.DataFrame) -> list[dict[str, Any]]:
@@ -184,6 +185,9 @@ def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") 
             parts.append(f'<p class="partial"><strong>{e(s["partial"])}</strong></p>')
         parts.append(html_table(fold_zero_failures(s["rows"])))
         parts.append(replay_links(s.get("replay_runs", [])))
+        if s.get("best"):
+            parts.append(f'<p class="best">Best known plans: {e(s["best"])} (every bracket [target bound, best known]: '
+                         '<a href="best.csv">best.csv</a>).</p>')
         parts.append(f'<details class="stamp-box"><summary>How this table is ranked, and what it rests on: suite digest, '
                      f'machines, spot checks</summary><p class="rule">Ranking: {e(RANKING_RULE)}.</p>'
                      f'<div class="stamp">{e(chr(10).join(s["stamp"].lines() + s["stamp"].planner_lines()))}</div></details>')

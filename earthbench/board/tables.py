@@ -58,6 +58,8 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
     rows = []
     # the preparation's wall seconds (docs/DESIGN.md §6), in a column of their own when a row has one
     prepared = "prepare_max" in summary and bool(summary["prepare_max"].notna().any())
+    # the ratio to each scenario's best known plan (earthbench.best), in a column when some scenario has one
+    best = "time_per_target_m3_best_ratio_median" in summary and bool(summary["time_per_target_m3_best_ratio_median"].notna().any())
     for _, r in summary.iterrows():
         vr = number_text(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else f" ± {number_text(r['volume_ratio_sd'])}")
         rows.append({
@@ -79,6 +81,9 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                                           r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
                 ("× target bound", ci_text(r["time_per_target_m3_bound_ratio_median"], r["time_per_target_m3_bound_ratio_lo"],
                                            r["time_per_target_m3_bound_ratio_hi"], ".2f"), r["time_per_target_m3_bound_ratio_median"]),
+                *((("× best known", ci_text(r["time_per_target_m3_best_ratio_median"], r["time_per_target_m3_best_ratio_lo"],
+                                            r["time_per_target_m3_best_ratio_hi"], ".2f"), r["time_per_target_m3_best_ratio_median"]),)
+                  if best else ()),
                 ("Time per m³, s (median)", number_text(r["time_per_m3_median"], ".1f"), r["time_per_m3_median"]),
                 ("Solve CPU s (median)", ci_text(r["solve_cpu_median"], r["solve_cpu_lo"], r["solve_cpu_hi"], ".2f"),
                  r["solve_cpu_median"]),

@@ -37,6 +37,7 @@ COMMANDS = [
     "merge",
     "export",
     "verify",
+    "best",
 ]
 
 

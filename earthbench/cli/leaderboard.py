@@ -53,6 +53,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="a sealed draw's key, checked against the store and published with the board in keys/ (repeatable)")
     p.add_argument("--replays", type=int, default=20, metavar="N",
                    help="runs the page's replay viewer embeds, a success and an invalid run per planner first (default: 20; 0: none)")
+    p.add_argument("--best", metavar="DIR", default=None,
+                   help="the folder of best known plans (`earthbench best`): a \"× best known\" column and best.csv "
+                        "(default: leaderboard/best when it exists; `--best none`: neither)")
     return p
 
 
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     keys = _checked_keys(args.db, args.key)
     res = publish(args.db, args.out, args.suite or None, figures=not args.no_figures, terrain=not args.no_terrain,
                   workers=args.jobs, replays=args.replays, all_versions=args.all_versions,
-                  seeds=parse_seed_range(args.seeds) if args.seeds else None)
+                  seeds=parse_seed_range(args.seeds) if args.seeds else None, best=_best_dir(args.best))
     runs = 0 if res.runs is None else len(res.runs)
     tables = 0 if res.summary is None or res.summary.empty else res.summary.groupby(["suite", "track"]).ngroups
     print(f"leaderboard: {runs} run(s), {tables} table(s), {len(res.files)} file(s) in {res.out}/ "
@@ -84,6 +87,19 @@ def run(args: argparse.Namespace) -> int:
                   "(counted as failed); each such table says which", file=sys.stderr)
     _publish_keys(res.out, keys, set() if res.summary is None or res.summary.empty else set(res.summary["suite"]))
     return 0
+
+
+def _best_dir(given: str | None) -> Path | None:
+    """The best-known folder the board reads: the one named, else the committed one when it is here."""
+    from ..best import BestError, DEFAULT_DIR
+
+    if given == "none":
+        return None
+    if given is None:
+        return DEFAULT_DIR if DEFAULT_DIR.is_dir() else None
+    if not Path(given).is_dir():
+        raise BestError(f"--best {given}: no such folder of best known plans (`earthbench best update --dir {given}` makes one)")
+    return Path(given)
 
 
 def _checked_keys(db: str, paths: list[str]) -> list[SealKey]:
