@@ -35,16 +35,59 @@ of each cycle: the referee lets the truck stand anywhere clear of the excavator,
 ray to the contact (on the dig area beyond it, or between the base and a contact the arm reaches
 over), where a cycle swings 0 rad; ``tests/test_bound.py`` builds such a plan (docs/metrics.md,
 "What the geometry forces").
+
+The one wheel loader's ``time_per_target_m3_lower_bound`` adds the meeting of loader, pile and
+truck (:func:`_loader_dumps_start`). Facts the referee enforces:
+
+- *Material stays where it was.* A cut lowers only cells above the cut level (the floor, or the
+  base level) and the slump only fills cells the cut lowered, so every cell that ever holds
+  material held it at the start: the set ``M`` of those cells' centres.
+- *A loaded dump's charge touches ``M``.* The bucket is empty after every dump, so each loaded
+  dump ``k`` has its own charge since dump ``k − 1`` that cut something: a cell whose centre
+  lies in the edge's path (bucket width × penetration from the edge). At the instant the edge
+  passes that centre the loader's pose is within ``r_e = hypot(bucket_offset, width / 2)`` of it.
+- *A dump is near the truck.* The edge lies within ``ρ + dump_reach`` of the truck's centre, so
+  the pose within ``R = bucket_offset + ρ + dump_reach``; the truck stands still meanwhile.
+- *Speeds.* Every machine's path is continuous (moves start where it is, a charge at its pose)
+  and it covers at most its travel speed ``v`` (the truck ``v_t``) per second, a charge at most
+  the penetration speed ``v_p ≤ v``, and lasts at least ``t_c``.
+
+So with ``M`` at least ``D_T`` from the truck's start, the truck is at least ``D_T − v_t s``
+from ``M`` at time ``s``, and a dump starting at ``s`` stands at least
+``g(s) = (D_T − v_t s − R − r_e)⁺`` from any point where a charge touches: the loader drives at
+least ``g(s_k)`` from the touch of charge ``k`` to dump ``k``, and at least ``g(s_k)`` from dump
+``k`` to the touch of charge ``k + 1`` (the first touch: at least ``D_L = (D_L0 − r_e)⁺`` from
+the loader's start, ``D_L0`` its distance to ``M``). A stretch of path of length ``ℓ`` that holds
+a charge of duration ``c ≥ t_c`` takes at least ``c + (ℓ − v_p c)⁺ / v ≥ t_c + (ℓ − v_p t_c)⁺ / v``.
+Hence the dumps' starts satisfy ``s₁ ≥ t_c + (D_L + g(s₁) − v_p t_c)⁺ / v`` and
+``s_k ≥ s_{k−1} + t_d + t_c + (g(s_{k−1}) + g(s_k) − v_p t_c)⁺ / v``. The right-hand sides fall
+as ``s_k`` grows and rise with ``s_{k−1}`` (``g`` falls at most ``v_t < v`` per second), so by
+induction every valid plan's ``s_k`` is at least the least ``σ_k`` these allow, and the time to
+the target is at least ``σ_n + t_d`` (speeds at ``1 + RATE_TOL`` of their limits, ``ABS_TOL``
+on distances and on each action's time). Once ``g`` is 0 the cycles cost ``t_c + t_d``.
+
+What it cannot price, and why (``tests/test_loader_bound.py``): the per-cycle reverse out of the
+pile and turn to the truck. A loader may scrape a strip along the pile's face with its bucket
+half in it and the truck on the open floor beside the strip, within 45° of its heading; it then
+dumps where the charge ended, never reverses or turns, while the truck moves on beside it during
+the next charge — every cycle after the first at ``t_c + t_d`` plus a back-off of two cells. And
+the referee's ``heading`` rule lets a machine slide sideways up to its chord tolerance between
+any two samples, at full speed: a loader can shift sideways without turning, a truck without
+yawing, so neither the turning radius nor a yaw rate bounds their travel under today's referee.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
+
+import numpy as np
 
 from earthbench.motion import ABS_TOL, RATE_TOL
 from earthbench.plan import Plan
 from earthbench.referee import Verdict
+from earthbench.rules import loader_base_level
 from earthbench.scoring import time_per_target
 from earthbench.scoring import time_to_target as scoring_time_to_target
 from earthbench.world import Scenario
@@ -100,6 +143,60 @@ def _first_dump_start(scenario: Scenario) -> float:
     return ts + le / ve
 
 
+def _material(scenario: Scenario) -> np.ndarray:
+    """Centres ``[k, 2]`` of the cells holding material above the loader's cut level at the start
+    (the floor, or the base level): no cut or slump ever puts material in any other cell."""
+    level = scenario.site.floor if scenario.site.floor is not None else loader_base_level(scenario)
+    xs, ys = scenario.terrain.cell_centres()
+    jj, ii = np.nonzero(np.asarray(scenario.terrain.z) > level)
+    return np.stack([xs[ii], ys[jj]], axis=1)
+
+
+def _least_time(floor: float, need: Callable[[float], float]) -> float:
+    """The least ``s ≥ floor`` with ``s ≥ need(s)``, for ``need`` continuous and non-increasing
+    (so the times that qualify are every time from that one on), by bisection."""
+    if floor >= need(floor):
+        return floor
+    lo, hi = floor, need(floor)
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if mid >= need(mid) else (mid, hi)
+    return hi
+
+
+def _loader_dumps_start(scenario: Scenario, n: int) -> float:
+    """The earliest start of the ``n``-th loaded dump of the one loader (s): the rendezvous of
+    the module docstring. ``g(s)``, the least loader travel between a charge's touch of material
+    and a dump at ``s`` (and from that dump to the next touch), is what the truck has not closed
+    by ``s``; the dumps' starts ``σ_k`` are the least times the recursion allows."""
+    m = scenario.machines
+    lo, truck, start, stand = m.loader, m.truck, m.loader_pose, m.truck_pose
+    assert lo is not None and start is not None
+    cycle, tc = lo.min_charge_time + lo.min_dump_time, lo.min_charge_time
+    mat = _material(scenario)
+    if not len(mat):
+        return n * cycle - lo.min_dump_time
+    touch = math.hypot(lo.bucket_offset, lo.bucket_width / 2) + ABS_TOL  # pose to a cell its charge cuts
+    dump = lo.bucket_offset + truck.loading_radius + lo.dump_reach + ABS_TOL  # pose to the truck at a dump
+    v, vp, vt = (s * (1 + RATE_TOL) for s in (lo.travel_speed, lo.penetration_speed, truck.travel_speed))
+    first = max(float(np.min(np.hypot(mat[:, 0] - start.x, mat[:, 1] - start.y))) - touch, 0.0)
+    gap = float(np.min(np.hypot(mat[:, 0] - stand.x, mat[:, 1] - stand.y))) - touch - dump
+
+    def g(s: float) -> float:
+        return max(gap - vt * s, 0.0)
+
+    def leg(a: float, b: float) -> float:  # a charge ≥ tc (≤ vp·its time of the way) and the travel a + b
+        return tc + max(a + b - vp * tc, 0.0) / v
+
+    s = _least_time(tc, lambda x: leg(first, g(x)))
+    for k in range(1, n):  # s is the k-th dump's start
+        if g(s) == 0.0:  # the truck may stand at the pile from here on: every cycle as fast as a cycle can be
+            return s + (n - k) * cycle
+        after, back = s + lo.min_dump_time, g(s)
+        s = _least_time(after + tc, lambda x: after + leg(back, g(x)))  # noqa: B023 (used at once)
+    return s
+
+
 def lower_bound_time_to_target(scenario: Scenario) -> float:
     """The least time (s) after which any valid plan's truck holds the target.
 
@@ -107,8 +204,8 @@ def lower_bound_time_to_target(scenario: Scenario) -> float:
     dump before (the bucket is empty after a dump that did not fill the truck), the first
     starting no earlier than :func:`_first_dump_start`:
     ``S₁ + t_d + (n − 1)(t_s + t_d)``, less the referee's tolerance of ``ABS_TOL`` per action on
-    durations and overlaps. One loader: ``n (t_c + t_d)`` likewise. Both on one site: the
-    machines' rates add, ``target × lower_bound_time_per_m3``.
+    durations and overlaps. One loader: ``σ_n + t_d`` (:func:`_loader_dumps_start`, at least
+    ``n (t_c + t_d)``). Both on one site: the machines' rates add, ``target × lower_bound_time_per_m3``.
     """
     m, target = scenario.machines, scenario.task.target_volume
     fill = scenario.soil.fill_factor if scenario.soil is not None else 1.0
@@ -118,9 +215,8 @@ def lower_bound_time_to_target(scenario: Scenario) -> float:
         t = _first_dump_start(scenario) + e.min_dump_time + (n - 1) * (e.min_stroke_time + e.min_dump_time)
         return max(t - 4 * n * ABS_TOL, 0.0)
     if m.loader is not None and m.excavator is None:
-        lo = m.loader
-        n = _buckets(target, lo.bucket_capacity * fill)
-        return max(n * (lo.min_charge_time + lo.min_dump_time) - 4 * n * ABS_TOL, 0.0)
+        n = _buckets(target, m.loader.bucket_capacity * fill)
+        return max(_loader_dumps_start(scenario, n) + m.loader.min_dump_time - 4 * n * ABS_TOL, 0.0)
     return target * lower_bound_time_per_m3(scenario)
 
 

@@ -27,3 +27,12 @@ def test_replay_loader_plan(benchmark):
     sc = pile(0, 4.0)
     plan = SinghCannonLoader().plan(sc)
     assert benchmark(judge, sc, plan).valid
+
+
+def test_loader_bound_pile_4m3(benchmark):
+    """The time-to-target bound runs in the scoring of every run: side by side with the bound
+    before issue 49 (``n (t_c + t_d)``, a few µs), the meeting of loader, pile and truck."""
+    from earthbench_metrics import lower_bound_time_to_target
+
+    sc = pile(0, 4.0)
+    assert benchmark(lower_bound_time_to_target, sc) > 25.0
