@@ -70,10 +70,11 @@ What it cannot price, and why (``tests/test_loader_bound.py``): the per-cycle re
 pile and turn to the truck. A loader may scrape a strip along the pile's face with its bucket
 half in it and the truck on the open floor beside the strip, within 45° of its heading; it then
 dumps where the charge ended, never reverses or turns, while the truck moves on beside it during
-the next charge — every cycle after the first at ``t_c + t_d`` plus a back-off of two cells. And
-the referee's ``heading`` rule lets a machine slide sideways up to its chord tolerance between
-any two samples, at full speed: a loader can shift sideways without turning, a truck without
-yawing, so neither the turning radius nor a yaw rate bounds their travel under today's referee.
+the next charge — every cycle after the first at ``t_c + t_d`` plus a back-off of two cells. Nor
+is the turning radius or a yaw rate priced: the referee's ``heading`` rule lets a machine slip
+sideways by its chord tolerance per metre of chord (up to 5 % of its travel; before rules 2 it
+was per sample, so steps of 4.99 cm slid a machine sideways at full speed), and a bound on a
+turn would have to allow for that slip.
 """
 
 from __future__ import annotations

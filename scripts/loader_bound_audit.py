@@ -5,8 +5,8 @@ bound now (``lower_bound_time_to_target``: the meeting of loader, pile and truck
 "The wheel loader"), and a *what-if*: the same recursion with the truck's approach also limited by
 its yaw rate (its speed toward the pile along a direction ``u`` at most ``v_t`` times the cosine of
 the least angle its heading can make with ``±u`` by then). The what-if is **not** a bound under
-today's referee, whose ``heading`` rule lets a truck slide sideways by its chord tolerance per
-sample; it measures what closing that would be worth.
+today's referee, whose ``heading`` rule still lets a truck slip sideways by up to 5 % of its
+travel (its chord tolerance per metre of chord); it measures what pricing the turn would be worth.
 
     python scripts/loader_bound_audit.py [--suite pile]
 """

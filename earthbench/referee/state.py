@@ -30,6 +30,11 @@ from ..rules import off_map_excess as _off_map_excess
 from ..rules import reach_of as _reach_of
 from ..world import Pose, Scenario, TruckSpec
 
+#: The chord (m) below which the heading rule's lateral slack shrinks in proportion: a sample
+#: may leave its arc by ``chord_tolerance`` over a chord this long or longer, and by that share
+#: of it over a shorter one, so no chain of short steps slides a machine sideways (rules 2).
+SLIP_LENGTH = 1.0
+
 
 #: The version of the rules below. Bumped whenever a rule is added or changes what it refuses,
 #: so a stored verdict says which rules judged it (docs/referee.md, "Rules versions"): 1 until
@@ -398,14 +403,15 @@ class Replay:
             if rates[k] > limit * (1 + RATE_TOL):
                 self.flag(n, rule, rates[k] - limit,
                           f"{a.machine} {doing.format(rates[k])} between samples {k} and {k + 1}; limit {limit} {unit}")
-        k = int(np.argmax(arc["lateral"]))
-        if arc["lateral"][k] > spec.chord_tolerance:
+        slack = spec.chord_tolerance * np.minimum(1.0, arc["chord"] / SLIP_LENGTH)
+        k = int(np.argmax(arc["lateral"] - slack))
+        if arc["lateral"][k] > slack[k]:
             self.flag(
                 n,
                 "heading",
                 arc["lateral"][k],
                 f"no arc along the headings joins samples {k} and {k + 1}: {a.machine} slides {arc['lateral'][k]:.3f}"
-                f" m sideways; tolerance {spec.chord_tolerance} m",
+                f" m sideways over a {arc['chord'][k]:.3f} m chord; tolerance {slack[k]:.4f} m",
             )
         self.swept(n, a.machine, p, arc)
         self.travel[a.machine] += float(arc["length"].sum())
