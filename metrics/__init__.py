@@ -5,6 +5,6 @@ Each metric plugin is a callable ``(scenario, plan, verdict) -> dict[str, float]
 in the ``earthbench.metrics`` entry-point group; :func:`earthbench.scoring.evaluate` merges them all.
 """
 
-from .run import core_metrics, lower_bound_time_per_m3, lower_bound_time_to_target, time_to_target
+from .run import core_metrics, least_time, lower_bound_time_per_m3, lower_bound_time_to_target, time_to_target
 
-__all__ = ["core_metrics", "lower_bound_time_per_m3", "lower_bound_time_to_target", "time_to_target"]
+__all__ = ["core_metrics", "least_time", "lower_bound_time_per_m3", "lower_bound_time_to_target", "time_to_target"]

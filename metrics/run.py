@@ -153,7 +153,7 @@ def _material(scenario: Scenario) -> np.ndarray:
     return np.stack([xs[ii], ys[jj]], axis=1)
 
 
-def _least_time(floor: float, need: Callable[[float], float]) -> float:
+def least_time(floor: float, need: Callable[[float], float]) -> float:
     """The least ``s ≥ floor`` with ``s ≥ need(s)``, for ``need`` continuous and non-increasing
     (so the times that qualify are every time from that one on), by bisection."""
     if floor >= need(floor):
@@ -189,12 +189,12 @@ def _loader_dumps_start(scenario: Scenario, n: int) -> float:
     def leg(a: float, b: float) -> float:  # a charge ≥ tc (≤ vp·its time of the way) and the travel a + b
         return tc + max(a + b - vp * tc, 0.0) / v
 
-    s = _least_time(tc, lambda x: leg(first, g(x)))
+    s = least_time(tc, lambda x: leg(first, g(x)))
     for k in range(1, n):  # s is the k-th dump's start
         if g(s) == 0.0:  # the truck may stand at the pile from here on: every cycle as fast as a cycle can be
             return s + (n - k) * cycle
         after, back = s + lo.min_dump_time, g(s)
-        s = _least_time(after + tc, lambda x: after + leg(back, g(x)))  # noqa: B023 (used at once)
+        s = least_time(after + tc, lambda x: after + leg(back, g(x)))  # noqa: B023 (used at once)
     return s
 
 

@@ -15,25 +15,13 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Callable
 
 import numpy as np
 
 from earthbench.rules import loader_base_level
 from earthbench.suite import load_suite
 from earthbench.world import Scenario
-from earthbench_metrics import lower_bound_time_to_target
-
-
-def least(floor: float, need: Callable[[float], float]) -> float:
-    """The least ``s ≥ floor`` with ``s ≥ need(s)`` (``need`` non-increasing), by bisection."""
-    if floor >= need(floor):
-        return floor
-    lo, hi = floor, need(floor)
-    for _ in range(60):
-        mid = (lo + hi) / 2
-        lo, hi = (lo, mid) if mid >= need(mid) else (mid, hi)
-    return hi
+from earthbench_metrics import least_time, lower_bound_time_to_target
 
 
 def with_yaw_rate(sc: Scenario, n: int) -> float:
@@ -63,12 +51,12 @@ def with_yaw_rate(sc: Scenario, n: int) -> float:
         return tc + max(a + b - vp * tc, 0.0) / vl
 
     first = max(float(np.min(np.hypot(mat[:, 0] - start.x, mat[:, 1] - start.y))) - touch, 0.0)
-    s = least(tc, lambda x: leg(first, g(x)))
+    s = least_time(tc, lambda x: leg(first, g(x)))
     for k in range(1, n):
         if g(s) == 0.0:
             return s + (n - k) * (tc + td) + td
         after, back = s + td, g(s)
-        s = least(after + tc, lambda x: after + leg(back, g(x)))  # noqa: B023 (used at once)
+        s = least_time(after + tc, lambda x: after + leg(back, g(x)))  # noqa: B023 (used at once)
     return s + td
 
 
