@@ -6,7 +6,8 @@
 #
 # EB_USER (default 65534, nobody) is the user id. If the interpreter lives under a folder that user
 # cannot enter (e.g. a pyenv under /root), EB_BIND=/root/.pyenv makes that folder visible to the
-# command only (in a private mount namespace: /root becomes an empty tmpfs with it inside).
+# command only (in a private mount namespace: /root becomes an empty tmpfs with it inside). EB_BIND
+# takes several folders separated by ':' (a venv in a 0700 folder of /tmp and a pyenv under /root).
 set -euo pipefail
 EB_USER=${EB_USER:-65534}
 name=earthbench-delegated-$$
@@ -37,14 +38,19 @@ home=$(mktemp -d "${TMPDIR:-/tmp}/earthbench-unprivileged.XXXXXX")
 chown "$EB_USER:$EB_USER" "$home"
 DIRS="${dirs[*]}" EB_BIND=${EB_BIND:-} EB_USER=$EB_USER HOME_DIR=$home unshare -m --propagation private bash -c '
   set -e
-  if [ -n "$EB_BIND" ]; then
+  IFS=: read -r -a binds <<< "$EB_BIND"
+  keeps=()
+  for b in "${binds[@]}"; do  # set every folder aside first: a tmpfs over one parent hides the next
     keep=$(mktemp -d)
-    mount --bind "$EB_BIND" "$keep"
-    parent=$(dirname "$EB_BIND")
-    mount -t tmpfs -o mode=755 tmpfs "$parent"
-    mkdir -p "$EB_BIND"
-    mount --bind "$keep" "$EB_BIND"
-  fi
+    mount --bind "$b" "$keep"
+    keeps+=("$keep")
+  done
+  parents=$(for b in "${binds[@]}"; do dirname "$b"; done | sort -u)
+  for parent in $parents; do mount -t tmpfs -o mode=755 tmpfs "$parent"; done
+  for i in "${!binds[@]}"; do
+    mkdir -p "${binds[$i]}"
+    mount --bind "${keeps[$i]}" "${binds[$i]}"
+  done
   for d in $DIRS; do echo $$ > "$d/cgroup.procs"; done
   exec setpriv --reuid="$EB_USER" --regid="$EB_USER" --clear-groups env -i PATH=/usr/bin:/bin LANG=C.UTF-8 \
     PYTHONDONTWRITEBYTECODE=1 HOME="$HOME_DIR" TMPDIR="$HOME_DIR" EARTHBENCH_PREPARED="$HOME_DIR/prepared" "$@"
