@@ -1,5 +1,5 @@
 """The README's route for a newcomer, timed: a fresh environment, the commands of the README's
-steps 1–3 exactly as written, then every command those commands print for the user to run
+steps 1–4 exactly as written (the last ranks the new planner beside the published board), then every command those commands print for the user to run
 (``see: …``, ``next: …``), each as printed, until none is left that has not run.
 
     python scripts/newcomer_route.py                    # a fresh clone and `pip install .` (minutes: the dependencies)
@@ -18,6 +18,7 @@ import argparse
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -84,6 +85,7 @@ class Step:
 
 @dataclass
 class Route:
+    workdir: Path  # where the commands ran: the clone, or the scratch folder with --reuse
     steps: list[Step] = field(default_factory=list)
 
     @property
@@ -111,7 +113,8 @@ def make_env(root: Path, reuse: bool) -> tuple[dict[str, str], Path]:
             script.write_text(f'#!/bin/sh\nexec "{python}" -m {module} "$@"\n')
             script.chmod(0o755)
         work = root / "work"
-        work.mkdir()
+        (work / "leaderboard").mkdir(parents=True)  # what step 4 reads from the clone: the published board's store
+        shutil.copyfile(ROOT / "leaderboard" / "standard.db", work / "leaderboard" / "standard.db")
     else:
         work = root / "earthbench"
         subprocess.run(["git", "clone", "--quiet", str(ROOT), str(work)], check=True)
@@ -138,7 +141,7 @@ def walk(root: Path, *, reuse: bool, with_quick_start: bool = False, timeout: fl
     env, work = make_env(root, reuse)
     todo = [Step(c, "README") for c in (quick_start(readme) if with_quick_start else [] if reuse else ["pip install ."])]
     todo += [Step(c, "README") for c in readme_commands(readme)]
-    route, seen = Route(), set()
+    route, seen = Route(work), set()
     while todo:
         step = todo.pop(0)
         if step.command in seen:

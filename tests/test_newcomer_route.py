@@ -112,7 +112,7 @@ def test_script_file_and_package_reach_a_ranked_table(fresh):
 
 
 def test_the_readme_route_and_every_printed_command_run_as_written(tmp_path):
-    """``scripts/newcomer_route.py --reuse``: the README's steps 1–3 as written in a fresh environment, then every
+    """``scripts/newcomer_route.py --reuse``: the README's steps 1–4 as written in a fresh environment, then every
     command earthbench printed for the user (``see:``, ``next:``, the new package's steps), each as printed."""
     from helpers import load_script
 
@@ -129,6 +129,10 @@ def test_the_readme_route_and_every_printed_command_run_as_written(tmp_path):
     assert any(c.startswith("earthbench runs --suite quick") for c in printed)
     assert "earthbench leaderboard --suite quick" in printed and any(c.startswith("earthbench merge ") for c in printed)
     assert "passed" in next(s.output for s in route.steps if "python -m pytest earthbench-my-planner/tests" in s.command)
+    # step 4: the new planner ranked beside the published board's planners, none of which ran here
+    ranked = (route.workdir / "ranked" / "README.md").read_text()
+    assert all(f"| {name} " in ranked for name in ("my-planner", "greedy", "singh-cannon-backhoe", "stl-tamp")), ranked[:2000]
+    assert not any(c.startswith("earthbench run ") and "--planner my-planner" not in c for c in ran)
 
 
 def test_hints_are_read_as_printed():
