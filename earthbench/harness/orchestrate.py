@@ -45,7 +45,7 @@ def _refuse_a_visible_store(cases: Sequence[Case], store: Store) -> None:
     """No case may see the store (docs/isolation.md): it lies in no folder a case can read."""
     from . import isolation
 
-    why = isolation.store_exposure(str(store.path), (c.planner.source for c in cases))
+    why = isolation.store_exposure(str(store.path), (c.planner for c in cases))
     if why:
         raise StoreError(why)
 
@@ -185,7 +185,7 @@ def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, 
                      log: Callable[[str], None] | None = None) -> dict[str, Prepared | None]:
     """Prepare, once each and before any case, every planner configuration of ``cases`` that
     declares a preparation and has none on this machine. A failure is logged; that planner's
-    cases then end as errors with its message (:func:`.sandbox.run_case`)."""
+    cases then end as errors with its message (:func:`.run.run_case`)."""
     from .prepare import PrepareError, ensure
 
     out: dict[str, Prepared | None] = {}

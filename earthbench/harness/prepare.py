@@ -54,8 +54,8 @@ from .environment import cache_folder
 
 ENV = "EARTHBENCH_PREPARED"
 #: ``EARTHBENCH_PREPARE=off``: no preparation is run or used; cases run without their planner's
-#: folder (a planner must work without it: stl-tamp then loads its NLPs uncompiled, with the
-#: same plans) and their runs store no preparation time.
+#: folder (a planner must work without it, with the same plans: e.g. by loading uncompiled what it
+#: would have compiled) and their runs store no preparation time.
 SWITCH = "EARTHBENCH_PREPARE"
 MANIFEST = "prepare.json"
 #: The most files and folders a preparation may leave (with ``prepare_disk_mb``, its disk budget).
@@ -198,9 +198,9 @@ def _key_lock(key: str, ref: PlannerRef, stop: threading.Event | None = None,
 
 def run_prepared_case(case: Case, cores: Sequence[int], *, stop: threading.Event | None = None,
                       startup_s: float | None = None) -> CaseResult:
-    """:func:`.sandbox.run_case` after the case's planner is prepared on this machine (what every
+    """:func:`.run.run_case` after the case's planner is prepared on this machine (what every
     executor calls): a failed preparation is this case's ``error``, with its message."""
-    from .sandbox import STARTUP_S, run_case
+    from .run import STARTUP_S, run_case
 
     try:
         prepared = ensure(case.planner, case.scenario.budget, cores, stop=stop) if case.prepare else None
@@ -240,7 +240,7 @@ def _run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
     payload = json.dumps({"folder": str(out), "jobs": len(cores)}).encode() + b"\n"
     what = f"the preparation of {ref.name} {ref.version}"
     try:
-        o = run_job(job, payload, cores, job_budget, writable=str(out), stop=stop,
+        o = run_job(job, payload, cores, job_budget, writable=str(out), stop=stop, reads=ref.reads,
                     watch=lambda: _over_budget(out, disk, budget.prepare_disk_mb))
         tail = o.log_tail
         if o.cancelled:
