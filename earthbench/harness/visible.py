@@ -60,8 +60,12 @@ def shared_folders(reads: Iterable[SharedFolder]) -> tuple[dict[str, str], tuple
     """The variables a case of a planner that ``reads`` these folders is given, and the folders it
     may read: each variable as this machine's user set it (``off`` stays ``off``; a path is
     resolved) or, unset, its default under ``$XDG_CACHE_HOME`` (default ``~/.cache``); resolved
-    here, since the case has no ``HOME`` of the user's. A folder that does not exist is not shown."""
+    here, since the case has no ``HOME`` of the user's. A folder that does not exist is not shown,
+    nor anything of a declaration :func:`check_shared` refuses (resolving a planner refuses it first)."""
+    reads = tuple(reads)
     env: dict[str, str] = {}
+    if check_shared(reads):
+        return env, ()
     seen: list[str] = []
     for r in reads:
         chosen = os.environ.get(r.env, "").strip()
