@@ -177,7 +177,7 @@ class Planner(ABC):
     def report_progress(self, done: int, total: int, what: str = "") -> None:
         """From :meth:`prepare`, optionally: ``done`` of ``total`` steps are finished and ``what``
         (one short line) is under way, e.g. ``report_progress(3, 12, "NLP dig 2x3")``. The
-        harness shows it with an estimate of the time left (docs/commands.md "prepare"); it is
+        harness shows it with an estimate of the time left (docs/running.md "Preparation"); it is
         never stored, may be called as often as convenient (the harness keeps up to ten a
         second) and does nothing outside a preparation."""
         if self.progress_sink is not None:

@@ -1,4 +1,4 @@
-"""A preparation says how far it is (``Planner.report_progress``, docs/commands.md "Preparation"):
+"""A preparation says how far it is (``Planner.report_progress``, docs/running.md "Preparation"):
 the messages cross the job's pipe as hostile data (size, rate, types, order, nonce checked; text
 made printable) and reach the display with an estimate of the time left."""
 

@@ -1,6 +1,6 @@
 """A preparation on the terminal (``earthbench run``, ``earthbench prepare``): its start and end as
 lines, and while it runs what it works on, how far it is and an estimate of the time left
-(docs/commands.md "Preparation"). On a terminal one line keeps time in place; in a log file a
+(docs/running.md "Preparation"). On a terminal one line keeps time in place; in a log file a
 line per step, at most one per :data:`LINE_EVERY_S`, and one every :data:`QUIET_EVERY_S` while
 the planner says nothing."""
 

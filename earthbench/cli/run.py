@@ -189,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{suite.budget.memory_mb} MB per case, db {args.db}",
                 file=sys.stderr,
             )
-        shown = PrepareDisplay()  # a preparation's start, progress and end (docs/commands.md "Preparation")
+        shown = PrepareDisplay()  # a preparation's start, progress and end (docs/running.md "Preparation")
         old = signal.signal(signal.SIGTERM, _sigterm) if _main_thread() else None
         try:
             report = run_cases(cases, store, executor, rerun=args.rerun, progress=progress,
