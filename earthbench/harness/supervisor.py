@@ -2,9 +2,10 @@
 
 :class:`Supervisor` hands a job its input, reads and validates its messages (:mod:`.protocol`),
 keeps its deadlines on this process's monotonic clock, samples its memory and CPU (the
-cgroup's figures where it has one, else the process tree's), drives a closed loop's steps
-through the loop that owns them (:class:`.protocol.ClosedLoop`, with this class as the hooks
-around each step) and ends the process tree. What it returns, :class:`Outcome`, is raw: the
+cgroup's figures where it has one, else the process tree's: :class:`.tree.ProcessTree`),
+drives a closed loop's steps through the loop that owns them (:class:`.protocol.ClosedLoop`,
+with this class as the hooks around each step), passes a preparation's progress on, and ends
+the process tree. What it returns, :class:`.outcome.Outcome`, is raw: the
 exit status, the result message, the fault, which deadline passed, the times and figures. It
 judges nothing: :mod:`.judge` turns an outcome into a stored result (docs/DESIGN.md §6).
 """
@@ -44,7 +45,7 @@ SAMPLE_S = 0.25
 
 
 class Supervisor(ProcessTree):
-    """Hands the scenario over, reads and validates the case's messages, enforces the deadlines."""
+    """Hands the job its input, reads and validates its messages, enforces the deadlines."""
 
     def __init__(self, proc: subprocess.Popen, msg_fd: int, report_fd: int, scenario: bytes, tag: str,
                  budget: Budget, startup_s: float, stop: threading.Event | None, t_spawn: float, loop: ClosedLoop | None = None,
