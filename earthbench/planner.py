@@ -103,8 +103,8 @@ class SharedFolder:
     runs fill outside the sandbox (docs/plugins.md "Folders a planner reads").
 
     ``env`` is the variable that says where the folder is (``EARTHBENCH_`` and capitals);
-    ``default`` where it is when the variable is unset, a relative path under the user's cache
-    folder (``$XDG_CACHE_HOME``, else ``~/.cache``). The harness resolves both on the machine
+    ``default`` where it is when the variable is unset: ``earthbench/NAME`` (or deeper) under the
+    user's cache folder (``$XDG_CACHE_HOME``, else ``~/.cache``). The harness resolves both on the machine
     that runs the case (the case has no ``HOME`` of the user's), gives the case the variable
     (the folder's absolute path, or ``off`` when the user set it so) and shows it the folder
     read only, if it exists. A sandboxed case sees nothing else outside its own files.

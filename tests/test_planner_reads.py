@@ -54,29 +54,30 @@ def test_a_planner_that_declares_nothing_is_shown_nothing(folders):
 
 def test_off_is_passed_on_and_shows_no_folder(folders, monkeypatch):
     monkeypatch.setenv("EARTHBENCH_TEST_SHARED", "off")
-    assert shared_folders([SharedFolder("EARTHBENCH_TEST_SHARED", "x")]) == ({"EARTHBENCH_TEST_SHARED": "off"}, ())
+    assert shared_folders([SharedFolder("EARTHBENCH_TEST_SHARED", "earthbench/x")]) == ({"EARTHBENCH_TEST_SHARED": "off"}, ())
     assert _info("t-reads-shared")["env"] == "off"
 
 
 def test_the_default_lies_under_the_users_cache_folder(tmp_path, monkeypatch):
     monkeypatch.delenv("EARTHBENCH_TEST_SHARED", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    (tmp_path / "earthbench-test" / "shared").mkdir(parents=True)
-    env, seen = shared_folders([SharedFolder("EARTHBENCH_TEST_SHARED", "earthbench-test/shared")])
-    assert env == {"EARTHBENCH_TEST_SHARED": str((tmp_path / "earthbench-test" / "shared").resolve())}
+    (tmp_path / "earthbench" / "test-shared").mkdir(parents=True)
+    env, seen = shared_folders([SharedFolder("EARTHBENCH_TEST_SHARED", "earthbench/test-shared")])
+    assert env == {"EARTHBENCH_TEST_SHARED": str((tmp_path / "earthbench" / "test-shared").resolve())}
     assert seen == (env["EARTHBENCH_TEST_SHARED"],)
 
 
 @pytest.mark.parametrize("env, default", [
     ("EARTHBENCH_DB", "a/b"), ("HOME", "a"), ("EARTHBENCH_X", "/etc"), ("EARTHBENCH_X", "../x"), ("EARTHBENCH_X", "a/../../b"),
-    ("EARTHBENCH_X", "earthbench"), ("EARTHBENCH_X", "earthbench/probes"), ("EARTHBENCH_X", ".ssh"), ("EARTHBENCH_X", ""),
-    ("EARTHBENCH_x", "a"),
+    ("EARTHBENCH_X", "earthbench"), ("EARTHBENCH_X", "earthbench/probes"), ("EARTHBENCH_X", "earthbench/prepared/k"),
+    ("EARTHBENCH_X", ".ssh"), ("EARTHBENCH_X", ""), ("EARTHBENCH_X", "huggingface"), ("EARTHBENCH_X", "earthbench/.hidden"),
+    ("EARTHBENCH_x", "earthbench/a"),
 ])
 def test_a_declaration_that_could_show_more_is_refused(env, default):
     assert check_shared([SharedFolder(env, default)])
     assert shared_folders([SharedFolder(env, default)]) == ({}, ())
-    assert not check_shared([SharedFolder("EARTHBENCH_X_CACHE", "earthbench/nlp"), SharedFolder("EARTHBENCH_Y", "my-planner")])
-    assert check_shared([SharedFolder(f"EARTHBENCH_X{i}", "a") for i in range(9)])
+    assert not check_shared([SharedFolder("EARTHBENCH_X_CACHE", "earthbench/nlp"), SharedFolder("EARTHBENCH_Y", "earthbench/my-p/x")])
+    assert check_shared([SharedFolder(f"EARTHBENCH_X{i}", "earthbench/a") for i in range(9)])
 
 
 def test_a_plugins_bad_declaration_is_refused_when_it_is_described(tmp_path):
@@ -84,7 +85,7 @@ def test_a_plugins_bad_declaration_is_refused_when_it_is_described(tmp_path):
     bad.write_text("from earthbench.planner import Planner, SharedFolder\n\n\n"
                    "class ReadsTheStore(Planner):\n"
                    "    name = 't-reads-bad'\n"
-                   "    reads = (SharedFolder('EARTHBENCH_DB', 'earthbench-test/shared'),)\n\n"
+                   "    reads = (SharedFolder('EARTHBENCH_DB', 'earthbench/test-shared'),)\n\n"
                    "    def plan(self, scenario):\n"
                    "        raise NotImplementedError\n")
     with pytest.raises(PluginError, match="t-reads-bad.*EARTHBENCH_DB.*one of the harness's own"):

@@ -3,7 +3,7 @@
 docs/DESIGN.md §6 "Plugin code". A plugin file (``--plugin FILE.py``) or another distribution's
 planner entry points are imported only inside a job that runs through the same fences as a case
 (:func:`.sandbox.run_job`): the *probe* imports the code, describes each planner (name, version,
-tracks, settings, whether it prepares) and resolves the configurations asked for, and answers
+tracks, settings, whether it prepares, the folders it reads) and resolves the configurations asked for, and answers
 with one JSON document. The harness reads that answer as hostile data (:func:`_validate`: types,
 sizes, names), recomputes every configuration hash itself, and keeps it in a cache keyed by a
 digest of the code (the file's bytes, or the distribution's files), the Python version and

@@ -32,14 +32,16 @@ OWN_VARS = frozenset({"EARTHBENCH_DB", "EARTHBENCH_CASE", "EARTHBENCH_CASE_ENV",
                       "EARTHBENCH_TRUST"})
 _PART = re.compile(r"[A-Za-z0-9_+-][A-Za-z0-9_.+-]{0,63}\Z")
 #: earthbench's own caches under the user's cache folder: never shown through a declaration.
-_OWN_CACHES = ("earthbench", "earthbench/prepared", "earthbench/probes")
+_OWN_CACHES = ("prepared", "probes")
 
 
 def check_shared(reads: Sequence[object]) -> str:
     """Why a planner's declaration of the folders it reads is refused ('' when it is not):
     at most :data:`MAX_SHARED`, each a :class:`SharedFolder` whose variable matches
-    :data:`SHARED_ENV` outside :data:`OWN_VARS` and whose default is a plain relative path
-    (no ``..``, no hidden first character) outside earthbench's own caches."""
+    :data:`SHARED_ENV` outside :data:`OWN_VARS` and whose default is a folder of earthbench's
+    part of the user's cache folder, ``earthbench/NAME[/…]`` in plain names (no ``..``, nothing
+    hidden), outside earthbench's own caches there: the rest of that folder is the user's other
+    programs' (tokens among them), which no planner may declare its way into."""
     if len(reads) > MAX_SHARED:
         return f"it declares {len(reads)} folders it reads, more than {MAX_SHARED}"
     for r in reads:
@@ -49,10 +51,10 @@ def check_shared(reads: Sequence[object]) -> str:
             return (f"the variable {r.env[:80]!r} of a folder it reads is not EARTHBENCH_ and capitals, digits, '_' "
                     f"(at most 48), or is one of the harness's own")
         parts = r.default.split("/")
-        if len(r.default) > 256 or not all(_PART.match(p) for p in parts) or r.default in _OWN_CACHES or \
-                any(r.default.startswith(c + "/") for c in _OWN_CACHES[1:]):
-            return (f"the default {r.default[:80]!r} of a folder it reads is not a relative path of plain names "
-                    "under the user's cache folder, outside earthbench's own caches")
+        if len(r.default) > 256 or len(parts) < 2 or parts[0] != "earthbench" or parts[1] in _OWN_CACHES or \
+                not all(_PART.match(p) for p in parts):
+            return (f"the default {r.default[:80]!r} of a folder it reads is not earthbench/NAME in plain names "
+                    "(under the user's cache folder, outside earthbench's own prepared and probes)")
     return ""
 
 

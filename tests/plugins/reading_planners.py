@@ -19,7 +19,7 @@ class ReadsShared(Planner):
     """Reports what its declared folder holds, and what it sees of an undeclared one beside it."""
 
     name = "t-reads-shared"
-    reads = (SharedFolder("EARTHBENCH_TEST_SHARED", "earthbench-test/shared"),)
+    reads = (SharedFolder("EARTHBENCH_TEST_SHARED", "earthbench/test-shared"),)
 
     def plan(self, scenario):
         shared = os.environ.get("EARTHBENCH_TEST_SHARED")
