@@ -248,8 +248,8 @@ class StlTampPlanner(Planner):
             out["note"] = "no C compiler: the NLPs stay uncompiled (the same plans, solved more slowly)"
             return out
         shapes = self.prepared_shapes()
-        for k, (label, shape, exc, truck) in enumerate(shapes):
-            self.report_progress(k, len(shapes), f"NLP {label}: building and compiling")
+        for i, (label, shape, exc, truck) in enumerate(shapes):
+            self.report_progress(i, len(shapes), f"NLP {label}: building and compiling")
             t0 = time.perf_counter()
             name, fns = build_functions(shape, exc, truck)
             t_build = time.perf_counter() - t0
