@@ -113,3 +113,13 @@ def test_a_log_gets_a_line_per_step_not_per_second():
     assert shown.getvalue().splitlines()[-1] == status_line(PrepareStatus("x", PrepareProgress(1, 3, "b"), 11.0, 22.0))
     assert status_line(PrepareStatus("x", None, 75.0, 3725.0)) == "  x: working · 1 min 15 s, about 1 h 2 min left"
     assert (duration(42.4), duration(500), duration(3725)) == ("42 s", "8 min 20 s", "1 h 2 min")
+
+
+def test_the_live_line_redraws_on_the_terminal_and_escapes_its_text():
+    from earthbench.cli._common import PrintableStream
+
+    raw = io.StringIO()
+    display = PrepareDisplay(PrintableStream(raw), live=True)  # the streams every command prints through
+    display.progress(PrepareStatus("x", PrepareProgress(1, 2, "bell\x07"), 1.0, None))
+    display.log("prepared x")
+    assert raw.getvalue() == "\r  x: 1 of 2 · bell\\x07 · 1 s\x1b[K\r\x1b[Kearthbench: prepared x\n"

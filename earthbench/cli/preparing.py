@@ -10,6 +10,7 @@ import sys
 import time
 from typing import TextIO
 
+from ..errors import printable
 from ..harness.prepare import PrepareStatus
 
 #: Seconds between two progress lines in a log (not a terminal).
@@ -41,6 +42,9 @@ class PrepareDisplay:
 
     def __init__(self, stream: TextIO | None = None, live: bool | None = None):
         self.stream = stream or sys.stderr
+        # the line's own controls (redraw in place) go to the terminal itself, its text through
+        # printable() (as the run's progress line, earthbench.progress)
+        self.terminal: TextIO = getattr(self.stream, "raw", self.stream)
         self.live = self.stream.isatty() if live is None else live
         self.showing = False
         self.printed_at = float("-inf")
@@ -55,8 +59,8 @@ class PrepareDisplay:
     def progress(self, status: PrepareStatus) -> None:
         line = status_line(status)
         if self.live:
-            self.stream.write("\r" + line + "\x1b[K")
-            self.stream.flush()
+            self.terminal.write("\r" + printable(line) + "\x1b[K")
+            self.terminal.flush()
             self.showing = True
             return
         now = time.monotonic()
@@ -67,5 +71,6 @@ class PrepareDisplay:
 
     def _clear(self) -> None:
         if self.showing:
-            self.stream.write("\r\x1b[K")
+            self.terminal.write("\r\x1b[K")
+            self.terminal.flush()
             self.showing = False
