@@ -83,6 +83,18 @@ def test_the_harness_names_no_planner():
     assert found == []
 
 
+def test_run_case_imported_from_its_old_place_still_works_with_a_warning():
+    import warnings
+
+    import earthbench.harness
+    from earthbench.harness import sandbox
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert sandbox.run_case is earthbench.harness.run_case
+    assert [w.category for w in caught] == [DeprecationWarning] and "earthbench.harness.run" in str(caught[0].message)
+
+
 #: The longest a module of the harness may be (lines).
 HARNESS_MODULE_LINES = 600
 

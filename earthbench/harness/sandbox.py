@@ -53,6 +53,7 @@ from typing import Any
 import psutil
 
 from ..errors import EarthbenchError
+from ..lazy import moved_getattr
 from ..planner import PrepareProgress, SharedFolder
 from ..world import Budget
 from . import isolation
@@ -250,3 +251,7 @@ def run_fenced(spec: dict[str, Any], payload: bytes, cores: tuple[int, ...], bud
 def _undumpable() -> None:
     """Once per process: no case may read the harness's memory or descriptors through /proc."""
     isolation.make_undumpable()
+
+
+#: ``run_case`` moved to :mod:`.run` (0.5.0): the old import still works, with a warning.
+__getattr__ = moved_getattr(__name__, {"run_case": "earthbench.harness.run"})
