@@ -11,7 +11,7 @@ import pytest
 
 from earthbench.cli.preparing import PrepareDisplay, duration, status_line
 from earthbench.harness import build_cases, run_case
-from earthbench.harness.prepare import PrepareError, PrepareStatus, ensure, estimate, find, run
+from earthbench.harness.prepare import PrepareError, PrepareStatus, ensure, estimate, forget, last_recorded
 from earthbench.harness.protocol import PROGRESS_BURST, PROGRESS_RATE
 from earthbench.planner import PrepareProgress
 from earthbench.records import PlannerRef
@@ -43,7 +43,7 @@ def _steps(statuses: list[PrepareStatus]) -> list[PrepareProgress]:
     return out
 
 
-def test_a_preparation_reports_its_steps_and_they_are_shown_with_an_estimate(tmp_path):
+def test_a_preparation_reports_its_steps_and_they_are_shown_with_an_estimate(tmp_path, prepared_root):
     ref = PlannerRef.resolve("t-prepare-reports")
     log: list[str] = []
     statuses: list[PrepareStatus] = []
@@ -62,13 +62,17 @@ def test_a_preparation_reports_its_steps_and_they_are_shown_with_an_estimate(tmp
     text = shown.getvalue()
     assert "\x1b[2J" not in text and "t-prepare-reports: 2 of 3 · \\x1b[2Jstep 2 of three · " in text
     assert text.endswith("\r\x1b[K" + f"earthbench: {log[-1]}\n")
-    # the next preparation of the planner knows what the last one took
-    again: list[PrepareStatus] = []
-    last = find(ref).wall_s
+    # the next preparation of the planner knows what the last one took (here: an older one's 1000 s)
+    older = prepared_root / "t-prepare-reports-older"
+    older.mkdir()
+    (older / "prepare.json").write_text('{"planner": "t-prepare-reports", "started_at": "9999", "wall_s": 1000.0}')
+    assert last_recorded("t-prepare-reports") == 1000.0
+    forget(ref)
     log.clear()
-    run(ref, Budget(), on_progress=again.append)
-    early = next(s for s in again if s.elapsed_s < last)
-    assert early.left_s == pytest.approx(last - early.elapsed_s)
+    again: list[PrepareStatus] = []
+    ensure(ref, Budget(), log=log.append, on_progress=again.append)
+    assert "(the last preparation of t-prepare-reports here took 1000 s)" in log[0]
+    assert again and all(s.left_s == pytest.approx(1000.0 - s.elapsed_s) for s in again)
 
 
 def test_a_flood_of_progress_is_read_and_kept_to_ten_a_second(tmp_path):
