@@ -22,7 +22,7 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     "earthbench.world": ("Budget", "ExcavatorSpec", "Heightmap", "LoaderSpec", "Machines", "Pose", "Scenario", "Sensing",
                          "Site", "Soil", "Task", "TruckSpec"),
     "earthbench.plan": ("PLAN_SCHEMA", "Charge", "Dig", "Dump", "Move", "Plan", "Prediction"),
-    "earthbench.planner": ("NoConfig", "Observation", "Planner", "closed_loop_setting"),
+    "earthbench.planner": ("NoConfig", "Observation", "Planner", "PrepareProgress", "SharedFolder", "closed_loop_setting"),
     "earthbench.errors": ("EarthbenchError", "PlanFormatError", "PluginError", "ScenarioError", "StoreError", "SuiteError",
                           "UnknownNameError"),
     "earthbench.registry": ("METRICS", "PLANNERS", "TERRAINS", "load_plugin_file", "register_planner"),

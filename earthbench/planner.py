@@ -17,6 +17,7 @@ import dataclasses
 import hashlib
 import json
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -97,6 +98,33 @@ class Observation:
 
 
 @dataclass(frozen=True)
+class SharedFolder:
+    """A folder outside its own files that a planner's cases read, read only: e.g. a cache its
+    runs fill outside the sandbox (docs/plugins.md "Folders a planner reads").
+
+    ``env`` is the variable that says where the folder is (``EARTHBENCH_`` and capitals);
+    ``default`` where it is when the variable is unset: ``earthbench/NAME`` (or deeper) under the
+    user's cache folder (``$XDG_CACHE_HOME``, else ``~/.cache``). The harness resolves both on the machine
+    that runs the case (the case has no ``HOME`` of the user's), gives the case the variable
+    (the folder's absolute path, or ``off`` when the user set it so) and shows it the folder
+    read only, if it exists. A sandboxed case sees nothing else outside its own files.
+    """
+
+    env: str
+    default: str
+
+
+@dataclass(frozen=True)
+class PrepareProgress:
+    """How far a preparation is (:meth:`Planner.report_progress`): ``done`` of ``total`` steps,
+    working on ``what`` (one short line, e.g. the NLP being compiled)."""
+
+    done: int
+    total: int
+    what: str = ""
+
+
+@dataclass(frozen=True)
 class NoConfig:
     """The configuration of a planner that has no settings."""
 
@@ -108,6 +136,9 @@ class Planner(ABC):
     version: ClassVar[str] = "0"
     tracks: ClassVar[tuple[str, ...]] = ("backhoe",)
     Config: ClassVar[type] = NoConfig
+    #: The folders outside its own files its cases read (see :class:`SharedFolder`); declared
+    #: like the preparation, so the harness, which knows no planner by name, can show them.
+    reads: ClassVar[tuple[SharedFolder, ...]] = ()
 
     def __init__(self, config: Any = None, **overrides: Any):
         if config is None:
@@ -134,9 +165,23 @@ class Planner(ABC):
         planner's first case, in a fenced process with its own budget (``[budget] prepare_s``,
         ``prepare_memory_mb``), with no scenario and no store; ``jobs`` is the number of cores
         it may keep busy. Returns a small JSON-able summary (kept with the folder) or None.
-        Its time is reported beside the solve times, never inside them.
+        Its time is reported beside the solve times, never inside them. It may say how far it
+        is with :meth:`report_progress`.
         """
         return None
+
+    #: Where :meth:`report_progress` goes: set by the harness on the instance whose
+    #: :meth:`prepare` it calls; None (nowhere) otherwise.
+    progress_sink: Callable[[PrepareProgress], None] | None = None
+
+    def report_progress(self, done: int, total: int, what: str = "") -> None:
+        """From :meth:`prepare`, optionally: ``done`` of ``total`` steps are finished and ``what``
+        (one short line) is under way, e.g. ``report_progress(3, 12, "NLP dig 2x3")``. The
+        harness shows it with an estimate of the time left (docs/running.md "Preparation"); it is
+        never stored, may be called as often as convenient (the harness keeps up to ten a
+        second) and does nothing outside a preparation."""
+        if self.progress_sink is not None:
+            self.progress_sink(PrepareProgress(int(done), int(total), str(what)))
 
     @classmethod
     def prepares(cls) -> bool:

@@ -18,7 +18,7 @@ from types import FrameType
 from typing import Any
 
 from .errors import PluginError
-from .planner import Planner
+from .planner import Planner, SharedFolder
 from .registry import PLANNERS, class_digest
 from .world import Scenario
 
@@ -50,6 +50,8 @@ class PlannerRef:
     #: A digest of the code that provides the planner (docs/DESIGN.md §6 "Plugin code"): ``sha256:…`` of a
     #: plugin file or of a distribution's files, ``earthbench`` for the built-in planners, '' unknown.
     code_digest: str = field(default="", compare=False)
+    #: The folders outside its own files its cases read (``Planner.reads``; docs/DESIGN.md §6 "Isolation").
+    reads: tuple[SharedFolder, ...] = field(default=(), compare=False)
 
     @classmethod
     def resolve(cls, name: str, overrides: dict[str, Any] | None = None) -> PlannerRef:
@@ -70,6 +72,7 @@ class PlannerRef:
             tracks=tuple(klass.tracks),
             prepares=klass.prepares(),
             code_digest=class_digest(klass),
+            reads=tuple(klass.reads),
         )
 
 

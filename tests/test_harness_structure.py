@@ -52,6 +52,58 @@ def test_the_store_and_progress_line_never_import_the_harness_and_the_harness_im
                 assert guarded, f"harness/{path.name} imports {module}.{name} at run time"
 
 
+def _reached(graph: dict[str, set[str]], start: str) -> set[str]:
+    seen, todo = set(), [start]
+    while todo:
+        for dep in graph.get(todo.pop(), ()):
+            if dep not in seen:
+                seen.add(dep)
+                todo.append(dep)
+    return seen
+
+
+def test_the_sandbox_runs_and_measures_and_judges_nothing():
+    """The harness's seams (docs/DESIGN.md §6): the sandbox (and its supervisor and fences) reaches
+    neither the referee nor the scoring rule, not even through another module or on first use;
+    the judge is a step of its own, and the closed loop's step is the step loop's."""
+    graph = _core_graph(in_functions=True)
+    for module in ("earthbench.harness.sandbox", "earthbench.harness.supervisor", "earthbench.harness.isolation"):
+        reached = _reached(graph, module)
+        assert not {m for m in reached if m.startswith(("earthbench.referee", "earthbench.scoring", "earthbench.harness.steps",
+                                                         "earthbench.harness.judge"))}, module
+    assert "earthbench.scoring" in graph["earthbench.harness.judge"]
+    assert "earthbench.referee" in _reached(graph, "earthbench.harness.steps")
+
+
+def test_the_harness_names_no_planner():
+    """A planner declares what its cases read (``Planner.reads``) as it declares its preparation:
+    the harness knows no planner by name."""
+    found = [(p.name, n) for p in sorted((ROOT / "harness").glob("*.py"))
+             for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"stl|nlp", line, re.I)]
+    assert found == []
+
+
+def test_run_case_imported_from_its_old_place_still_works_with_a_warning():
+    import warnings
+
+    import earthbench.harness
+    from earthbench.harness import sandbox
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert sandbox.run_case is earthbench.harness.run_case
+    assert [w.category for w in caught] == [DeprecationWarning] and "earthbench.harness.run" in str(caught[0].message)
+
+
+#: The longest a module of the harness may be (lines).
+HARNESS_MODULE_LINES = 600
+
+
+def test_no_harness_module_runs_over_600_lines():
+    long = {p.name: n for p in sorted((ROOT / "harness").glob("*.py")) if (n := len(p.read_text().splitlines())) > HARNESS_MODULE_LINES}
+    assert long == {}
+
+
 # -- the whole core ------------------------------------------------------------------------------
 
 
@@ -116,7 +168,7 @@ def test_the_graph_sees_every_kind_of_import():
     assert ("earthbench.records", "Case") in _all_imports(ROOT / "store.py", in_functions=False, type_checking=True)
     assert ("earthbench.records", "Case") not in _all_imports(ROOT / "store.py", in_functions=True)
     graph = _core_graph(in_functions=True)
-    assert {"earthbench.harness.cases", "earthbench.scoring"} <= graph["earthbench.harness.sandbox"]  # from .x, from ..x
+    assert {"earthbench.harness.environment", "earthbench.scoring"} <= graph["earthbench.harness.judge"]  # from .x, from ..x
     assert "earthbench.scoring" not in _core_graph(in_functions=False)["earthbench.verify"]  # imported on first use
     assert {"earthbench.scoring", "earthbench.harness.environment"} <= graph["earthbench.verify"]
     assert _cycle({"a": {"b"}, "b": {"a"}}) is not None and _cycle({"a": {"b"}, "b": set()}) is None

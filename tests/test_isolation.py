@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from earthbench.harness import LocalExecutor, build_cases, isolation, run_cases
+from earthbench.harness import LocalExecutor, build_cases, cgroups, isolation, run_cases
 from earthbench.publish import stamp
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
@@ -128,7 +128,7 @@ def test_case_cgroups_of_a_killed_harness_are_removed_by_the_next(tmp_path):
     probe.remove()
     for d in stale:
         os.mkdir(d)
-    isolation._clear_stale.cache_clear()
+    cgroups._clear_stale.cache_clear()
     isolation.CaseCgroup.create(isolation.support().cgroup, cores=(), memory_bytes=64 * 2**20).remove()
     assert not [d for d in stale if os.path.exists(d)]
 

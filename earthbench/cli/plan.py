@@ -70,7 +70,7 @@ def _fenced(args: argparse.Namespace) -> int:
     on this machine if there is one; the plan it returns is written as it is (invalid ones too)."""
     from ..errors import EarthbenchError
     from ..harness.prepare import find
-    from ..harness.sandbox import run_case
+    from ..harness.run import run_case
     from ..records import Case
 
     ref = resolve(args.planner, parse_config(args.config, info(args.planner)))

@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     load_plugins(args)
     from ..harness.prepare import PrepareError, ensure, forget, prepare_key
     from ..harness.probe import info, resolve
+    from .preparing import PrepareDisplay
 
     overrides = parse_config(args.config, info(args.planner)) if args.config else {}
     if args.suite:
@@ -57,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
     if args.again:
         forget(ref)
     try:
-        done = ensure(ref, budget, log=lambda m: print(f"earthbench: {m}", file=sys.stderr, flush=True))
+        shown = PrepareDisplay()
+        done = ensure(ref, budget, log=shown.log, on_progress=shown.progress)
     except PrepareError as exc:
         raise EarthbenchError(str(exc)) from None
     assert done is not None  # ref.prepares

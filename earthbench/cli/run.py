@@ -20,6 +20,7 @@ from ..harness.orchestrate import check_code
 from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
+from .preparing import PrepareDisplay
 from .runs import db_option, failure_filters
 
 HELP = """Run every (planner, scenario) case of a suite, each in a fresh process pinned to its own
@@ -188,10 +189,11 @@ def run(args: argparse.Namespace) -> int:
                 f"{suite.budget.memory_mb} MB per case, db {args.db}",
                 file=sys.stderr,
             )
+        shown = PrepareDisplay()  # a preparation's start, progress and end (docs/running.md "Preparation")
         old = signal.signal(signal.SIGTERM, _sigterm) if _main_thread() else None
         try:
             report = run_cases(cases, store, executor, rerun=args.rerun, progress=progress,
-                               log=None if args.quiet else (lambda m: print(f"earthbench: {m}", file=sys.stderr, flush=True)))
+                               log=None if args.quiet else shown.log, on_prepare=None if args.quiet else shown.progress)
         finally:
             if old is not None:
                 signal.signal(signal.SIGTERM, old)

@@ -4,7 +4,13 @@ Modules, each with one job:
 
 * :mod:`.cases` — :class:`~.cases.Prepared`, a planner's finished preparation; :class:`PlannerRef`, :class:`Case`,
   :class:`CaseResult` and ``REASONS`` are :mod:`earthbench.records`'s, exported here too;
-* :mod:`.sandbox` — :func:`run_case`: one case in a fresh, supervised process tree;
+* :mod:`.run` — :func:`run_case`: one case, run and measured in the sandbox (:mod:`.sandbox`, :mod:`.supervisor`,
+  :mod:`.tree`: a raw :class:`~.outcome.Outcome`; the pipe's messages checked by :mod:`.protocol`), then judged
+  (:mod:`.judge`); a closed loop's steps owned by :mod:`.steps`;
+* the fences: :mod:`.isolation` (what this machine allows; :class:`~.isolation.Fence`), :mod:`.namespaces`
+  (bubblewrap), :mod:`.cgroups` (v1 and v2 behind :class:`~.cgroups.CaseCgroup`), :mod:`.visible` (what a job may
+  read, with the folders its planner declares);
+* :mod:`.prepare` — a planner's preparation: its key, its folder, the job that makes it and its progress;
 * :mod:`.child` — the bootstrap and the code that runs inside a case's process;
 * :mod:`.environment` — :func:`environment`: the machine and software stamp of a run;
 * :mod:`.slots` — :func:`make_slots`, :class:`SlotPool`: disjoint core groups;
@@ -29,7 +35,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .environment import environment
     from .local import Executor, LocalExecutor
     from .orchestrate import RunReport, build_cases, run_cases, run_suite
-    from .sandbox import run_case
+    from .run import run_case
     from .slots import SlotPool, make_slots
 
 

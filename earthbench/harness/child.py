@@ -34,6 +34,9 @@ harness validates every message and owns every time: it starts the wall budget w
 over the scenario and stops it when the result arrives; ``detail`` (the child's own timings) is
 kept for information only. The child never judges its own plan.
 
+A preparation job may send ``{"event": "progress", "done": K, "total": N, "what": TEXT, "nonce": N}``
+before its result, when the planner calls ``Planner.report_progress`` (at most ten a second).
+
 A closed-loop configuration (docs/DESIGN.md §6) answers instead with ``{"event": "step",
 "plan": JSON, "nonce": N}`` per step; the harness executes the step on the truth and writes
 the next observation (with a fresh nonce) as the next line of stdin, or closes stdin to end the run. When ``step()``
@@ -185,7 +188,9 @@ def _prepare(cls: type, overrides: dict[str, Any], given: dict[str, str], send: 
     outcome, error, summary = "prepared", "", None
     try:
         job, given["nonce"] = read_input(sys.stdin.buffer.readline())
-        summary = cls(**overrides).prepare(Path(job["folder"]), int(job["jobs"]))
+        planner = cls(**overrides)
+        planner.progress_sink = _progress_sender(send)
+        summary = planner.prepare(Path(job["folder"]), int(job["jobs"]))
     except MemoryError:
         outcome, error = "memory", "MemoryError: the preparation exceeded its memory budget\n" + _short_tb()
     except BaseException as exc:  # noqa: BLE001 - SystemExit and KeyboardInterrupt too
@@ -197,6 +202,32 @@ def _prepare(cls: type, overrides: dict[str, Any], given: dict[str, str], send: 
         except (TypeError, ValueError) as exc:
             msg.update(outcome="error", error="prepare() returned what JSON cannot write:\n" + _tb(exc))
     send(msg)
+
+
+#: Seconds between two progress messages a preparation sends (the last step's always goes).
+PROGRESS_EVERY_S = 0.1
+
+
+def _progress_sender(send: Any) -> Any:
+    """Where ``Planner.report_progress`` goes in a preparation job: ``{"event": "progress", "done": K,
+    "total": N, "what": TEXT}`` on the message pipe, at most one per :data:`PROGRESS_EVERY_S`,
+    from any thread, with the planner's slips mended (K within 0..N, TEXT short) so an honest
+    planner never breaks the protocol (the harness checks each message all the same)."""
+    import threading
+
+    lock, last = threading.Lock(), [-PROGRESS_EVERY_S]
+
+    def sink(p: Any) -> None:
+        total = max(0, int(p.total))
+        done = min(max(0, int(p.done)), total)
+        with lock:
+            now = time.monotonic()
+            if now - last[0] < PROGRESS_EVERY_S and not 0 < done == total:
+                return
+            last[0] = now
+            send({"event": "progress", "done": done, "total": total, "what": str(p.what)[:200]})
+
+    return sink
 
 
 def _probe(spec: dict[str, Any], given: dict[str, str], send: Any) -> None:

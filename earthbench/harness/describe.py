@@ -73,6 +73,7 @@ def answer(spec: Mapping[str, Any], payload: Mapping[str, Any]) -> dict[str, Any
         doc = (klass.__doc__ or "").strip().splitlines()
         planners.append({"name": name, "version": str(klass.version), "tracks": list(klass.tracks),
                          "prepares": bool(klass.prepares()), "doc": doc[0] if doc else "",
+                         "reads": [[getattr(r, "env", None), getattr(r, "default", None)] for r in klass.reads],
                          "settings": [dataclasses.asdict(s) for s in settings_of(klass)]})
         configs[name] = {overrides_key(o): _config(klass, o) for o in [*asked.get(name, []), *asked.get("", [])]}
     return {"planners": planners, "configs": configs, "failures": failures}

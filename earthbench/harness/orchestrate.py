@@ -16,7 +16,7 @@ from .sandbox import CASE_TAG
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..progress import Progress
-    from .prepare import Prepared
+    from .prepare import Prepared, PrepareStatus
     from ..store import Store
     from ..suite import Suite
 
@@ -45,7 +45,7 @@ def _refuse_a_visible_store(cases: Sequence[Case], store: Store) -> None:
     """No case may see the store (docs/isolation.md): it lies in no folder a case can read."""
     from . import isolation
 
-    why = isolation.store_exposure(str(store.path), (c.planner.source for c in cases))
+    why = isolation.store_exposure(str(store.path), (c.planner for c in cases))
     if why:
         raise StoreError(why)
 
@@ -111,11 +111,13 @@ def run_cases(
     rerun: bool = False,
     progress: Progress | None = None,
     log: Callable[[str], None] | None = None,
+    on_prepare: Callable[[PrepareStatus], None] | None = None,
 ) -> RunReport:
     """Run every case not yet in ``store`` (all with ``rerun``) and store each as it finishes.
 
     Each planner that declares a preparation is prepared first, on this machine when the
-    executor runs cases here (``log`` hears when it starts and what it took), else by each
+    executor runs cases here (``log`` hears when it starts and what it took, ``on_prepare`` how
+    far it is while it runs), else by each
     worker before its first case of that planner (:mod:`.prepare`).
 
     Only this function writes the store, one transaction per case, so an executor may run
@@ -134,7 +136,7 @@ def run_cases(
     report.skipped = len(cases) - len(todo)
     _refuse_a_visible_store(todo, store)
     if getattr(executor, "prepares_here", False):
-        prepare_planners(todo, getattr(executor, "slots", [None])[0], log=log)
+        prepare_planners(todo, getattr(executor, "slots", [None])[0], log=log, on_prepare=on_prepare)
     if progress is not None:
         progress.total = len(todo)
         _say_isolation(executor, progress)
@@ -182,10 +184,11 @@ def _short(digest: str) -> str:
 
 
 def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, *,
-                     log: Callable[[str], None] | None = None) -> dict[str, Prepared | None]:
+                     log: Callable[[str], None] | None = None,
+                     on_prepare: Callable[[PrepareStatus], None] | None = None) -> dict[str, Prepared | None]:
     """Prepare, once each and before any case, every planner configuration of ``cases`` that
     declares a preparation and has none on this machine. A failure is logged; that planner's
-    cases then end as errors with its message (:func:`.sandbox.run_case`)."""
+    cases then end as errors with its message (:func:`.run.run_case`)."""
     from .prepare import PrepareError, ensure
 
     out: dict[str, Prepared | None] = {}
@@ -196,7 +199,7 @@ def prepare_planners(cases: Sequence[Case], cores: Sequence[int] | None = None, 
             continue
         seen.add((ref.name, ref.version, ref.config_hash))
         try:
-            out[ref.name] = ensure(ref, c.scenario.budget, cores, log=log)
+            out[ref.name] = ensure(ref, c.scenario.budget, cores, log=log, on_progress=on_prepare)
         except PrepareError as exc:
             out[ref.name] = None
             if log is not None:

@@ -42,10 +42,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 
 from ..errors import EarthbenchError
+from ..planner import PrepareProgress
 from ..registry import OWN_DISTRIBUTION
 from ..world import Budget
 from ..records import Case, CaseResult, PlannerRef, utc_now
@@ -54,8 +56,8 @@ from .environment import cache_folder
 
 ENV = "EARTHBENCH_PREPARED"
 #: ``EARTHBENCH_PREPARE=off``: no preparation is run or used; cases run without their planner's
-#: folder (a planner must work without it: stl-tamp then loads its NLPs uncompiled, with the
-#: same plans) and their runs store no preparation time.
+#: folder (a planner must work without it, with the same plans: e.g. by loading uncompiled what it
+#: would have compiled) and their runs store no preparation time.
 SWITCH = "EARTHBENCH_PREPARE"
 MANIFEST = "prepare.json"
 #: The most files and folders a preparation may leave (with ``prepare_disk_mb``, its disk budget).
@@ -66,6 +68,48 @@ MAX_DEPTH = 64
 
 class PrepareError(EarthbenchError):
     """A planner's preparation failed (its error, a timeout, a crash): its cases are not run."""
+
+
+@dataclass(frozen=True)
+class PrepareStatus:
+    """A running preparation, for a display: the planner, what it last said of its progress
+    (``Planner.report_progress``, checked as hostile data; None: nothing yet), the harness's
+    seconds since it started, and an estimate of the seconds left (None: no ground for one)."""
+
+    planner: str
+    progress: PrepareProgress | None
+    elapsed_s: float
+    left_s: float | None
+
+
+def estimate(progress: PrepareProgress | None, elapsed_s: float, last_s: float | None) -> float | None:
+    """Seconds a preparation has left: from the last recorded preparation of the planner on this
+    machine while it has not been outrun (steps may differ widely in cost, the whole does not),
+    else from the share of steps done so far; None without either."""
+    if last_s is not None and elapsed_s < last_s:
+        return last_s - elapsed_s
+    if progress is not None and progress.total > 0 and progress.done > 0:
+        return elapsed_s * (progress.total - progress.done) / progress.done
+    return None
+
+
+def last_recorded(name: str) -> float | None:
+    """The wall seconds of the latest finished preparation of planner ``name`` on this machine
+    (any version or configuration: the harness's own measurement, from its manifest), or None."""
+    best: tuple[str, float] | None = None
+    try:
+        folders = [p for p in root().iterdir() if p.name.startswith(f"{name}-") and not p.name.startswith(".")]
+    except OSError:
+        return None
+    for folder in folders:
+        try:
+            doc = json.loads((folder / MANIFEST).read_text())
+            when, wall = str(doc["started_at"]), float(doc["wall_s"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if doc.get("planner") == name and (best is None or when > best[0]):
+            best = (when, wall)
+    return best[1] if best is not None else None
 
 
 def root() -> Path:
@@ -133,11 +177,12 @@ _LOCKS_LOCK = threading.Lock()
 
 
 def ensure(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
-           stop: threading.Event | None = None, log: Callable[[str], None] | None = None) -> Prepared | None:
+           stop: threading.Event | None = None, log: Callable[[str], None] | None = None,
+           on_progress: Callable[[PrepareStatus], None] | None = None) -> Prepared | None:
     """The preparation of ``ref`` on this machine: found on disk, or run now (once per process
     and key; concurrent callers wait for it). None when the planner declares none or
-    ``$EARTHBENCH_PREPARE`` is ``off``. Raises
-    :class:`PrepareError` when it fails."""
+    ``$EARTHBENCH_PREPARE`` is ``off``. ``log`` hears when it starts and ends, ``on_progress``
+    how far it is while it runs (:class:`PrepareStatus`). Raises :class:`PrepareError` when it fails."""
     if not ref.prepares or os.environ.get(SWITCH, "").strip().lower() == "off":
         return None
     key = prepare_key(ref)
@@ -153,10 +198,12 @@ def ensure(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, 
         if key in _FAILED:  # one attempt per process: the next cases fail at once with its error
             raise PrepareError(_FAILED[key])
         if log is not None:
+            last = last_recorded(ref.name)
             log(f"preparing {ref.name} {ref.version} (config {ref.config_hash}) on this machine: "
-                f"up to {budget.prepare_s:g} s, {budget.prepare_memory_mb} MB of memory and {budget.prepare_disk_mb} MB of disk")
+                f"up to {budget.prepare_s:g} s, {budget.prepare_memory_mb} MB of memory and {budget.prepare_disk_mb} MB of disk"
+                + (f" (the last preparation of {ref.name} here took {last:.0f} s)" if last is not None else ""))
         try:
-            done = _run(ref, budget, cores, stop=stop)
+            done = _run(ref, budget, cores, stop=stop, on_progress=on_progress)
         except PrepareError as exc:
             if "interrupted" not in str(exc):
                 _FAILED[key] = str(exc)
@@ -198,9 +245,9 @@ def _key_lock(key: str, ref: PlannerRef, stop: threading.Event | None = None,
 
 def run_prepared_case(case: Case, cores: Sequence[int], *, stop: threading.Event | None = None,
                       startup_s: float | None = None) -> CaseResult:
-    """:func:`.sandbox.run_case` after the case's planner is prepared on this machine (what every
+    """:func:`.run.run_case` after the case's planner is prepared on this machine (what every
     executor calls): a failed preparation is this case's ``error``, with its message."""
-    from .sandbox import STARTUP_S, run_case
+    from .run import STARTUP_S, run_case
 
     try:
         prepared = ensure(case.planner, case.scenario.budget, cores, stop=stop) if case.prepare else None
@@ -210,14 +257,31 @@ def run_prepared_case(case: Case, cores: Sequence[int], *, stop: threading.Event
 
 
 def run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
-        stop: threading.Event | None = None) -> Prepared:
+        stop: threading.Event | None = None, on_progress: Callable[[PrepareStatus], None] | None = None) -> Prepared:
     """Run the preparation of ``ref`` now, in a fenced process (replacing a finished one)."""
     with _key_lock(prepare_key(ref), ref, stop):
-        return _run(ref, budget, cores, stop=stop)
+        return _run(ref, budget, cores, stop=stop, on_progress=on_progress)
+
+
+class _Reporter:
+    """A running preparation's :class:`PrepareStatus` for ``on_progress``: at each progress message
+    (checked by the sandbox) and, so a display keeps time when a planner says nothing, each second."""
+
+    def __init__(self, ref: PlannerRef, on_progress: Callable[[PrepareStatus], None] | None):
+        self.name, self.on_progress = ref.name, on_progress
+        self.t0, self.last = time.monotonic(), last_recorded(ref.name) if on_progress is not None else None
+        self.progress: PrepareProgress | None = None
+
+    def __call__(self, p: PrepareProgress | None = None) -> None:
+        if self.on_progress is None:
+            return
+        self.progress = p or self.progress
+        elapsed = time.monotonic() - self.t0
+        self.on_progress(PrepareStatus(self.name, self.progress, elapsed, estimate(self.progress, elapsed, self.last)))
 
 
 def _run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
-         stop: threading.Event | None = None) -> Prepared:
+         stop: threading.Event | None = None, on_progress: Callable[[PrepareStatus], None] | None = None) -> Prepared:
     """:func:`run` with the key's lock held."""
     from .sandbox import run_job
 
@@ -240,8 +304,14 @@ def _run(ref: PlannerRef, budget: Budget, cores: Sequence[int] | None = None, *,
     payload = json.dumps({"folder": str(out), "jobs": len(cores)}).encode() + b"\n"
     what = f"the preparation of {ref.name} {ref.version}"
     try:
-        o = run_job(job, payload, cores, job_budget, writable=str(out), stop=stop,
-                    watch=lambda: _over_budget(out, disk, budget.prepare_disk_mb))
+        report = _Reporter(ref, on_progress)
+
+        def watch() -> str:  # every second while it runs
+            report()
+            return _over_budget(out, disk, budget.prepare_disk_mb)
+
+        o = run_job(job, payload, cores, job_budget, writable=str(out), stop=stop, reads=ref.reads,
+                    on_progress=report if on_progress is not None else None, watch=watch)
         tail = o.log_tail
         if o.cancelled:
             raise PrepareError(f"the preparation of {ref.name} was interrupted")

@@ -3,7 +3,7 @@
 docs/DESIGN.md §6 "Plugin code". A plugin file (``--plugin FILE.py``) or another distribution's
 planner entry points are imported only inside a job that runs through the same fences as a case
 (:func:`.sandbox.run_job`): the *probe* imports the code, describes each planner (name, version,
-tracks, settings, whether it prepares) and resolves the configurations asked for, and answers
+tracks, settings, whether it prepares, the folders it reads) and resolves the configurations asked for, and answers
 with one JSON document. The harness reads that answer as hostile data (:func:`_validate`: types,
 sizes, names), recomputes every configuration hash itself, and keeps it in a cache keyed by a
 digest of the code (the file's bytes, or the distribution's files), the Python version and
@@ -33,15 +33,17 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ..errors import PluginError, UnknownNameError
+from ..planner import SharedFolder
 from ..registry import PLANNERS, class_digest, distribution_of, file_digest
 from ..records import PlannerRef
 from ..world import TRACKS, Budget, canonical_json
 from .describe import Setting, overrides_key, settings_of
 from .environment import cache_folder
+from .visible import MAX_SHARED, check_shared
 
 ENV = "EARTHBENCH_PROBES"
 #: The probe's protocol: a change of what it answers makes every cached answer stale.
-PROTOCOL = 1
+PROTOCOL = 2  # 2: each planner's ``reads``
 #: A probe imports a plugin and describes it: a minute, one core and 2 GB are plenty.
 BUDGET = Budget(wall_s=60.0, cores=1, memory_mb=2048)
 MAX_ANSWER = 1 << 20
@@ -72,6 +74,8 @@ class PlannerInfo:
     origin: str
     #: Resolved configurations: canonical JSON of the overrides -> the configuration (or an error text).
     configs: Mapping[str, Any] = field(default_factory=dict, compare=False)
+    #: The folders outside its own files its cases read (``Planner.reads``, checked: :func:`.visible.check_shared`).
+    reads: tuple[SharedFolder, ...] = ()
 
     def hints(self) -> dict[str, Any]:
         """Each setting's type as a ``typing`` hint, for converting ``--config KEY=VALUE``."""
@@ -314,6 +318,7 @@ def _validate(source: Source, doc: dict[str, Any]) -> Described:
             raise bad(f"planner {name!r} has tracks {_clean(repr(tracks), 80)}, not a list of {', '.join(TRACKS)}")
         if not isinstance(p.get("prepares"), bool):
             raise bad(f"planner {name!r}: 'prepares' is not true or false")
+        reads = _reads(name, p.get("reads", []), bad)
         settings = p.get("settings")
         if not isinstance(settings, list) or len(settings) > MAX_SETTINGS:
             raise bad(f"planner {name!r}: settings are not a list of at most {MAX_SETTINGS}")
@@ -323,9 +328,21 @@ def _validate(source: Source, doc: dict[str, Any]) -> Described:
             settings=tuple(_setting(name, s, bad) for s in settings),
             source=source.ident if source.kind == "file" else allowed[name],
             code_digest=source.digest, origin=source.label,
-            configs=_configs(name, configs.get(name), bad),
+            configs=_configs(name, configs.get(name), bad), reads=reads,
         )
     return Described(out, failed)
+
+
+def _reads(planner: str, reads: Any, bad: Any) -> tuple[SharedFolder, ...]:
+    """A planner's declared folders from the probe's answer (pairs of strings), checked as the harness's own."""
+    if not isinstance(reads, list) or len(reads) > MAX_SHARED or \
+            not all(isinstance(r, list) and len(r) == 2 and all(isinstance(x, str) for x in r) for r in reads):
+        raise bad(f"planner {planner!r}: 'reads' is not a list of at most {MAX_SHARED} pairs of strings")
+    out = tuple(SharedFolder(env, default) for env, default in reads)
+    why = check_shared(out)
+    if why:
+        raise bad(f"planner {planner!r}: {_clean(why)}")
+    return out
 
 
 def _setting(planner: str, s: Any, bad: Any) -> Setting:
@@ -384,7 +401,7 @@ def info_of_class(name: str, klass: type) -> PlannerInfo:
     return PlannerInfo(name=name, version=str(getattr(klass, "version", "0")), tracks=tuple(getattr(klass, "tracks", ())),
                        prepares=bool(klass.prepares()), doc=doc[0] if doc else "",  # type: ignore[attr-defined]
                        settings=tuple(settings_of(klass)), source=source, code_digest=class_digest(klass),
-                       origin=PLANNERS.origin(name))
+                       origin=PLANNERS.origin(name), reads=tuple(getattr(klass, "reads", ())))
 
 
 def catalogue(*, sources_only: bool = False) -> Catalogue:
@@ -478,6 +495,9 @@ def resolve(name: str, overrides: Mapping[str, Any] | None = None) -> PlannerRef
     if name in PLANNERS:
         inproc = PlannerRef.resolve(name, overrides)
         info(name)  # a plugin file or a distribution of the same name is a clash
+        why = check_shared(inproc.reads)
+        if why:
+            raise PluginError(f"planner {name!r} cannot run: {why}")
         return inproc
     base = info(name)
     key = overrides_key(overrides)
@@ -490,7 +510,8 @@ def resolve(name: str, overrides: Mapping[str, Any] | None = None) -> PlannerRef
     config = got["config"]
     return PlannerRef(name=name, version=base.version, source=base.source, config=config,
                       config_hash=hashlib.sha256(canonical_json(config).encode()).hexdigest()[:16],
-                      overrides=overrides, tracks=base.tracks, prepares=base.prepares, code_digest=base.code_digest)
+                      overrides=overrides, tracks=base.tracks, prepares=base.prepares, code_digest=base.code_digest,
+                      reads=base.reads)
 
 
 _SIMPLE: dict[str, Any] = {"bool": bool, "int": int, "float": float, "str": str, "none": type(None), "any": Any}

@@ -1,7 +1,8 @@
 """Closed-loop execution, in the harness process: each step of a planner executed on the truth.
 
 A closed-loop planner (docs/DESIGN.md §6) answers each :class:`~earthbench.planner.Observation`
-with its next actions. :class:`StepLoop` takes each answer as the harness received it, checks
+with its next actions. :class:`StepLoop` is the one loop that owns a step (:meth:`StepLoop.step`),
+with the sandbox's hooks around it (its clock and I/O, its freezer). It takes each answer as the harness received it, checks
 it (a readable plan, not empty, starting no earlier than the executed actions end, within the
 plan-size rule), executes it on the scenario's truth with the referee's
 :class:`~earthbench.referee.Execution` (the verdict :func:`~earthbench.referee.judge` gives the
@@ -26,6 +27,7 @@ from ..planner import Observation, Planner
 from ..referee import Execution, Verdict
 from ..sensing import Stations, observe, scan_seconds
 from ..world import Scenario
+from .protocol import StepHooks
 
 
 def observation(truth: Scenario, verdict: Verdict, step: int, stations: Stations | None = None) -> Observation:
@@ -107,7 +109,28 @@ class StepLoop:
             self.ended = f"the planner did not say done within the step cap of {self.max_steps} steps; its executed actions were judged"
         return ""
 
-    def said_done(self, compute_s: float) -> None:
+    def step(self, plan_json: str, compute_s: float, hooks: StepHooks) -> str:
+        """One step, whole, in this one place: the case stands still (``hooks.pause``), the step's
+        actions are checked and executed on the truth and the next observation built, the case
+        goes on (``hooks.resume``), and the observation is handed over (``hooks.observe``) or the
+        run ends (``hooks.end``: the step cap, a broken rule). ``compute_s``: the harness-measured
+        seconds of the call that answered. Returns what is wrong with the step ('' when executed)."""
+        hooks.pause()
+        try:
+            problem = self.take(plan_json, compute_s)
+            data = self.next_observation() if not (problem or self.ended) else b""
+        finally:
+            hooks.resume()
+        if problem:
+            return problem
+        if self.ended:
+            hooks.end()
+        else:
+            hooks.observe(data)
+        return ""
+
+    def no_actions(self, compute_s: float) -> None:
+        """A call that ended without actions: the planner said done, or a deadline or a fault cut it short."""
         self.steps.append((0, compute_s))
 
     def next_observation(self) -> bytes:
@@ -130,12 +153,32 @@ def run_closed_loop(planner: Planner, truth: Scenario, *, max_steps: int | None 
     loop = StepLoop(truth, max_steps=max_steps or truth.budget.max_steps, max_bytes=2**62)
     first = observe(truth)
     obs = Observation(first)
+    hooks = _InProcess()
     while not loop.ended:
         actions = planner.step(obs)
         if actions is None:
             break
-        problem = loop.take(actions.to_json(), 0.0)
+        problem = loop.step(actions.to_json(), 0.0, hooks)
         if problem:
             raise PlanFormatError(problem)
-        obs = Observation.from_dict(json.loads(loop.next_observation()), first)
+        if not loop.ended:
+            obs = Observation.from_dict(json.loads(hooks.data), first)
     return loop.plan()
+
+
+class _InProcess:
+    """The hooks of :func:`run_closed_loop`: no process to pause, the observation kept for the next call."""
+
+    data = b""
+
+    def pause(self) -> None:
+        pass
+
+    def resume(self) -> None:
+        pass
+
+    def observe(self, data: bytes) -> None:
+        self.data = data
+
+    def end(self) -> None:
+        pass

@@ -277,6 +277,7 @@ class SeparatePlanner(Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
+    reads = StlTampPlanner.reads  # stl-tamp's built NLPs
     #: 0.4.3: ties in the tour and in the rule's highest point broken in the site's own frame
     #: (:func:`site_frame`), and stl-tamp 0.10.2's rounding-proof tiling; plans on the public
     #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.

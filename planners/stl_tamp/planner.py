@@ -12,7 +12,7 @@ import numpy as np
 
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
-from earthbench.planner import Observation, Planner, closed_loop_setting
+from earthbench.planner import Observation, Planner, SharedFolder, closed_loop_setting
 from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
@@ -185,6 +185,7 @@ class StlTampPlanner(Planner):
     version = "0.10.5"
     tracks = ("backhoe",)
     Config = Config
+    reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
 
     # -- shapes ---------------------------------------------------------------------------------
     def local_shape(self, scenario: Scenario) -> Shape:
@@ -246,13 +247,16 @@ class StlTampPlanner(Planner):
         if compiled.compiler() is None:  # nothing to compile with: cases load their NLPs as before
             out["note"] = "no C compiler: the NLPs stay uncompiled (the same plans, solved more slowly)"
             return out
-        for label, shape, exc, truck in self.prepared_shapes():
+        shapes = self.prepared_shapes()
+        for i, (label, shape, exc, truck) in enumerate(shapes):
+            self.report_progress(i, len(shapes), f"NLP {label}: building and compiling")
             t0 = time.perf_counter()
             name, fns = build_functions(shape, exc, truck)
             t_build = time.perf_counter() - t0
             took = compiled.build(fns, folder, name, jobs=jobs, log=lambda m: print(m, flush=True))
             out["nlps"][label] = {"key": name, "build_s": round(t_build, 2), "compile_s": {k: round(v, 2) for k, v in took.items()}}
             print(f"{label}: built in {t_build:.1f} s, compiled in {sum(took.values()):.1f} s of compiler time", flush=True)
+        self.report_progress(len(shapes), len(shapes), "done")
         return out
 
     def _use_prepared(self) -> None:

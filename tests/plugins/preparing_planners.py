@@ -145,3 +145,86 @@ class PrepareBigFile(_Hostile):
         with open(folder / "big", "wb") as f:
             os.posix_fallocate(f.fileno(), 0, 64 * 2**20)
         return {}
+
+
+# -- preparations that say how far they are (Planner.report_progress) -----------------------------
+class PrepareReports(Planner):
+    """Reports three steps, 0.3 s apart, with a name that tries to move the terminal's cursor, and
+    a slip an honest planner can make (more done than in all), which the bootstrap mends."""
+
+    name = "t-prepare-reports"
+
+    def prepare(self, folder, jobs=1):
+        for k in range(3):
+            self.report_progress(k, 3, f"\x1b[2Jstep {k}\nof three")
+            time.sleep(0.3)
+        self.report_progress(4, 3, "done")
+        return {"steps": 3}
+
+    def plan(self, scenario):
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+def _nonce() -> str | None:
+    """The nonce of the job's input, dug out of the bootstrap's frames (as any code in the process can)."""
+    frame = sys._getframe()
+    while frame is not None:
+        given = frame.f_locals.get("given")
+        if isinstance(given, dict) and given.get("nonce"):
+            return given["nonce"]
+        frame = frame.f_back
+    return None
+
+
+def _raw(msg: dict) -> None:
+    """A message written straight on the harness's pipe, past the bootstrap's checks."""
+    os.write(int(sys.argv[1]), (json.dumps({**msg, "nonce": _nonce()}) + "\n").encode())
+
+
+class PrepareFloodsProgress(Planner):
+    """Writes 5,000 well-formed progress messages at once: the harness keeps ten a second."""
+
+    name = "t-prepare-floods"
+
+    def prepare(self, folder, jobs=1):
+        for k in range(5000):
+            _raw({"event": "progress", "done": k, "total": 5000, "what": "flood"})
+        time.sleep(0.5)
+        return {}
+
+    def plan(self, scenario):
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+class PrepareBadProgress(Planner):
+    """Writes the progress message its configuration names, past the bootstrap's checks."""
+
+    name = "t-prepare-bad-progress"
+
+    @dataclass(frozen=True)
+    class Config:
+        kind: str = "types"
+
+    def prepare(self, folder, jobs=1):
+        msg = {"types": {"done": "1", "total": 3}, "order": {"done": 4, "total": 3},
+               "huge": {"done": 1, "total": 3, "what": "x" * 5000}, "nonce": {"done": 1, "total": 3}}[self.config.kind]
+        if self.config.kind == "nonce":
+            os.write(int(sys.argv[1]), (json.dumps({"event": "progress", **msg, "nonce": "0" * 32}) + "\n").encode())
+        else:
+            _raw({"event": "progress", **msg})
+        time.sleep(2.0)
+        return {}
+
+    def plan(self, scenario):
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
+
+
+class PlanReportsProgress(Planner):
+    """A case (not a preparation) that sends a progress message: a protocol fault."""
+
+    name = "t-plan-progress"
+
+    def plan(self, scenario):
+        _raw({"event": "progress", "done": 1, "total": 2, "what": "planning"})
+        time.sleep(2.0)
+        return Plan(predicted=Prediction(volume=0.0, makespan=0.0))
