@@ -130,7 +130,7 @@ def machine_class(name: str) -> MachineClass:
     """The machine class ``name``; an unknown name suggests the close ones."""
     known = machine_classes()
     if name not in known:
-        raise UnknownNameError("machine class", name, known)
+        raise UnknownNameError("machine class name", name, known)
     return known[name]
 
 
