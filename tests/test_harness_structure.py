@@ -138,7 +138,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "world": ("world", "machines", "classes", "plan"),
     "contract": ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal"),
     "judge": ("referee",),
-    "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "identity",
+    "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "identity", "calibration",
                 "provenance"),
     "running": ("harness", "playback", "figures", "scaling", "replay", "runner", "dask_executor"),
     "publishing": ("verify", "merge", "best", "board", "publish", "compare"),
