@@ -96,3 +96,14 @@ def test_the_calibration_s_figures_are_the_referee_s_and_a_slower_machine_leaves
     slow = dataclasses.replace(mc, excavator=dataclasses.replace(mc.excavator, min_stroke_time=14.0))
     monkeypatch.setattr("earthbench.calibration.machine_classes", lambda: {"20t": slow})
     assert main(["calibration"]) == 1
+
+
+@pytest.mark.parametrize("name", ["stl-tamp", "separate"])
+def test_the_optimisation_planners_refuse_another_class_at_once(name):
+    """Their NLPs and sizes are the compact machines' (on the 20-t class stl-tamp loaded nothing)."""
+    from earthbench.errors import EarthbenchError
+    from earthbench.registry import PLANNERS
+
+    big = fit(rbf(0, 4.0 / 3.375, n_bases=30), machine_class("20t"), 4.0)
+    with pytest.raises(EarthbenchError, match="compact machine class only.*'20t'"):
+        PLANNERS.get(name)().plan(big)
