@@ -33,8 +33,8 @@ PINNED = {
     "standard-20t-realistic": ("eac742cebbab4716a3aafc0a1bec880688e1219e11bbed503150962aaed76a19", 36),
 }
 #: The 20-t class's loader suites (docs/machine-classes.md).
-PILE_20T = {"pile-20t": ("54f7806cca2f35395dbb4d5a0b14e5b1c9d3b70668cae0a4d7b107a4f12da6bf", 20),
-            "pile-20t-realistic": ("6cc8ada57156b78949232adc55633da1407770a4569d3f6280d59bbc42ea72d3", 12)}
+PILE_20T = {"pile-20t": ("2c48a5655a1d52191ed88701491e1d2d4b5d40ec1777c4e41116c001c596e1a0", 20),
+            "pile-20t-realistic": ("9de797dd32651d5294fe022f66b5237ca8dea007a429668a165fe9a0a6f81d31", 12)}
 #: The realistic loader suite (a wheel-loader suite, so outside the backhoe checks below).
 PILE_REALISTIC = ("03f40951c961f54705214a82d1d3a5c19c2ff3163efdf1e162ad609cbc602711", 12)
 
