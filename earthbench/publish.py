@@ -129,7 +129,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         spot_checks = latest_spot_checks(store)
         for sec, ((suite, track), srun) in zip(sections, groups):
             st = sec["stamp"] = stamp(srun, suite, track, generated, spot_checks, seed_note)
-            st.production = production_note({store.scenario(d).machines.machine_class for d in srun["scenario_digest"].unique()}, track)
+            classes = {store.scenario(d).machines.machine_class for d in srun["scenario_digest"].unique()}
+            st.classes, st.production = ", ".join(sorted(classes)), production_note(classes, track)
             sec["run_rows"] = run_rows(srun.sort_values("id"))
             sec["scale_rows"] = mark_mixed_solve_columns(sec["scale_rows"], st.mixed) if sec["scale_rows"] else sec["scale_rows"]
         viewer = viewer_section(store, runs, replays)

@@ -177,6 +177,7 @@ class Stamp:
     scenarios: int = 0  #: scenarios of the suite's table (for the separation note)
     rules: str = ""  #: the version of the referee's rules that judged the runs (docs/referee.md "Rules versions")
     production: str = ""  #: what the production column counts, and the handbook's band of a calibrated class
+    classes: str = ""  #: the machine classes of the table's scenarios (docs/machine-classes.md)
 
     @property
     def mixed(self) -> bool:
@@ -189,6 +190,7 @@ class Stamp:
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
             *([f"referee rules: {self.rules}"] if self.rules else []),
+            *([f"machine class: {self.classes}"] if self.classes else []),
             *([f"production: {self.production}"] if self.production else []),
             *([f"scenarios: {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
             *([f"code: {'; '.join(self.builds)}"] if self.builds else [f"project commit: {commits or 'unknown'}"]),
