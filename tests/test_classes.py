@@ -107,3 +107,13 @@ def test_the_optimisation_planners_refuse_another_class_at_once(name):
     big = fit(rbf(0, 4.0 / 3.375, n_bases=30), machine_class("20t"), 4.0)
     with pytest.raises(EarthbenchError, match="compact machine class only.*'20t'"):
         PLANNERS.get(name)().plan(big)
+
+
+def test_production_is_bank_m3_an_hour_and_the_stamp_names_the_class_s_band():
+    from earthbench.aggregate import production
+    from earthbench.board.tables import production_note
+
+    assert production(18.0) == pytest.approx(200.0) and production(float("inf")) == 0.0
+    note = production_note({"20t"}, "backhoe")
+    assert "bank m³ an hour" in note and "44–107 m³/h" in note
+    assert "uncalibrated" in production_note({"compact"}, "backhoe")
