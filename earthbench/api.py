@@ -40,6 +40,8 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     # the realistic track
     "earthbench.soil": ("MATERIALS", "Material", "draw", "nominal", "slump"),
     "earthbench.sensing": ("observe",),
+    # machine classes (docs/machine-classes.md): a generator or script may fit a scenario to one
+    "earthbench.classes": ("MachineClass", "fit", "machine_class", "machine_classes"),
     # metrics: a metric plugin is a callable (scenario, plan, verdict) -> dict; the scoring rule
     "earthbench.scoring": ("evaluate", "is_success", "run_order", "target_share", "time_per_target", "time_to_target"),
     # scripts and notebooks: run suites, read results

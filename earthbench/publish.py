@@ -68,7 +68,8 @@ from .board.selection import (closed_configs, histories, limit_to_seeds, load_ru
                               seed_list, shown_runs, solver_labels)
 from .board.tables import (FAILURE_COLUMNS, FORMULA_STARTS, PROVENANCE, UNSEPARABLE, Stamp, builds_of, load_text,
                            mark_mixed_solve_columns, mark_unseparable, markdown_more_tables, markdown_page, markdown_table,
-                           md_escape, section_tables, slug, spreadsheet_safe, stamp, table_rows, table_sections, write_csv)
+                           md_escape, production_note, section_tables, slug, spreadsheet_safe, stamp, table_rows, table_sections,
+                           write_csv)
 from .generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
 from .scaling import SCALE_CAPTION, scale_section
 from .store import Store, suite_members
@@ -128,6 +129,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         spot_checks = latest_spot_checks(store)
         for sec, ((suite, track), srun) in zip(sections, groups):
             st = sec["stamp"] = stamp(srun, suite, track, generated, spot_checks, seed_note)
+            classes = {store.scenario(d).machines.machine_class for d in srun["scenario_digest"].unique()}
+            st.classes, st.production = ", ".join(sorted(classes)), production_note(classes, track)
             sec["run_rows"] = run_rows(srun.sort_values("id"))
             sec["scale_rows"] = mark_mixed_solve_columns(sec["scale_rows"], st.mixed) if sec["scale_rows"] else sec["scale_rows"]
         viewer = viewer_section(store, runs, replays)

@@ -172,7 +172,7 @@ def observe(truth: Scenario, *, pose: Pose | None = None, step: int = 0, station
         return dataclasses.replace(truth, **changes)
     changes["sensing"] = None
     if truth.soil is not None:
-        changes["soil"] = nominal(truth.soil.material)
+        changes["soil"] = nominal(truth.soil.material, truth.machines.machine_class)
     if truth.sensing is not None:
         where = pose if pose is not None else truth.machines.pose(truth.worker)
         changes["terrain"] = scan(truth, truth.sensing, where, step if stations is None else stations.noise_step(where, step))

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from .classes import DEFAULT_CLASS, machine_class as _class_named
 from .errors import ScenarioError
 from .world import Soil
 
@@ -67,16 +68,27 @@ def _material(name: Any, where: str) -> Material:
     return MATERIALS[name]
 
 
-def nominal(material: str) -> Soil:
-    """The class's nominal soil: the middle of each range (what a planner may assume)."""
+def _fill_loose(m: Material, material: str, machines: str) -> tuple[float, float]:
+    """The handbook fill factor's range of ``material`` for the buckets of the machine class
+    ``machines`` (its ``fill_loose`` table, docs/machine-classes.md; else the material's)."""
+    if machines == DEFAULT_CLASS:
+        return m.fill_loose
+    return _class_named(machines).fill_loose.get(material, m.fill_loose)
+
+
+def nominal(material: str, machines: str = DEFAULT_CLASS) -> Soil:
+    """The class's nominal soil: the middle of each range (what a planner may assume); the
+    fill factor's for the buckets of the machine class ``machines``."""
     m = _material(material, "soil")
-    mid = [(a + b) / 2 for a, b in (m.fill_loose, m.swell, m.repose_deg, m.hard_depth)]
+    fill = _fill_loose(m, material, machines)
+    mid = [(a + b) / 2 for a, b in (fill, m.swell, m.repose_deg, m.hard_depth)]
     return Soil(material, round(mid[0] / mid[1], 6), round(mid[1], 6), round(mid[2], 6), round(mid[3], 6), m.hard_penetration)
 
 
-def draw(spec: dict[str, Any], seed: int, where: str = "soil") -> Soil:
+def draw(spec: dict[str, Any], seed: int, where: str = "soil", machines: str = DEFAULT_CLASS) -> Soil:
     """A site's true soil: ``spec["material"]``'s ranges sampled with ``seed`` (any other key
-    of ``spec`` — a field of :class:`~earthbench.world.Soil` — fixes that value instead).
+    of ``spec`` — a field of :class:`~earthbench.world.Soil` — fixes that value instead), the
+    fill factor's range that of the machine class ``machines``' buckets.
 
     Values are rounded to 1e-6 so that a seed gives the same scenario digest everywhere.
     """
@@ -88,7 +100,8 @@ def draw(spec: dict[str, Any], seed: int, where: str = "soil") -> Soil:
         if key not in fields:
             raise ScenarioError(f"{where}.{key} is unknown; the fields of soil: {', '.join(sorted(fields))}")
     u = np.random.default_rng([int(seed), 0x5011]).uniform(size=4)
-    pick = [a + f * (b - a) for f, (a, b) in zip(u, (m.fill_loose, m.swell, m.repose_deg, m.hard_depth))]
+    fill = _fill_loose(m, spec["material"], machines)
+    pick = [a + f * (b - a) for f, (a, b) in zip(u, (fill, m.swell, m.repose_deg, m.hard_depth))]
     values: dict[str, Any] = {
         "material": spec["material"],
         "fill_factor": round(pick[0] / pick[1], 6),

@@ -20,6 +20,8 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     success_threshold = 0.9          # optional
     planners = ["greedy"]            # optional; default: every planner supporting the track
     prepare = false                  # optional: run no planner's preparation (docs/DESIGN.md §6)
+    class = "20t"                    # optional machine class of every family (docs/machine-classes.md)
+    classes = ["compact", "20t"]     # or: sweep each family over classes (renamed FAMILY@CLASS)
     [budget]                         # earthbench.world.Budget
     wall_s = 60
     cores = 2
@@ -34,6 +36,7 @@ Format (every key is checked; a typo is a :class:`SuiteError` that suggests the 
     generator = "rbf"
     targets = [0.56, 1.12]           # m³
     seeds = [0, 1]                   # or "0-9"
+    class = "20t"                    # optional: this family's machine class (targets: its bank m³)
     [family.params]
     n_bases = 14
     [family.soil]                    # optional (realistic track): a material, drawn per seed
@@ -73,6 +76,7 @@ from typing import Any
 from .errors import EarthbenchError, SuiteError, UnknownNameError
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
 from .seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
+from .classes import DEFAULT_CLASS, fit, machine_class
 from .soil import draw
 from .world import TRACKS, Budget, Scenario, Sensing
 
@@ -83,8 +87,8 @@ DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
 #: when the suite is loaded, before anything is generated.
 MAX_CELLS = 4_000_000
 _TOP_KEYS = ("name", "description", "track", "success_threshold", "planners", "budget", "family", "config", "include",
-             "prepare")
-_FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params", "soil", "sensing")
+             "prepare", "class", "classes")
+_FAMILY_KEYS = ("name", "generator", "targets", "seeds", "params", "soil", "sensing", "class")
 _BUDGET_KEYS = tuple(f.name for f in dataclasses.fields(Budget))
 
 
@@ -112,6 +116,9 @@ class Family:
     params: dict[str, Any] = field(default_factory=dict, hash=False)
     soil: dict[str, Any] | None = field(default=None, hash=False)
     sensing: dict[str, Any] | None = field(default=None, hash=False)
+    #: The machine class (:mod:`earthbench.classes`): its scenarios are the generator's, fitted
+    #: to the class (:func:`earthbench.classes.fit`); the targets are the class's bank m³.
+    machine_class: str = DEFAULT_CLASS
 
     def realism(self, seed: int, scan_seed: int | None = None) -> dict[str, Any]:
         """The scenario sections of the realistic track for ``seed``: the soil drawn from its
@@ -119,7 +126,7 @@ class Family:
         (or with ``scan_seed``: a sealed draw seeds the two apart)."""
         out: dict[str, Any] = {}
         if self.soil is not None:
-            out["soil"] = draw(self.soil, seed, f"family {self.name!r} soil")
+            out["soil"] = draw(self.soil, seed, f"family {self.name!r} soil", self.machine_class)
         if self.sensing is not None:
             out["sensing"] = Sensing(**{"seed": seed if scan_seed is None else scan_seed, **self.sensing})
         return out
@@ -206,10 +213,10 @@ class Suite:
         as the public ones do, so no feature of it tells it apart)."""
         key = self.sealing
         if key is None:
-            return gen(seed, target, **fam.params)
+            return _fitted(gen(seed, _generator_target(fam, target), **fam.params), fam, target)
         # as a public seed serves every target of its family, so does its sealed draw's (a /1 key drew per target)
         public_id = f"{key.suite}/{fam.name}/s{seed}" + (f"/v{target:g}" if key.schema == LEGACY_SCHEMA else "")
-        sc = gen(key.derive(public_id, "terrain"), target, **fam.params)
+        sc = _fitted(gen(key.derive(public_id, "terrain"), _generator_target(fam, target), **fam.params), fam, target)
         if not isinstance(sc, Scenario):
             return sc  # refused by the caller, as for a public suite
         sc = sc.replace(**fam.realism(key.derive(public_id, "soil"), key.derive(public_id, "scan")))
@@ -233,6 +240,21 @@ class Suite:
     @property
     def _where(self) -> str:
         return f"suite {self.name!r}" + (f" ({self.path})" if self.path else "")
+
+
+def _generator_target(fam: Family, target: float) -> float:
+    """The target to generate a family's site with: the class's target shrunk by its scale³, so
+    that the generator's site, grown by the scale, holds what it promises for the target."""
+    if fam.machine_class == DEFAULT_CLASS:
+        return target
+    return round(target / machine_class(fam.machine_class).scale ** 3, 9)
+
+
+def _fitted(sc: Any, fam: Family, target: float) -> Any:
+    """A generated scenario fitted to the family's machine class (the compact class's as it is)."""
+    if fam.machine_class == DEFAULT_CLASS or not isinstance(sc, Scenario):
+        return sc
+    return fit(sc, machine_class(fam.machine_class), target)
 
 
 # -- sealed draws (earthbench.seal holds the key and the site transform) -------------------------
@@ -558,9 +580,36 @@ def _family(fd: Any, n: int, where: str, path: str) -> Family:
         raise SuiteError(f"{fwhere}: params must be a table")
     params = _check_params(gen, params, fwhere, path)
     fam = Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params,
-                 fd.get("soil"), fd.get("sensing"))
+                 fd.get("soil"), fd.get("sensing"), _class_name(fd.get("class", DEFAULT_CLASS), fwhere))
     _check_realism(fam, fwhere)
     return fam
+
+
+def _class_name(name: Any, where: str) -> str:
+    """A machine class's name, checked (an unknown one suggests the close names)."""
+    if not isinstance(name, str):
+        raise SuiteError(f"{where}: class must be the name of a machine class, got {name!r:.40}")
+    try:
+        machine_class(name)
+    except EarthbenchError as exc:
+        raise SuiteError(f"{where}: {exc}") from None
+    return name
+
+
+def _with_classes(doc: dict[str, Any], families: list[Family], where: str) -> list[Family]:
+    """The families under the suite's ``class`` (for those that name none) or swept over its
+    ``classes`` (each family once per class, renamed ``FAMILY@CLASS``)."""
+    if "class" in doc and "classes" in doc:
+        raise SuiteError(f"{where}: give class or classes, not both")
+    if "class" in doc:
+        name = _class_name(doc["class"], where)
+        return [f if f.machine_class != DEFAULT_CLASS else dataclasses.replace(f, machine_class=name) for f in families]
+    if "classes" in doc:
+        names = doc["classes"]
+        if not isinstance(names, list) or not names or len(set(map(str, names))) != len(names):
+            raise SuiteError(f"{where}: classes must be a non-empty list of distinct machine class names, got {names!r:.60}")
+        return [dataclasses.replace(f, name=f"{f.name}@{n}", machine_class=_class_name(n, where)) for n in names for f in families]
+    return families
 
 
 def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tuple[str, ...] = ()) -> Suite:
@@ -597,6 +646,7 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
     families = [_family(fd, n, where, path) for n, fd in enumerate(fams_doc)]
     if "include" in doc:
         families.extend(_included_families(doc["include"], where, path, track, _stack + (name,)))
+    families = _with_classes(doc, families, where)
     if len({f.name for f in families}) != len(families):
         raise SuiteError(f"{where}: two families share a name; scenario ids would clash")
     desc = doc.get("description", "")

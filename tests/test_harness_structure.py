@@ -187,10 +187,10 @@ def test_no_import_cycle_among_the_core_modules_counting_imports_made_on_first_u
 #: even for type checking, nor in a function body); within a layer, no cycle.
 LAYERS: dict[str, tuple[str, ...]] = {
     "base": ("errors", "lazy", "stats", "plotting", "profiles", "assets", "api"),
-    "world": ("world", "plan"),
+    "world": ("world", "machines", "classes", "plan"),
     "contract": ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal"),
     "judge": ("referee",),
-    "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "identity",
+    "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "identity", "calibration",
                 "provenance"),
     "running": ("harness", "playback", "figures", "scaling", "replay", "runner", "dask_executor"),
     "publishing": ("verify", "merge", "best", "board", "publish", "compare"),

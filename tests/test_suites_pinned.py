@@ -29,7 +29,12 @@ PINNED = {
     "bench-realistic": ("885c776aee8be79d087be2459681ae462fd6a0e94d043920e481cb07b4877943", 12),
     "dem-realistic": ("ec1d302612121fcb2e84b1753fdf81fada050ad8e611405a284636bb94813cf2", 12),
     "standard-realistic": ("bada4b0e98754785279bfe0c9ed464d53e7f97ec67b24c7dc68243d98b0de11c", 48),
+    "standard-20t": ("f30b58c4d26ce734386fb206492d0c533ac326a597c769407bc0bc16ac84ec60", 90),
+    "standard-20t-realistic": ("eac742cebbab4716a3aafc0a1bec880688e1219e11bbed503150962aaed76a19", 36),
 }
+#: The 20-t class's loader suites (docs/machine-classes.md).
+PILE_20T = {"pile-20t": ("2c48a5655a1d52191ed88701491e1d2d4b5d40ec1777c4e41116c001c596e1a0", 20),
+            "pile-20t-realistic": ("9de797dd32651d5294fe022f66b5237ca8dea007a429668a165fe9a0a6f81d31", 12)}
 #: The realistic loader suite (a wheel-loader suite, so outside the backhoe checks below).
 PILE_REALISTIC = ("03f40951c961f54705214a82d1d3a5c19c2ff3163efdf1e162ad609cbc602711", 12)
 
@@ -134,3 +139,11 @@ def test_include_errors(tmp_path):
         parse_suite('name = "x"\ninclude = "bench"\n')
     with pytest.raises(SuiteError, match="at least one"):
         parse_suite('name = "x"\n')
+
+
+@pytest.mark.parametrize("name", sorted(PILE_20T))
+def test_the_20t_loader_suites_are_pinned_and_of_their_class(name):
+    s = load_suite(name)
+    assert (s.digest, len(s.scenarios)) == PILE_20T[name]
+    assert {sc.machines.machine_class for sc in s.scenarios} == {"20t"}
+    assert all(sc.machines.truck.capacity >= sc.task.target_volume for sc in s.scenarios)

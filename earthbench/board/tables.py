@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ..aggregate import RANKING_RULE, RANK_ALPHA, ci_text
+from ..classes import machine_classes
 from ..provenance import build_text
 from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
 from ..store import rules_versions
@@ -77,6 +78,8 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
                 ("Time per target m³, s (median)",
                  ci_text(r["time_per_target_m3_median"], r["time_per_target_m3_lo"], r["time_per_target_m3_hi"])
                  + (f"; {r['short_of_target']} short" if r["short_of_target"] else ""), r["time_per_target_m3_median"]),
+                ("Production, bank m³/h (median)", ci_text(r["production_m3h_median"], r["production_m3h_lo"],
+                                                           r["production_m3h_hi"], ".0f"), r["production_m3h_median"]),
                 ("× lower bound", ci_text(r["time_per_target_m3_ratio_median"], r["time_per_target_m3_ratio_lo"],
                                           r["time_per_target_m3_ratio_hi"], ".2f"), r["time_per_target_m3_ratio_median"]),
                 ("× target bound", ci_text(r["time_per_target_m3_bound_ratio_median"], r["time_per_target_m3_bound_ratio_lo"],
@@ -173,6 +176,8 @@ class Stamp:
     load: str = ""  #: the machine's load around the runs' cases
     scenarios: int = 0  #: scenarios of the suite's table (for the separation note)
     rules: str = ""  #: the version of the referee's rules that judged the runs (docs/referee.md "Rules versions")
+    production: str = ""  #: what the production column counts, and the handbook's band of a calibrated class
+    classes: str = ""  #: the machine classes of the table's scenarios (docs/machine-classes.md)
 
     @property
     def mixed(self) -> bool:
@@ -185,6 +190,8 @@ class Stamp:
             f"suite digest: {self.suite_digest}",
             f"success threshold: volume ratio ≥ {self.threshold:g} with a valid plan",
             *([f"referee rules: {self.rules}"] if self.rules else []),
+            *([f"machine class: {self.classes}"] if self.classes else []),
+            *([f"production: {self.production}"] if self.production else []),
             *([f"scenarios: {self.seeds} of the suite only (every rate and median is over those)"] if self.seeds else []),
             *([f"code: {'; '.join(self.builds)}"] if self.builds else [f"project commit: {commits or 'unknown'}"]),
             f"CPU: {'; '.join(self.cpus) or 'unknown'}" + (" (solve times mixed from several CPU models)" if self.n_models > 1 else ""),
@@ -409,3 +416,23 @@ __all__ = ["BREAKDOWN_NOTE", "FAILURE_COLUMNS", "FORMULA_STARTS", "HISTORY_NOTE"
            "builds_of", "load_text", "mark_mixed_solve_columns", "mark_unseparable", "markdown_more_tables", "markdown_page",
            "markdown_table", "md_escape", "number_text", "partial_note", "rules_text", "section_tables", "slug", "spreadsheet_safe",
            "stamp", "table_rows", "table_sections", "write_csv"]
+
+
+def production_note(classes: set[str], track: str) -> str:
+    """The stamp's production line: bank m³ an hour from the time per target m³, and for each
+    calibrated machine class of the table the handbook's production band of its digging machine
+    (docs/machine-classes.md)."""
+    note = "bank m³ an hour = 3600 ÷ the median time per target m³ (the target is bank m³; the referee applies no job efficiency)"
+    machine = "excavator" if track == "backhoe" else "loader"
+    for name in sorted(classes):
+        mc = machine_classes().get(name)
+        band = None if mc is None or not mc.calibrated else mc.production_band(machine)
+        if mc is not None and band is not None:
+            src = next(b.source for b in mc.bands if b.what == "production" and b.machine == machine)
+            note += (f"; the {name} class's {machine}: handbook {band[0]:g}–{band[1]:g} m³/h across materials and conditions "
+                     f"({src}), which includes a job efficiency of about 0.6–0.8")
+        elif mc is not None and mc.calibrated:
+            note += f"; the {name} class's {machine}: no handbook production band"
+        else:
+            note += f"; the {name} class is uncalibrated: no handbook band"
+    return note

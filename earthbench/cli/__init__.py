@@ -38,6 +38,7 @@ COMMANDS = [
     "export",
     "verify",
     "best",
+    "calibration",
 ]
 
 

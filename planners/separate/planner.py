@@ -72,7 +72,7 @@ from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contac
 from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts, truck_side
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
-from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
+from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner, refuse_other_classes
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
     from ..stl_tamp.model import PhaseNLP
@@ -318,6 +318,7 @@ class SeparatePlanner(Planner):
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:
+        refuse_other_classes(scenario, self.name)
         t_start = time.perf_counter()
         c = self.config
         exc = scenario.machines.excavator

@@ -67,6 +67,18 @@ class LocalNLPConfig:
     alpha_term: float = 0.2
 
 
+def refuse_other_classes(scenario: Scenario, name: str) -> None:
+    """Refuse a scenario of another machine class than ``compact`` (docs/machine-classes.md): the
+    NLPs the preparation compiles are built for the compact machines, and the configuration's
+    sizes in metres and m³ (areas of ``area_vmax`` = 1 m³, ``base_offset``, ``truck_offset``,
+    the fit windows, ``global_window``) are the STL-TAMP paper's machine's. On the 20-t class it
+    loaded nothing (issue 51), so it says so at once instead of returning an empty plan."""
+    cls = scenario.machines.machine_class
+    if cls != "compact":
+        raise EarthbenchError(f"{name} plans for the compact machine class only (its NLPs and its sizes in metres are the "
+                              f"STL-TAMP paper's machine's); this scenario's class is {cls!r} (docs/machine-classes.md)")
+
+
 @dataclass(frozen=True)
 class Config(LocalNLPConfig):
     """Settings; defaults are the paper's values where it gives them (section V), but for two.
@@ -270,11 +282,13 @@ class StlTampPlanner(Planner):
         from .receding import Horizon, step
 
         if observation.step == 0:
+            refuse_other_classes(observation.scenario, self.name)
             self._use_prepared()
             self._horizon = Horizon()
         return step(self, observation, self._horizon)
 
     def plan(self, scenario: Scenario) -> Plan:
+        refuse_other_classes(scenario, self.name)
         t_start = time.perf_counter()
         self._use_prepared()
         c = self.config
