@@ -38,9 +38,7 @@ from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL
 from ..plan import Action, Plan
 from ..world import Scenario
-from . import loop
-from .loop import Observer
-from .state import RULES, RULES_VERSION, DigRecord, Replay, Verdict, Violation
+from .state import RULES, RULES_VERSION, DigRecord, Observer, Replay, Verdict, Violation
 
 __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "RULES_VERSION", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 
@@ -67,6 +65,8 @@ class Execution:
         return self.replay.plan
 
     def execute(self, actions: tuple[Action, ...]) -> Verdict:
+        from . import loop
+
         return loop.execute(self.replay, actions)
 
 
@@ -86,4 +86,6 @@ def judge(scenario: Scenario, plan: Plan | dict | str, observe: Observer | None 
     except (PlanFormatError, TypeError, ValueError, AttributeError) as exc:
         v = Violation(None, "malformed", 1.0, str(exc))
         return Verdict((v,), scenario.terrain, 0.0, 0.0, 0.0)
+    from . import loop  # the loop and the rules load with the first judgement (a case's start-up, issue 18)
+
     return loop.run(Replay(scenario, plan), observe)

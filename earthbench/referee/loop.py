@@ -24,11 +24,7 @@ from ..motion import ABS_TOL
 from ..plan import Action, Charge, Dig, Dump, Move, Plan
 from ..world import LoaderSpec, Pose, TruckSpec
 from . import backhoe, clearance, ground, loader, paths, truck
-from .state import DigRecord, Replay, Stroke, Verdict, Violation, timelines
-
-#: Called after each action, in the referee's time order, with the action's index, the heightmap
-#: as it then stands (read-only, current only during the call) and the m³ in the truck.
-Observer = Callable[[int, np.ndarray, float], None]
+from .state import DigRecord, Observer, Replay, Stroke, Verdict, Violation, timelines
 
 
 def run(r: Replay, observe: Observer | None = None) -> Verdict:

@@ -8,6 +8,7 @@ poses and violations so far), plain data that the rule modules read and only the
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -30,6 +31,10 @@ SLIP_LENGTH = 1.0
 #: so a stored verdict says which rules judged it (docs/referee.md, "Rules versions"): 1 until
 #: 0.x (no row recorded it), 2 adds the machines near a dig and the truck's ground.
 RULES_VERSION = 2
+
+#: Called after each action, in the referee's time order, with the action's index, the heightmap
+#: as it then stands (read-only, current only during the call) and the m³ in the truck.
+Observer = Callable[[int, np.ndarray, float], None]
 
 #: Every rule the referee checks, with the sentence a report shows for it.
 RULES: dict[str, str] = {
