@@ -11,6 +11,8 @@ from pathlib import Path
 
 
 ROOT = Path(__file__).parents[1] / "earthbench"
+#: The store's modules: every SQL statement of earthbench is in them.
+STORE = sorted((ROOT / "store").glob("*.py"))
 #: Import name of each plugin package → its folder in the repository (pyproject's package-dir).
 PLUGIN_PACKAGES = {"earthbench_planners": "planners", "earthbench_terrains": "terrains", "earthbench_metrics": "metrics"}
 FOLDER_PACKAGES = {folder: name for name, folder in PLUGIN_PACKAGES.items()}
@@ -30,7 +32,7 @@ def _imports(path: Path) -> list[tuple[str, str, bool]]:
 
 
 def test_no_private_name_crosses_a_harness_module():
-    for path in [*sorted((ROOT / "harness").glob("*.py")), ROOT / "records.py", ROOT / "store.py", ROOT / "progress.py"]:
+    for path in [*sorted((ROOT / "harness").glob("*.py")), ROOT / "records.py", *STORE, ROOT / "progress.py"]:
         for module, name, _ in _imports(path):
             if module.startswith(".") or module.startswith("earthbench"):
                 assert not name.startswith("_"), f"{path.name} imports the private {module}.{name}"
@@ -40,7 +42,7 @@ def test_the_store_and_progress_line_never_import_the_harness_and_the_harness_im
     """The store keeps the run's records (:mod:`earthbench.records`) and knows nothing of how cases
     run; the records sit below both, so neither a store nor a record reaches up into the harness,
     not even for type checking."""
-    for path in (ROOT / "store.py", ROOT / "progress.py", ROOT / "records.py"):
+    for path in (*STORE, ROOT / "progress.py", ROOT / "records.py"):
         found = {m for m, _ in _all_imports(path, in_functions=True, type_checking=True) if m.startswith("earthbench.harness")}
         assert found == set(), f"{path.name} imports {found}"
     up = {"earthbench.store", "earthbench.progress", "earthbench.merge", "earthbench.verify", "earthbench.publish", "earthbench.cli"}
@@ -113,8 +115,8 @@ def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 
 def test_the_graph_sees_every_kind_of_import():
-    assert ("earthbench.records", "Case") in _all_imports(ROOT / "store.py", in_functions=False, type_checking=True)
-    assert ("earthbench.records", "Case") not in _all_imports(ROOT / "store.py", in_functions=True)
+    assert ("earthbench.records", "Case") in _all_imports(ROOT / "store" / "database.py", in_functions=False, type_checking=True)
+    assert ("earthbench.records", "Case") not in _all_imports(ROOT / "store" / "database.py", in_functions=True)
     graph = _core_graph(in_functions=True)
     assert {"earthbench.harness.cases", "earthbench.scoring"} <= graph["earthbench.harness.sandbox"]  # from .x, from ..x
     assert "earthbench.scoring" not in _core_graph(in_functions=False)["earthbench.verify"]  # imported on first use
@@ -304,12 +306,13 @@ def test_the_sql_finder_sees_every_shape_of_statement():
 
 
 def test_no_sql_outside_the_store():
-    """Every SQL statement lives in :mod:`earthbench.store`, behind a named method (docs/DESIGN.md §2):
-    the rest of the core, the plugins and the scripts read and write a store only through it."""
+    """Every SQL statement lives in the :mod:`earthbench.store` package, behind a named method or
+    reader (docs/DESIGN.md §2): the rest of the core, the plugins and the scripts read and write a
+    store only through it."""
     files = [p for top in ("earthbench", *FOLDER_PACKAGES, "scripts") for p in sorted((ROOT.parent / top).rglob("*.py"))]
-    found = {(str(p.relative_to(ROOT.parent)), *hit) for p in files if p != ROOT / "store.py" for hit in _sql_in(p.read_text())}
+    found = {(str(p.relative_to(ROOT.parent)), *hit) for p in files if p not in STORE for hit in _sql_in(p.read_text())}
     assert found == set()
-    assert _sql_in((ROOT / "store.py").read_text())  # the finder reads the store's own statements
+    assert _sql_in((ROOT / "store" / "database.py").read_text())  # the finder reads the store's own statements
 
 
 def test_the_records_keep_their_old_import_paths():
