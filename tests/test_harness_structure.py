@@ -136,7 +136,7 @@ def test_no_import_cycle_among_the_core_modules_counting_imports_made_on_first_u
 #: ``earthbench``. A module imports from its own layer or the ones below, never from above (not
 #: even for type checking, nor in a function body); within a layer, no cycle.
 LAYERS: dict[str, tuple[str, ...]] = {
-    "base": ("errors", "lazy", "stats", "plotting", "profiles", "assets", "api"),
+    "base": ("errors", "lazy", "compat", "stats", "plotting", "profiles", "assets", "api"),
     "world": ("world", "plan"),
     "contract": ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal"),
     "judge": ("referee",),

@@ -34,7 +34,7 @@ re-deriving them:
 from __future__ import annotations
 
 from ..errors import PlanFormatError
-from ..lazy import moved_getattr
+from .. import compat
 from ..motion import ABS_TOL, RATE_TOL
 from ..plan import Action, Plan
 from ..world import Scenario
@@ -42,10 +42,8 @@ from .state import RULES, RULES_VERSION, DigRecord, Observer, Replay, Verdict, V
 
 __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "RULES_VERSION", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 
-#: The cut model was documented here until 0.1.0 and moved to :mod:`earthbench.cut` (0.2.0);
-#: a plugin that imports it from here still runs, with a DeprecationWarning.
-__getattr__ = moved_getattr(__name__, dict.fromkeys(("apply_cut", "charge_cut", "cut_level", "footprint"), "earthbench.cut")
-                            | {"LOADER_DUMP_HALF_ANGLE": "earthbench.motion"})
+#: The cut model was documented here until 0.1.0 (earthbench.compat keeps the old names).
+__getattr__ = compat.forward(__name__)
 
 
 class Execution:

@@ -12,9 +12,8 @@ import math
 from ..cut import Cut, cut_level, footprint, path_cells
 from ..motion import ABS_TOL, dump_reach_excess, min_dig_time, min_dump_time
 from ..plan import Dig, Dump
-from .. import rules  # its names that lived here until 0.2 stay out of this module's namespace (see __getattr__)
+from .. import compat, rules  # its names that lived here until 0.2 stay out of this module's namespace (see __getattr__)
 from ..world import ExcavatorSpec, Pose
-from ..lazy import moved_getattr
 from .site import around_dig
 from .state import Replay, Stroke, Violation
 
@@ -126,5 +125,4 @@ def _dump(r: Replay, n: int, a: Dump, spec: ExcavatorSpec) -> None:
             f"dump lasts {a.t_end - a.t_start:.3f} s; the swing and dump need {need:.3f} s"))
 
 
-# moved to earthbench.rules (0.2): the old names keep working for a release, with a warning
-__getattr__ = moved_getattr(__name__, dict.fromkeys(("ground_under", "track_level_and_tilt", "undermining_excess"), "earthbench.rules"))
+__getattr__ = compat.forward(__name__)  # the rules' predicates that lived here (earthbench.compat)

@@ -16,10 +16,9 @@ import math
 import numpy as np
 
 from ..cut import Cut, footprint, path_cells
-from ..lazy import moved_getattr
 from ..motion import ABS_TOL, RATE_TOL, arcs, loader_dump_excess, wrap
 from ..plan import Charge, Dump, Move
-from .. import rules  # its names that lived here until 0.2 stay out of this module's namespace (see __getattr__)
+from .. import compat, rules  # its names that lived here until 0.2 stay out of this module's namespace (see __getattr__)
 from ..world import LoaderSpec
 from .paths import swept
 from .site import around_dig
@@ -147,6 +146,4 @@ def _dump(r: Replay, n: int, a: Dump, spec: LoaderSpec) -> None:
             f"dump lasts {a.t_end - a.t_start:.3f} s; the loader needs {spec.min_dump_time} s"))
 
 
-# moved to earthbench.rules (0.2): the old names keep working for a release, with a warning
-__getattr__ = moved_getattr(__name__, dict.fromkeys(
-    ("STEP_FLOOR", "cell_heights", "densify", "loader_base_level", "step_excess", "wheel_step_excess"), "earthbench.rules"))
+__getattr__ = compat.forward(__name__)  # the rules' predicates that lived here (earthbench.compat)

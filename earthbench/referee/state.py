@@ -15,7 +15,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import shapely
 
-from ..motion import ABS_TOL, Timeline
+from .. import compat, motion
+from ..motion import ABS_TOL
 from ..plan import Charge, Move, Plan
 from ..rules import Spec
 from ..soil import hard_top
@@ -174,7 +175,7 @@ class Stroke(NamedTuple):
     stands: tuple[tuple[np.ndarray, np.ndarray], np.ndarray]
 
 
-def timelines(scenario: Scenario, plan: Plan) -> dict[str, Timeline]:
+def timelines(scenario: Scenario, plan: Plan) -> dict[str, motion.Timeline]:
     """Each machine's samples over the whole plan: its moves, and its charges (which move it too)."""
     m = scenario.machines
     moves: dict[str, list[Move]] = {mid: [] for mid in m.ids}
@@ -185,7 +186,7 @@ def timelines(scenario: Scenario, plan: Plan) -> dict[str, Timeline]:
             (x, y, yaw), (ex, ey, _) = a.entry, a.end
             if a.t_end > a.t_start:
                 moves[a.machine].append(Move(a.machine, ((a.t_start, x, y, yaw), (a.t_end, ex, ey, yaw))))
-    return {mid: Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
+    return {mid: motion.Timeline(m.pose(mid), moves[mid]) for mid in m.ids}
 
 
 class Replay:
@@ -235,3 +236,6 @@ class Replay:
         self.firm: np.ndarray | None = None if self.soil is None or m.loader is None else self.z.copy()
         #: with soil, the top of its harder layer under every cell (None: no such layer)
         self.hard_top = None if self.soil is None else hard_top(self.soil, self.sc.terrain.z)
+
+
+__getattr__ = compat.forward(__name__)  # Timeline: moved to earthbench.motion (earthbench.compat)
