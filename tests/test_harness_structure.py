@@ -124,6 +124,14 @@ def test_the_graph_sees_every_kind_of_import():
     assert _cycle({"a": {"b"}, "b": {"a"}}) is not None and _cycle({"a": {"b"}, "b": set()}) is None
 
 
+def test_publishing_reads_labels_not_verify():
+    """What publishing and ``verify`` both show (machine labels, the latest spot checks) lives in
+    :mod:`earthbench.labels`; publishing never imports ``verify`` (issue 52)."""
+    graph = _core_graph(in_functions=True)
+    publishing = [m for m in graph if m == "earthbench.publish" or m.startswith("earthbench.board")]
+    assert len(publishing) > 3 and not {m for m in publishing if "earthbench.verify" in graph[m]}
+
+
 def test_no_import_cycle_among_the_core_modules_at_import_time():
     assert _cycle(_core_graph(in_functions=False)) is None
 
