@@ -367,3 +367,33 @@ def test_no_module_runs_over_600_lines_but_the_named_ones():
     files = [p for top in ("earthbench", *FOLDER_PACKAGES) for p in sorted((ROOT.parent / top).rglob("*.py"))]
     found = {str(p.relative_to(ROOT.parent)) for p in files if len(p.read_text().splitlines()) > LONG_MODULE}
     assert found <= LONG_MODULES.keys(), f"split these, or name why they stand: {sorted(found - LONG_MODULES.keys())}"
+
+
+def _design_layers() -> tuple[dict[str, tuple[str, ...]], dict[str, set[str]]]:
+    """docs/DESIGN.md §2's table of layers: each layer's modules, and the modules a package's
+    entry names in parentheses (``referee`` (``state``: …; ``loop``: …))."""
+    text = (ROOT.parent / "docs" / "DESIGN.md").read_text().split("## 2. Data flow and layers", 1)[1].split("\n## ", 1)[0]
+    layers: dict[str, tuple[str, ...]] = {}
+    parts: dict[str, set[str]] = {}
+    for row in text.splitlines():
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        if len(cells) < 2 or cells[0] in ("layer", "") or set(cells[0]) <= {"-"}:
+            continue
+        top = re.sub(r"\([^)]*\)", "", cells[1])
+        layers[cells[0]] = tuple(re.findall(r"`([\w.]+)`", top))
+        for package, inner in re.findall(r"`(\w+)`\s*\(([^)]*)\)", cells[1]):
+            parts[package] = set(re.findall(r"`(\w+)`", inner))
+    return layers, parts
+
+
+def test_design_the_layers_table_and_the_folders_are_one_map():
+    """DESIGN §2's table is ``LAYERS``, layer by layer in order, and names every module and package
+    of ``earthbench/`` (test_every_core_module_has_one_layer); a package it lists part by part
+    (the referee) names exactly the package's modules."""
+    layers, parts = _design_layers()
+    assert layers == LAYERS
+    on_disk = {p.stem if p.is_file() else p.name for p in ROOT.iterdir()
+               if (p.suffix == ".py" and p.name != "__init__.py") or (p / "__init__.py").exists()}
+    assert on_disk == set(_RANK)
+    for package, named in parts.items():
+        assert named == {p.stem for p in (ROOT / package).glob("*.py") if p.name != "__init__.py"}, package
