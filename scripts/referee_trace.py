@@ -1,5 +1,5 @@
-"""How often one judgement enters each module of the referee (issue 52, docs/referee.md "How the
-referee is built"): greedy's 30-dig plan on ``rbf`` seed 0 (the case of
+"""How often one judgement enters each module of the referee (issue 52, docs/DESIGN.md §5, "One
+loop, a plain state"): greedy's 30-dig plan on ``rbf`` seed 0 (the case of
 ``tests/bench/test_bench_referee.py``), judged once under :func:`sys.setprofile`.
 
 A module is *entered* when a function of it is called from a function of another module; each
