@@ -227,6 +227,7 @@ class Timeline:
         self.times = self.path[:, 0].tolist()
         self.yaw0 = sample_yaws(self.path, self.arc).tolist() if self.arc is not None else []
         self.moves = [(m.t_start, m.t_end) for m in moves]
+        self._last: tuple[float, Pose] | None = None  # the last answer of :meth:`pose`: rules ask for one time in turn
 
     def poses(self, times: np.ndarray) -> np.ndarray:
         return poses_at(self.path, times, self.arc)
@@ -244,6 +245,13 @@ class Timeline:
 
     def pose(self, t: float) -> Pose:
         """The pose at ``t`` (:func:`poses_at` for one time, in plain floats)."""
+        if self._last is not None and self._last[0] == t:
+            return self._last[1]
+        pose = self._pose(t)
+        self._last = (t, pose)
+        return pose
+
+    def _pose(self, t: float) -> Pose:
         p, a = self.path, self.arc
         if a is None or t <= p[0, 0]:
             return Pose(float(p[0, 1]), float(p[0, 2]), float(p[0, 3]))
