@@ -5,6 +5,7 @@ through named methods; the tables are those of :mod:`earthbench.store.schema`.
 Why SQLite: embedded, a single file to copy or merge, safe against a killed writer (a run
 killed mid-case loses only that case: its transaction never commits), and readable by
 pandas. Tables:
+
 * ``runs`` — one row per finished case: scenario id/digest/family/seed, the suite it ran
   under (provenance) and its digest, planner name/version/config hash, termination
   ``reason``, ``success`` (under that suite's threshold), the main metrics as real columns,
