@@ -3,7 +3,7 @@
 One list, here and in docs/plugins.md ("The public API"); ``tests/test_api.py`` imports every
 name, checks that the two lists agree and that the built-in plugins import nothing else from
 earthbench. A name on this list keeps working for at least one release after it moves or is
-renamed, with a :class:`DeprecationWarning` (:func:`earthbench.lazy.moved_getattr`), and
+renamed, with a :class:`DeprecationWarning` (the table of :mod:`earthbench.compat`), and
 ``CHANGELOG.md`` says so. Import each name from the module it is listed under.
 """
 

@@ -1,5 +1,5 @@
 """Deprecated: moved to :mod:`earthbench.harness.dask_executor` in 0.2.0."""
 
-from .lazy import moved_module
+from . import compat
 
-__getattr__ = moved_module(__name__, "earthbench.harness.dask_executor")
+__getattr__ = compat.forward(__name__)

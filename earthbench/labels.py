@@ -1,5 +1,6 @@
-"""Readable names of planner configurations: ``greedy`` at its defaults, ``greedy[closed_loop]``,
-``greedy[min_fill=0.5]`` otherwise.
+"""Readable names of planner configurations (``greedy`` at its defaults, ``greedy[closed_loop]``,
+``greedy[min_fill=0.5]`` otherwise) and of machines (:func:`machine_label`), and the spot checks a
+board's stamp quotes (:func:`latest_spot_checks`): what publishing and ``verify`` both show.
 
 A configuration's hash tells two configurations apart but says nothing to a reader; its label
 names the settings that differ from the planner's defaults (from the installed planner's
@@ -11,9 +12,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
+
+from .records import SpotCheck
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .store import Store
 
 
 def _value(v: Any) -> str:
@@ -80,3 +86,16 @@ def config_labels(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
             twins = {json.dumps(configs[g], sort_keys=True) for g, t in labels.items() if t == text}
             out[(str(planner), h)] = text if len(twins) == 1 else f"{text}#{h[:8]}"
     return out
+
+
+def machine_label(env: dict[str, Any] | Any) -> str:
+    """A machine as readers know it: hostname, CPU model, cores."""
+    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a stored row
+    host, cpu, cores = get("hostname"), get("cpu_model"), get("cores")
+    return f"{host or 'unknown host'} ({cpu or 'unknown CPU'}" + (f", {cores} cores)" if cores else ")")
+
+
+def latest_spot_checks(store: Store) -> list[SpotCheck]:
+    """The most recent spot check of each planner version and configuration (none if never checked);
+    :meth:`Store.record_spot_checks` keeps them."""
+    return [SpotCheck(**fields) for fields in store.latest_spot_checks()]

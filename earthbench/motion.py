@@ -18,10 +18,12 @@ here once, for the referee and planners alike.
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
 
+from .plan import Move
 from .world import ExcavatorSpec, LoaderSpec, Pose, TruckSpec
 
 Sample = tuple[float, float, float, float]
@@ -209,3 +211,63 @@ def poses_at(path: np.ndarray, times: np.ndarray, arc: dict[str, np.ndarray] | N
     out = np.stack([x, y, yaw0[k] + f * a["dyaw"][k]], axis=1)
     out[times >= p[-1, 0]] = (p[-1, 1], p[-1, 2], yaw0[-1])
     return out
+
+
+class Timeline:
+    """A machine's samples over time (its start, then every move and charge), on the motion model:
+    where it is at any time, how fast its body moves, whether it moves in a span (the referee's
+    clock for every rule that looks at two machines at once, docs/DESIGN.md §5)."""
+
+    def __init__(self, start: Pose, moves: list[Move]):
+        samples = [(0.0, start.x, start.y, start.yaw)]
+        for m in sorted(moves, key=lambda m: m.t_start):
+            samples.extend(m.path)
+        self.path = np.array(samples, dtype=float)
+        self.arc = arcs(self.path) if len(self.path) > 1 else None
+        self.times = self.path[:, 0].tolist()
+        self.yaw0 = sample_yaws(self.path, self.arc).tolist() if self.arc is not None else []
+        self.moves = [(m.t_start, m.t_end) for m in moves]
+        self._last: tuple[float, Pose] | None = None  # the last answer of :meth:`pose`: rules ask for one time in turn
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        return poses_at(self.path, times, self.arc)
+
+    def rates(self, times: np.ndarray, reach: float) -> np.ndarray:
+        """Speed of the centre plus yaw rate × ``reach`` (a body corner) at ``times``."""
+        if self.arc is None:
+            return np.zeros(len(times))
+        k = np.clip(np.searchsorted(self.path[:, 0], times, side="right") - 1, 0, len(self.path) - 2)
+        dt = self.arc["dt"][k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = np.where(dt > 0, (self.arc["length"][k] + np.abs(self.arc["dyaw"][k]) * reach) / dt, 0.0)
+        inside = (times >= self.path[0, 0]) & (times <= self.path[-1, 0])
+        return np.where(inside, v, 0.0)
+
+    def pose(self, t: float) -> Pose:
+        """The pose at ``t`` (:func:`poses_at` for one time, in plain floats)."""
+        if self._last is not None and self._last[0] == t:
+            return self._last[1]
+        pose = self._pose(t)
+        self._last = (t, pose)
+        return pose
+
+    def _pose(self, t: float) -> Pose:
+        p, a = self.path, self.arc
+        if a is None or t <= p[0, 0]:
+            return Pose(float(p[0, 1]), float(p[0, 2]), float(p[0, 3]))
+        if t >= self.times[-1]:
+            return Pose(float(p[-1, 1]), float(p[-1, 2]), self.yaw0[-1])
+        k = min(bisect.bisect_right(self.times, t) - 1, len(p) - 2)
+        dt = float(a["dt"][k])
+        f = min(max((t - p[k, 0]) / dt, 0.0), 1.0) if dt > 0 else 1.0
+        dyaw, th0, length = float(a["dyaw"][k]), float(a["theta0"][k]), float(a["length"][k])
+        if abs(dyaw) < 1e-9:
+            x = p[k, 1] + length * f * math.cos(th0 + f * dyaw / 2)
+            y = p[k, 2] + length * f * math.sin(th0 + f * dyaw / 2)
+        else:
+            x = p[k, 1] + length / dyaw * (math.sin(th0 + f * dyaw) - math.sin(th0))
+            y = p[k, 2] + length / dyaw * (math.cos(th0) - math.cos(th0 + f * dyaw))
+        return Pose(float(x), float(y), float(self.yaw0[k] + f * dyaw))
+
+    def moving_during(self, t0: float, t1: float) -> bool:
+        return any(a < t1 - ABS_TOL and b > t0 + ABS_TOL for a, b in self.moves)

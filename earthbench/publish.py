@@ -58,22 +58,18 @@ from typing import Any
 
 import pandas as pd
 
-from .aggregate import REASONS, SCOPES, aggregate, latest_versions
+from . import compat
+from .aggregate import SCOPES, aggregate, latest_versions
 from .best import bracket_lines, bracket_markdown, bracket_table, with_best_known
-from .board.figures import (FIGURE_COLUMNS, RUN_FIGURES, Renderer, families_figure, figure_jobs, history_figure,
-                            profiles_figure, terrain_figure, volume_time_figure)
-from .board.page import (FILTERS, RUN_COLUMNS, filter_bar, fold_zero_failures, html_more_tables, html_page, html_table,
-                         replay_links, replay_runs, run_rows)
-from .board.selection import (closed_configs, histories, limit_to_seeds, load_runs_empty, published_runs, sample_runs,
-                              seed_list, shown_runs, solver_labels)
-from .board.tables import (FAILURE_COLUMNS, FORMULA_STARTS, PROVENANCE, UNSEPARABLE, Stamp, builds_of, load_text,
-                           mark_mixed_solve_columns, mark_unseparable, markdown_more_tables, markdown_page, markdown_table,
-                           md_escape, production_note, section_tables, slug, spreadsheet_safe, stamp, table_rows, table_sections,
+from .board.figures import Renderer, figure_jobs
+from .board.page import html_page, replay_runs, run_rows
+from .board.selection import closed_configs, histories, limit_to_seeds, published_runs, shown_runs
+from .board.tables import (mark_mixed_solve_columns, markdown_page, production_note, slug, spreadsheet_safe, stamp, table_sections,
                            write_csv)
 from .generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
+from .labels import latest_spot_checks
 from .scaling import SCALE_CAPTION, scale_section
 from .store import Store, suite_members
-from .verify import latest_spot_checks
 
 
 @dataclass
@@ -217,14 +213,7 @@ def _remove_stale_figures(fig_dir: Path, files: list[Path]) -> list[Path]:
     return removed
 
 
-__all__ = [
-    "FAILURE_COLUMNS", "REASONS", "Published", "publish", "published_runs", "solver_labels",
-    # defined in earthbench.board's modules since the split, importable from here as before
-    "FIGURE_COLUMNS", "FILTERS", "FORMULA_STARTS", "PROVENANCE", "RUN_COLUMNS", "RUN_FIGURES", "Renderer", "Stamp",
-    "UNSEPARABLE", "builds_of", "closed_configs", "families_figure", "figure_jobs", "filter_bar", "fold_zero_failures",
-    "histories", "history_figure", "html_more_tables", "html_page", "html_table", "limit_to_seeds", "load_runs_empty",
-    "load_text", "mark_mixed_solve_columns", "mark_unseparable", "markdown_more_tables", "markdown_page", "markdown_table",
-    "md_escape", "profiles_figure", "replay_links", "replay_runs", "run_rows", "sample_runs", "section_tables", "seed_list",
-    "shown_runs", "slug", "spreadsheet_safe", "stamp", "table_rows", "table_sections", "terrain_figure",
-    "volume_time_figure", "write_csv",
-]
+__all__ = ["Published", "publish"]
+#: The names of earthbench.board's modules that were defined here before the split (0.3.0) still
+#: import from here, with a warning (earthbench.compat).
+__getattr__ = compat.forward(__name__)

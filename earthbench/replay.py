@@ -2,6 +2,6 @@
 :mod:`earthbench.playback` after 0.2.0, so that this name no longer sounds like the referee's replay
 state (:mod:`earthbench.referee.state`)."""
 
-from .lazy import moved_module
+from . import compat
 
-__getattr__ = moved_module(__name__, "earthbench.playback")
+__getattr__ = compat.forward(__name__)

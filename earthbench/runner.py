@@ -1,5 +1,5 @@
 """Deprecated: the harness moved to :mod:`earthbench.harness` in 0.2.0 (``from earthbench.harness import run_suite``)."""
 
-from .lazy import moved_module
+from . import compat
 
-__getattr__ = moved_module(__name__, "earthbench.harness")
+__getattr__ = compat.forward(__name__)

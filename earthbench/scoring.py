@@ -7,8 +7,8 @@ prefix of a valid plan is a success where the plan is not, reaches the target ea
 first in :func:`run_order` (docs/metrics.md, "Why loading less never pays").
 
 Every place that needs to know whether a run succeeded — the harness, ``rescore``, ``validate``,
-:func:`earthbench.store.load_runs` re-labelling a run under another suite's threshold — calls
-:func:`is_success`; every metric comes from the ``earthbench.metrics`` registry (the built-in
+:func:`relabel` for runs read under another suite's threshold (:func:`earthbench.store.load_runs`
+with a suite) — calls :func:`is_success`; every metric comes from the ``earthbench.metrics`` registry (the built-in
 ones are the ``core`` plugin), so the core never imports a metrics package.
 """
 
@@ -19,6 +19,8 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover - imported when used: the suite loader needs only the threshold
+    import pandas as pd
+
     from .plan import Plan
     from .referee import Verdict
     from .world import Scenario
@@ -102,6 +104,16 @@ def is_success(valid: Any, volume_ratio: Any, threshold: float) -> bool:
     except (TypeError, ValueError):
         return False
     return bool(valid) and not math.isnan(ratio) and ratio >= threshold
+
+
+def relabel(runs: pd.DataFrame) -> pd.DataFrame:
+    """Stored runs read under another suite (a :func:`earthbench.store.load_runs` frame whose
+    ``threshold`` is that suite's): ``success`` decided anew by :func:`is_success` from each run's
+    stored ``valid`` and ``volume_ratio`` (a run without a plan has neither and never succeeds)."""
+    valid = runs["valid"] if "valid" in runs else [None] * len(runs)
+    ratio = runs["volume_ratio"] if "volume_ratio" in runs else [None] * len(runs)
+    runs["success"] = [v is not None and v == v and is_success(v, r, t) for v, r, t in zip(valid, ratio, runs["threshold"])]
+    return runs
 
 
 def evaluate(scenario: Scenario, plan: Plan, verdict: Verdict,

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from .errors import EarthbenchError, read_document
-from .lazy import moved_getattr
+from . import compat
 from .world import Heightmap, Machines, Pose, Scenario, Site
 
 #: The key file's schema, which also names how its draw is made: ``/2`` keys draw only the seeds;
@@ -218,5 +218,4 @@ def _tidy(v: float) -> float:
     return round(float(v), 9) + 0.0
 
 
-# moved to earthbench.suite after 0.2.0 (they draw a Suite; the seal no longer imports the suite)
-__getattr__ = moved_getattr(__name__, dict.fromkeys(("new_key", "open_sealed"), "earthbench.suite"))
+__getattr__ = compat.forward(__name__)  # new_key, open_sealed: moved to earthbench.suite (earthbench.compat)

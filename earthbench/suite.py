@@ -59,7 +59,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import hashlib
-import inspect
 import math
 import re
 import secrets
@@ -74,6 +73,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import EarthbenchError, SuiteError, UnknownNameError
+from .suite_checks import check_params, refuse_unknown
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
 from .seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
 from .classes import DEFAULT_CLASS, fit, machine_class
@@ -360,15 +360,6 @@ def _read(path: Path) -> str:
 # -- parsing ---------------------------------------------------------------------------------------
 
 
-def _unknown(keys: Iterable[str], allowed: Iterable[str], where: str) -> None:
-    allowed = list(allowed)
-    for k in keys:
-        if k not in allowed:
-            close = difflib.get_close_matches(k, allowed, n=3, cutoff=0.5)
-            hint = f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
-            raise SuiteError(f"{where}: unknown key {k!r}.{hint} Allowed keys: {', '.join(allowed)}.")
-
-
 def _seeds(value: Any, where: str) -> tuple[int, ...]:
     if isinstance(value, str):
         try:
@@ -411,91 +402,6 @@ def _targets(value: Any, where: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def _check_params(gen: Any, params: dict[str, Any], where: str, path: str) -> dict[str, Any]:
-    """Check a family's parameters against the generator's signature, before anything is generated.
-
-    Unknown names, values of the wrong type (by the parameter's annotation) and a grid of more
-    than :data:`MAX_CELLS` cells (``size`` / ``resolution``) are refused; a relative ``path``
-    resolves against the suite file's folder. Returns the parameters to generate with.
-    """
-    params = dict(params)
-    try:
-        sig = inspect.signature(gen)
-    except (TypeError, ValueError):
-        return params
-    ps = list(sig.parameters.values())
-    if not any(p.kind is p.VAR_KEYWORD for p in ps):
-        names = [p.name for p in ps[2:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-        _unknown(params, names, f"{where} params")
-    for key, value in params.items():
-        p = sig.parameters.get(key)
-        if p is not None and isinstance(p.annotation, str) and not _fits(value, p.annotation):
-            raise SuiteError(f"{where} params: {key} must be {p.annotation}, got {type(value).__name__} {value!r:.60}")
-    size = params.get("size", _default(sig, "size"))
-    res = params.get("resolution", _default(sig, "resolution"))
-    if isinstance(size, (list, tuple)) and len(size) == 2 and all(isinstance(v, (int, float)) for v in (*size, res or 0)) and res:
-        if res <= 0 or min(size) <= 0:
-            raise SuiteError(f"{where} params: size and resolution must be positive, got size {list(size)}, resolution {res}")
-        cells = math.ceil(size[0] / res) * math.ceil(size[1] / res)
-        if cells > MAX_CELLS:
-            raise SuiteError(f"{where} params: size {list(size)} m at resolution {res} m is {cells:.3g} cells, "
-                             f"over the limit of {MAX_CELLS:,} cells per heightmap")
-    if isinstance(params.get("path"), str) and path and not Path(params["path"]).is_absolute():
-        params["path"] = str((Path(path).parent / params["path"]).resolve())
-    return params
-
-
-def _default(sig: inspect.Signature, name: str) -> Any:
-    p = sig.parameters.get(name)
-    return None if p is None or p.default is p.empty else p.default
-
-
-def _fits(value: Any, annotation: str) -> bool:
-    """Whether a TOML value fits a parameter annotation such as ``float | tuple[float, float]``.
-
-    Understands int, float, str, bool, None and tuple/list of those; anything else passes.
-    """
-    parts = _split(annotation, "|")
-    for part in parts:
-        part = part.strip()
-        head, _, inner = part.partition("[")
-        inner = inner[:-1] if inner.endswith("]") else inner
-        if head == "int" and isinstance(value, int) and not isinstance(value, bool):
-            return True
-        if head == "float" and isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            return True
-        if head == "str" and isinstance(value, str):
-            return True
-        if head == "bool" and isinstance(value, bool):
-            return True
-        if head in ("tuple", "list") and isinstance(value, (list, tuple)):
-            if not inner:
-                return True
-            args = _split(inner, ",")
-            if head == "list" or (len(args) == 2 and args[1].strip() == "..."):
-                if all(_fits(v, args[0]) for v in value):
-                    return True
-            elif len(args) == len(value) and all(_fits(v, a) for v, a in zip(value, args)):
-                return True
-        if head not in ("int", "float", "str", "bool", "tuple", "list", "None"):
-            return True  # an annotation this check does not understand
-    return False
-
-
-def _split(text: str, sep: str) -> list[str]:
-    """Split on ``sep`` outside brackets."""
-    out, depth, cur = [], 0, ""
-    for ch in text:
-        depth += ch == "["
-        depth -= ch == "]"
-        if ch == sep and depth == 0:
-            out.append(cur)
-            cur = ""
-        else:
-            cur += ch
-    return [*out, cur]
-
-
 def _check_realism(fam: Family, where: str) -> None:
     """Refuse a family's ``soil`` or ``sensing`` table that no scenario could carry, naming the key."""
     for key in ("soil", "sensing"):
@@ -503,7 +409,7 @@ def _check_realism(fam: Family, where: str) -> None:
         if table is not None and not isinstance(table, dict):
             raise SuiteError(f"{where}: {key} must be a table, got {table!r:.40}")
     if fam.sensing is not None:
-        _unknown(fam.sensing, [f.name for f in dataclasses.fields(Sensing)], f"{where} sensing")
+        refuse_unknown(fam.sensing, [f.name for f in dataclasses.fields(Sensing)], f"{where} sensing")
     try:
         fam.realism(fam.seeds[0])
     except EarthbenchError as exc:
@@ -541,7 +447,7 @@ def _budget(budget_doc: Any, where: str) -> Budget:
     """The suite's ``[budget]`` table, checked: positive finite numbers, integers where counted."""
     if not isinstance(budget_doc, dict):
         raise SuiteError(f"{where}: [budget] must be a table with {', '.join(_BUDGET_KEYS)}")
-    _unknown(budget_doc, _BUDGET_KEYS, f"{where} [budget]")
+    refuse_unknown(budget_doc, _BUDGET_KEYS, f"{where} [budget]")
     for k, v in budget_doc.items():
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 and math.isfinite(v)):
             raise SuiteError(f"{where} [budget]: {k} must be a positive finite number, got {v!r}")
@@ -563,7 +469,7 @@ def _family(fd: Any, n: int, where: str, path: str) -> Family:
     from .registry import TERRAINS
 
     fwhere = f"{where} [[family]] #{n + 1}"
-    _unknown(fd, _FAMILY_KEYS, fwhere)
+    refuse_unknown(fd, _FAMILY_KEYS, fwhere)
     for req in ("name", "generator", "targets", "seeds"):
         if req not in fd:
             raise SuiteError(f"{fwhere}: missing key {req!r}")
@@ -578,7 +484,7 @@ def _family(fd: Any, n: int, where: str, path: str) -> Family:
     params = fd.get("params", {})
     if not isinstance(params, dict):
         raise SuiteError(f"{fwhere}: params must be a table")
-    params = _check_params(gen, params, fwhere, path)
+    params = check_params(gen, params, fwhere, path, MAX_CELLS)
     fam = Family(fname, fd["generator"], _targets(fd["targets"], fwhere), _seeds(fd["seeds"], fwhere), params,
                  fd.get("soil"), fd.get("sensing"), _class_name(fd.get("class", DEFAULT_CLASS), fwhere))
     _check_realism(fam, fwhere)
@@ -619,7 +525,7 @@ def parse_suite(text: str, *, path: str = "", default_name: str = "", _stack: tu
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SuiteError(f"{where} is not valid TOML: {exc}") from None
-    _unknown(doc, _TOP_KEYS, where)
+    refuse_unknown(doc, _TOP_KEYS, where)
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name or "/" in name:
         raise SuiteError(f"{where}: 'name' must be a non-empty string without '/', got {name!r}")

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
+from . import compat, labels
 from .errors import EarthbenchError, UnknownNameError
 from .records import SpotCheck  # a record the store also reads; importable from here as before
 from .harness.steps import step_metrics
@@ -338,13 +339,6 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
 # -- spot re-timing -------------------------------------------------------------------------------
 
 
-def machine_label(env: dict[str, Any] | Any) -> str:
-    """A machine as readers know it: hostname, CPU model, cores."""
-    get = env.get if isinstance(env, dict) else (lambda k: env[k])  # a dict or a stored row
-    host, cpu, cores = get("hostname"), get("cpu_model"), get("cores")
-    return f"{host or 'unknown host'} ({cpu or 'unknown CPU'}" + (f", {cores} cores)" if cores else ")")
-
-
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
     from .harness.probe import resolve
@@ -398,8 +392,8 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     if exposed:  # no case may read the store it is re-timed against (docs/isolation.md)
         raise VerifyError(exposed)
     fresh = {res.key: res for res in (executor or LocalExecutor(jobs)).run(cases)}
-    here = machine_label(environment())
-    stored_env = {e["id"]: machine_label(e) for e in store.environments()}
+    here = labels.machine_label(environment())
+    stored_env = {e["id"]: labels.machine_label(e) for e in store.environments()}
     now = datetime.now(UTC).isoformat(timespec="seconds")
     out = []
     for key in refs:
@@ -434,11 +428,6 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
                              tuple(cpu_ratios), tuple(load_stored), tuple(load_here), max(steal) if steal else None))
     return sorted(out, key=lambda s: (s.planner, s.version, s.config_hash))
 
-
-def latest_spot_checks(store: Store) -> list[SpotCheck]:
-    """The most recent spot check of each planner version and configuration (none if never checked);
-    :meth:`Store.record_spot_checks` keeps them."""
-    return [SpotCheck(**fields) for fields in store.latest_spot_checks()]
 
 
 # -- suite identity and sealed draws ----------------------------------------------------------
@@ -516,3 +505,6 @@ def check_seal(store: Store, key: Any) -> SealCheck:
         else:
             out.problems.append(f"run {r['id']} ({_label(r)}) is labelled {sealed.name} but its scenario is not one the key draws")
     return out
+
+
+__getattr__ = compat.forward(__name__)  # machine_label, latest_spot_checks: moved to earthbench.labels (earthbench.compat)

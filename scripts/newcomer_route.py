@@ -1,6 +1,7 @@
 """The README's route for a newcomer, timed: a fresh environment, the commands of the README's
-steps 1–4 exactly as written (the last ranks the new planner beside the published board), then every command those commands print for the user to run
-(``see: …``, ``next: …``), each as printed, until none is left that has not run.
+steps 1–4 exactly as written (the last ranks the new planner beside the published board), then
+every command those commands print for the user to run (``see: …``, ``next: …``), each as
+printed, until none is left that has not run.
 
     python scripts/newcomer_route.py                    # a fresh clone and `pip install .` (minutes: the dependencies)
     python scripts/newcomer_route.py --reuse            # this interpreter's installs seen from a fresh venv (seconds)

@@ -55,7 +55,7 @@ from earthbench.plan import Dig, Dump, Move, Plan
 from earthbench.referee import judge
 from earthbench.rules import arm_shadow, track_level_and_tilt, undermining_excess
 from earthbench.scoring import evaluate
-from earthbench.referee.replay import Replay
+from earthbench.referee.state import Replay
 from earthbench.store import Store, decompress
 from earthbench.world import Pose, Scenario
 

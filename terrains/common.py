@@ -83,6 +83,28 @@ def assemble_scenario(
     )
 
 
+def backhoe_site(
+    scenario_id: str,
+    terrain: Heightmap,
+    *,
+    dig_area: Sequence[Point],
+    target_volume: float,
+    corner: tuple[float, float, float],
+    excavator: PoseLike | None,
+    truck: PoseLike | None,
+    truck_capacity: float,
+    budget: Budget | None,
+    meta: dict[str, Any],
+    floor: float | None = 0.0,
+) -> Scenario:
+    """:func:`assemble_scenario` for a backhoe site whose machines stand where the generator's
+    ``excavator`` and ``truck`` parameters say, or at the paper's offsets (:func:`paper_poses`)
+    from the map's ``corner`` (west edge, east edge, north edge): the tail the backhoe generators share."""
+    exc, trk = paper_poses(*corner, excavator, truck)
+    return assemble_scenario(scenario_id, terrain, dig_area=dig_area, floor=floor, target_volume=target_volume,
+                             excavator_pose=exc, truck_pose=trk, truck_capacity=truck_capacity, budget=budget, meta=meta)
+
+
 def round_heights(z: np.ndarray) -> np.ndarray:
     """Heights rounded to 0.1 mm: float noise below that never changes a digest across machines."""
     return np.round(np.asarray(z, dtype=np.float64), 4) + 0.0  # + 0.0 turns -0.0 into 0.0

@@ -32,7 +32,7 @@ from scipy.ndimage import map_coordinates
 from earthbench.errors import ScenarioError
 from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import assemble_scenario, paper_poses, rectangle, round_heights
+from .common import backhoe_site, rectangle, round_heights
 
 SAMPLE_DEM = "jacksboro_fault_dem.npz"
 _M_PER_DEGREE = 111_320.0
@@ -132,16 +132,8 @@ def dem(
     terrain, source = dem_crop(
         seed, size=(lx, ly), resolution=resolution, ground_scale=ground_scale, relief=relief, min_ground_relief=min_ground_relief
     )
-    exc, trk = paper_poses(0.0, lx, ly, excavator, truck)
-    return assemble_scenario(
-        scenario_id or f"dem-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
-        terrain,
-        dig_area=rectangle(0.0, 0.0, lx, ly),
-        target_volume=target_volume,
-        excavator_pose=exc,
-        truck_pose=trk,
-        truck_capacity=truck_capacity,
-        budget=budget,
-        meta={"generator": "dem", "seed": seed, "size": [lx, ly], "resolution": resolution,
-              "ground_scale": ground_scale, "relief": relief, **source},
-    )
+    meta = {"generator": "dem", "seed": seed, "size": [lx, ly], "resolution": resolution, "ground_scale": ground_scale,
+            "relief": relief, **source}
+    return backhoe_site(scenario_id or f"dem-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}", terrain,
+                        dig_area=rectangle(0.0, 0.0, lx, ly), target_volume=target_volume, corner=(0.0, lx, ly),
+                        excavator=excavator, truck=truck, truck_capacity=truck_capacity, budget=budget, meta=meta)

@@ -35,7 +35,7 @@ import numpy as np
 from earthbench.errors import ScenarioError
 from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import assemble_scenario, paper_poses, rectangle, round_heights
+from .common import backhoe_site, rectangle, round_heights
 
 FORMATS = (".npy", ".npz", ".csv", ".tif", ".tiff")
 GEOTIFF = (".tif", ".tiff")
@@ -248,16 +248,8 @@ def heightmap_file(
                              bounds=tuple(bounds) if bounds is not None else None)  # type: ignore[arg-type]
     terrain = terrain.with_z(round_heights(terrain.z))
     xmin, xmax, ymin, ymax = terrain.extent
-    exc, trk = paper_poses(xmin, xmax, ymax, excavator, truck)
-    return assemble_scenario(
-        scenario_id or f"file-{Path(path).stem}-v{target_volume:g}",
-        terrain,
-        dig_area=tuple(dig_area) if dig_area is not None else rectangle(xmin, ymin, xmax, ymax),
-        floor=float(terrain.z.min()) if floor is None else floor,
-        target_volume=target_volume,
-        excavator_pose=exc,
-        truck_pose=trk,
-        truck_capacity=truck_capacity,
-        budget=budget,
-        meta={"generator": "file", "path": str(path)},
-    )
+    return backhoe_site(scenario_id or f"file-{Path(path).stem}-v{target_volume:g}", terrain,
+                        dig_area=tuple(dig_area) if dig_area is not None else rectangle(xmin, ymin, xmax, ymax),
+                        floor=float(terrain.z.min()) if floor is None else floor, target_volume=target_volume,
+                        corner=(xmin, xmax, ymax), excavator=excavator, truck=truck, truck_capacity=truck_capacity,
+                        budget=budget, meta={"generator": "file", "path": str(path)})

@@ -62,42 +62,6 @@ def _draw_features(rng: np.random.Generator, n: int, span: tuple[float, float], 
     return feats
 
 
-def pile_surface(
-    seed: int,
-    *,
-    size: tuple[float, float] = (20.0, 18.0),
-    resolution: float = 0.1,
-    face_y: float = 11.0,
-    wall: tuple[float, float] = (3.0, 17.0),
-    height: float | tuple[float, float] = (1.0, 1.4),
-    slope: float | tuple[float, float] = (0.55, 0.75),
-    n_features: int | tuple[int, int] = (3, 5),
-    amplitude: tuple[float, float] = (0.6, 1.5),
-    width: tuple[float, float] = (0.5, 1.1),
-    features: list | tuple | None = None,
-) -> tuple[Heightmap, list[tuple[float, float, float]]]:
-    """The heightmap alone, and the contour's features ``(x, a, s)`` it was built from."""
-    rng = np.random.default_rng(seed)
-    lx, ly = size
-    h = float(rng.uniform(*height)) if isinstance(height, (tuple, list)) else float(height)
-    k = float(rng.uniform(*slope)) if isinstance(slope, (tuple, list)) else float(slope)
-    if features is None:
-        n = int(rng.integers(n_features[0], n_features[1] + 1)) if isinstance(n_features, (tuple, list)) else int(n_features)
-        feats = _draw_features(rng, n, (wall[0] + 1.5, wall[1] - 1.5), amplitude, width)
-    else:
-        feats = [(float(x), float(a), float(s)) for x, a, s in features]
-    nx, ny = int(round(lx / resolution)), int(round(ly / resolution))
-    xs = (np.arange(nx) + 0.5) * resolution
-    ys = (np.arange(ny) + 0.5) * resolution
-    contour = np.full(nx, face_y)
-    for x, a, s in feats:
-        contour -= a * np.exp(-((xs - x) ** 2) / (2 * s * s))
-    inside = (ys[:, None] >= contour[None, :]) & (xs[None, :] >= wall[0]) & (xs[None, :] <= wall[1])
-    dist = distance_transform_edt(inside) * resolution  # to the nearest cell outside the pile
-    z = np.where(inside, np.minimum(h, k * (dist - 0.5 * resolution)), 0.0)
-    return Heightmap((0.0, 0.0), resolution, round_heights(z)), feats
-
-
 def pile(
     seed: int,
     target_volume: float = 2.0,
@@ -120,11 +84,25 @@ def pile(
     scenario_id: str | None = None,
 ) -> Scenario:
     """A wheel-loader scenario on a pile; see the module docstring for the layout."""
-    terrain, feats = pile_surface(
-        seed, size=size, resolution=resolution, face_y=face_y, wall=wall, height=height, slope=slope,
-        n_features=n_features, amplitude=amplitude, width=width, features=features,
-    )
+    rng = np.random.default_rng(seed)
     lx, ly = size
+    h = float(rng.uniform(*height)) if isinstance(height, (tuple, list)) else float(height)
+    k = float(rng.uniform(*slope)) if isinstance(slope, (tuple, list)) else float(slope)
+    if features is None:
+        n = int(rng.integers(n_features[0], n_features[1] + 1)) if isinstance(n_features, (tuple, list)) else int(n_features)
+        feats = _draw_features(rng, n, (wall[0] + 1.5, wall[1] - 1.5), amplitude, width)
+    else:
+        feats = [(float(x), float(a), float(s)) for x, a, s in features]
+    nx, ny = int(round(lx / resolution)), int(round(ly / resolution))
+    xs = (np.arange(nx) + 0.5) * resolution
+    ys = (np.arange(ny) + 0.5) * resolution
+    contour = np.full(nx, face_y)
+    for x, a, s in feats:
+        contour -= a * np.exp(-((xs - x) ** 2) / (2 * s * s))
+    inside = (ys[:, None] >= contour[None, :]) & (xs[None, :] >= wall[0]) & (xs[None, :] <= wall[1])
+    dist = distance_transform_edt(inside) * resolution  # to the nearest cell outside the pile
+    z = np.where(inside, np.minimum(h, k * (dist - 0.5 * resolution)), 0.0)
+    terrain = Heightmap((0.0, 0.0), resolution, round_heights(z))
     loader_pose = Pose(*(loader or (0.6 * lx, face_y - 5.0, math.pi / 2)))
     truck_pose = Pose(*(truck or (0.25 * lx, face_y - 7.5, 0.0)))
     sc = assemble_scenario(

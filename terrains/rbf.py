@@ -25,7 +25,7 @@ import numpy as np
 from earthbench.errors import ScenarioError
 from earthbench.world import Budget, Heightmap, Scenario
 
-from .common import assemble_scenario, paper_poses, rectangle, round_heights
+from .common import backhoe_site, rectangle, round_heights
 
 #: Elements of the largest array the mounds are summed through: 4 × earthbench.suite.MAX_CELLS
 #: (the scale suite's 96 × 48 m map with 1,920 mounds needs 5.5 million).
@@ -121,18 +121,9 @@ def rbf(
         dig_area = rectangle(0.0, 0.0, lx, ly)
     else:
         dig_area = richest_window(terrain, (float(local_area[0]), float(local_area[1])))
-    exc, trk = paper_poses(0.0, lx, ly, excavator, truck)
     meta = {"generator": "rbf", "seed": seed, "n_bases": n_bases, "size": [lx, ly], "resolution": resolution}
     if local_area is not None:
         meta["local_area"] = [float(local_area[0]), float(local_area[1])]
-    return assemble_scenario(
-        scenario_id or f"rbf-n{n_bases}-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}",
-        terrain,
-        dig_area=dig_area,
-        target_volume=target_volume,
-        excavator_pose=exc,
-        truck_pose=trk,
-        truck_capacity=truck_capacity,
-        budget=budget,
-        meta=meta,
-    )
+    return backhoe_site(scenario_id or f"rbf-n{n_bases}-{lx:g}x{ly:g}-s{seed}-v{target_volume:g}", terrain, dig_area=dig_area,
+                        target_volume=target_volume, corner=(0.0, lx, ly), excavator=excavator, truck=truck,
+                        truck_capacity=truck_capacity, budget=budget, meta=meta)

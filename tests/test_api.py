@@ -142,3 +142,35 @@ def test_the_package_face_exports_one_list():
         assert getattr(earthbench.harness, name) is not None
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         earthbench.nothing  # noqa: B018
+
+
+def test_every_moved_name_imports_from_its_old_place_with_a_warning_naming_its_removal():
+    """One table of moved names (earthbench.compat), each still importable from its old place: the
+    same object, with a DeprecationWarning naming its new place and the release that removes it
+    (unless the old module still uses the name itself), and on CHANGELOG.md's removal schedule."""
+    from earthbench import compat
+
+    schedule = (ROOT / "CHANGELOG.md").read_text().split("### Removal schedule", 1)[1].split("\n## ", 1)[0]
+    for old, names in compat.MOVED_NAMES.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a module that moved whole warns on import (the test above)
+            module = importlib.import_module(old)
+        for name, (new, removed_in) in names.items():
+            assert f"`{old}`" in schedule and removed_in in schedule, (old, removed_in)
+            target = getattr(importlib.import_module(new), name)
+            if name in vars(module):  # the old module still imports it for its own use
+                assert vars(module)[name] is target
+                continue
+            with pytest.warns(DeprecationWarning, match=rf"{re.escape(old)}\.{name} moved to {re.escape(new)}\.{name}.*{removed_in}"):
+                assert getattr(module, name) is target
+    for old, (new, removed_in) in compat.MOVED_MODULES.items():
+        assert f"`{old}`" in schedule and f"`{new}`" in schedule and removed_in in schedule
+
+
+def test_no_module_but_the_compatibility_table_forwards_a_moved_name():
+    """History stays out of the code: a module that lost names has one hook into earthbench.compat."""
+    for path in sorted((ROOT / "earthbench").rglob("*.py")):
+        text = path.read_text()
+        if path.name != "compat.py":
+            assert "DeprecationWarning, stacklevel" not in text or path.name == "world.py", path  # world: a deprecated argument
+            assert "moved_getattr" not in text and "moved_module" not in text, path

@@ -15,7 +15,9 @@ import earthbench
 from earthbench.cli import main
 from earthbench.compare import Selector, compare
 from earthbench.merge import MergeError, merge
-from earthbench.publish import md_escape, publish, seed_list
+from earthbench.board.selection import seed_list
+from earthbench.board.tables import md_escape
+from earthbench.publish import publish
 from earthbench.store import load_runs
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import matplotlib.colors as mcolors
 import pytest
 
-from earthbench.publish import profiles_figure, published_runs, volume_time_figure
+from earthbench.board.figures import profiles_figure, volume_time_figure
+from earthbench.board.selection import published_runs
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 

@@ -194,7 +194,7 @@ def test_a_limit_the_dense_motion_breaks_is_caught_however_sparsely_it_is_sample
 @settings(max_examples=30, deadline=None)
 @given(curvature=st.floats(-0.5, 0.5), length=st.floats(-6.0, 6.0), n=st.integers(1, 5), t=st.floats(-1.0, 12.0))
 def test_a_timeline_pose_is_the_motion_models_pose(curvature, length, n, t):
-    from earthbench.referee.state import Timeline
+    from earthbench.motion import Timeline
 
     if abs(curvature * length) / n > math.pi - 0.05:
         return
@@ -212,7 +212,7 @@ def test_a_machine_at_rest_stands_exactly_where_its_last_move_ended(start, goal,
     """The arc's end is 1e-15 m off the sample for about half of all drives; the station a
     planner checked (tilt, track level) must be the one the referee judges, bit for bit."""
     from earthbench.motion import turn_drive_turn
-    from earthbench.referee.state import Timeline
+    from earthbench.motion import Timeline
 
     path = turn_drive_turn(Pose(*start), goal, 0.0, 0.5, 0.5)
     line = Timeline(Pose(*start), [Move("excavator", tuple(path))] if len(path) > 1 else [])

@@ -177,7 +177,7 @@ def test_a_spot_check_table_made_before_it_was_versioned_keeps_its_rows(tmp_path
     """``earthbench verify --sample`` created ``spot_checks`` itself before schema version 7, at
     first without ``context``: such a store catches up without losing a check, and its checks
     read back as they were written."""
-    from earthbench.verify import latest_spot_checks
+    from earthbench.labels import latest_spot_checks
 
     path = tmp_path / "v6.db"
     Store(path).close()

@@ -19,7 +19,7 @@ from ..classes import machine_classes
 from ..provenance import build_text
 from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
 from ..store import rules_versions
-from ..verify import machine_label
+from ..labels import machine_label
 
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -217,7 +217,7 @@ PROVENANCE = ("provenance: success, volume and time-per-m³ figures are the refe
 
 
 def _machine_of(runs: pd.DataFrame) -> pd.Series:
-    """Each run's machine, labelled as :func:`earthbench.verify.machine_label` does."""
+    """Each run's machine, labelled as :func:`earthbench.labels.machine_label` does."""
     cols = {"hostname": "hostname", "cpu_model": "cpu_model", "cores": "cpu_cores"}
     values = [runs[c].tolist() if c in runs else [None] * len(runs) for c in cols.values()]
     labels: dict[tuple[Any, ...], str] = {}  # a store holds a few machines: label each once

@@ -52,8 +52,8 @@ from typing import Any
 
 import psutil
 
+from .. import compat
 from ..errors import EarthbenchError
-from ..lazy import moved_getattr
 from ..planner import PrepareProgress, SharedFolder
 from ..world import Budget
 from . import isolation
@@ -254,4 +254,4 @@ def _undumpable() -> None:
 
 
 #: ``run_case`` moved to :mod:`.run` (0.5.0): the old import still works, with a warning.
-__getattr__ = moved_getattr(__name__, {"run_case": "earthbench.harness.run"})
+__getattr__ = compat.forward(__name__)

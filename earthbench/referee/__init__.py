@@ -14,91 +14,36 @@ re-deriving them:
 - :mod:`earthbench.cut` — the cut model (``apply_cut``, ``charge_cut``);
 - :mod:`earthbench.rules` — the predicates the rules are made of, which planners call too
   (footprints touching, the excavator's stand and undermining line, the loader's step);
-- :mod:`earthbench.referee.state` — the replay state and the rules all machines share: speed, yaw rate, heading,
-  keep-out zones and the map's edge along the footprint's swept path, and clearance between
-  machines checked along both swept paths at once;
+- :mod:`earthbench.referee.state` — the replay state (plain data), the verdict and the rules' names;
+- :mod:`earthbench.referee.loop` — the one loop that replays the actions in time order, hands
+  each to the rules below and alone advances the state;
+- :mod:`earthbench.referee.paths` — the rules all machines share along a path: speed, yaw rate,
+  heading, keep-out zones and the map's edge along the footprint's swept path;
+- :mod:`earthbench.referee.clearance` — clearance between machines along both swept paths at once;
 - :mod:`earthbench.referee.backhoe` — digs and dumps of the excavator (reach, depth, drag, dig
   area, floor, undermining, tilt, durations);
 - :mod:`earthbench.referee.loader` — the wheel loader's charges, dumps, turning radius and the
   step of its wheels;
-- :mod:`earthbench.referee.site` — no machine under a dig's bucket or arm, and the truck's
-  ground (rules version 2, :data:`RULES_VERSION`).
+- :mod:`earthbench.referee.site` — no machine under a dig's bucket or arm (rules version 2,
+  :data:`RULES_VERSION`);
+- :mod:`earthbench.referee.truck` — the truck's ground where it drives, and standing still for a dump;
+- :mod:`earthbench.referee.ground` — the cut itself (with soil: its truth and slump) and the
+  truck's ground left as it was.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
-
-import numpy as np
-
 from ..errors import PlanFormatError
-from ..lazy import moved_getattr
+from .. import compat
 from ..motion import ABS_TOL, RATE_TOL
-from ..plan import Action, Charge, Dig, Dump, Move, Plan
-from ..world import LoaderSpec, Scenario, TruckSpec
-from .state import RULES, RULES_VERSION, DigRecord, Replay, Verdict, Violation
+from ..plan import Action, Plan
+from ..world import Scenario
+from .state import RULES, RULES_VERSION, DigRecord, Observer, Replay, Verdict, Violation
 
 __all__ = ["ABS_TOL", "RATE_TOL", "RULES", "RULES_VERSION", "DigRecord", "Execution", "Observer", "Verdict", "Violation", "judge"]
 
-#: The cut model was documented here until 0.1.0 and moved to :mod:`earthbench.cut` (0.2.0);
-#: a plugin that imports it from here still runs, with a DeprecationWarning.
-__getattr__ = moved_getattr(__name__, dict.fromkeys(("apply_cut", "charge_cut", "cut_level", "footprint"), "earthbench.cut")
-                            | {"LOADER_DUMP_HALF_ANGLE": "earthbench.motion"})
-
-
-#: Called after each action, in the referee's time order, with the action's index, the heightmap
-#: as it then stands (read-only, current only during the call) and the m³ in the truck.
-Observer = Callable[[int, np.ndarray, float], None]
-
-
-def _act(r: Replay, indices: Iterable[int], observe: Observer | None = None) -> None:
-    """Replay the plan's actions ``indices`` in time order, telling ``observe`` after each."""
-    plan = r.plan
-    z = r.z.view()  # the rules cut r.z in place, so this view stays current
-    z.flags.writeable = False
-    for n in sorted(indices, key=lambda n: (plan.actions[n].t_start, n)):
-        a = plan.actions[n]
-        if a.machine not in r.pose:
-            r.flag(n, "unknown_machine", 1.0, f"no machine {a.machine!r}; on site: {', '.join(r.pose)}")
-        else:
-            _apply(r, n, a)
-        if observe is not None:
-            observe(n, z, r.loaded)
-
-
-def _apply(r: Replay, n: int, a: Action) -> None:
-    # each track's rules load with the first judgement, not with every planner that calls one
-    # of them (a case's start-up, issue 18)
-    from . import backhoe, loader, site
-
-    if a.t_start < r.busy_until[a.machine] - ABS_TOL:
-        gap = r.busy_until[a.machine] - a.t_start
-        r.flag(n, "overlap", gap, f"{a.machine} is busy until t={r.busy_until[a.machine]:.3f} s")
-    spec = r.specs.get(a.machine)
-    if isinstance(a, Move):
-        arc = r.move(n, a)
-        if isinstance(spec, LoaderSpec):
-            loader.move(r, n, a, spec, arc)
-        elif isinstance(spec, TruckSpec):
-            site.truck_path(r, n, np.array(a.path, dtype=float), arc)
-    elif isinstance(a, Dig):
-        backhoe.dig(r, n, a)
-    elif isinstance(a, Dump):
-        if isinstance(spec, LoaderSpec):
-            loader.dump(r, n, a, spec)
-        elif a.machine == "excavator" and spec is not None:
-            backhoe.dump(r, n, a, spec)  # type: ignore[arg-type]
-        else:
-            r.flag(n, "wrong_machine", 1.0, f"{a.machine} cannot dump into the truck")
-    elif isinstance(a, Charge):
-        loader.charge(r, n, a)
-    r.busy_until[a.machine] = max(r.busy_until[a.machine], a.t_end)
-
-
-def _run(r: Replay, observe: Observer | None = None) -> Verdict:
-    _act(r, range(len(r.plan.actions)), observe)
-    r.collisions()
-    return r.verdict()
+#: The cut model was documented here until 0.1.0 (earthbench.compat keeps the old names).
+__getattr__ = compat.forward(__name__)
 
 
 class Execution:
@@ -118,13 +63,9 @@ class Execution:
         return self.replay.plan
 
     def execute(self, actions: tuple[Action, ...]) -> Verdict:
-        r = self.replay
-        _act(r, r.extend(actions))
-        kept = len(r.violations)
-        r.collisions()  # along the whole of both paths so far; checked again after the next step
-        verdict = r.verdict()
-        del r.violations[kept:]
-        return verdict
+        from . import loop
+
+        return loop.execute(self.replay, actions)
 
 
 def judge(scenario: Scenario, plan: Plan | dict | str, observe: Observer | None = None) -> Verdict:
@@ -143,4 +84,6 @@ def judge(scenario: Scenario, plan: Plan | dict | str, observe: Observer | None 
     except (PlanFormatError, TypeError, ValueError, AttributeError) as exc:
         v = Violation(None, "malformed", 1.0, str(exc))
         return Verdict((v,), scenario.terrain, 0.0, 0.0, 0.0)
-    return _run(Replay(scenario, plan), observe)
+    from . import loop  # the loop and the rules load with the first judgement (a case's start-up, issue 18)
+
+    return loop.run(Replay(scenario, plan), observe)

@@ -30,15 +30,14 @@ way to a station is tested before the tilt, as most rejected stations fail the t
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from shapely.geometry import LineString, Point, Polygon
+from shapely.geometry import Point, Polygon
 
 from earthbench.cut import apply_cut, cut_along, path_cells, path_window
-from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn, wrap
+from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.rules import track_level_and_tilt, undermining_excess
@@ -48,6 +47,7 @@ from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
 from ..truck_stands import TruckStands
+from .moves import Moves
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
@@ -117,7 +117,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
         return session.run(carried, max_dumps=1)
 
 
-class _Greedy:
+class _Greedy(Moves):
     def __init__(self, sc: Scenario, cfg: GreedyConfig):
         self.sc, self.cfg = sc, cfg
         self.exc: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
@@ -546,74 +546,3 @@ class _Greedy:
         if w.sum() <= 0:
             return base.yaw
         return math.atan2(float((w * dy / np.maximum(d, 1e-9)).sum()), float((w * dx / np.maximum(d, 1e-9)).sum()))
-
-    def _truck_spots(self, base: Pose, toward: tuple[float, float] | None = None) -> Iterator[Pose]:
-        """Stands for the truck serving ``base``, nearest the bearing of its material (or of
-        ``toward``) first (:meth:`..truck_stands.TruckStands.parking`)."""
-        bearing = (math.atan2(toward[1] - base.y, toward[0] - base.x) if toward is not None
-                   else self.material_bearing(base))
-        buckets = (self.sc.task.target_volume - self.loaded) / self.exc.bucket_capacity
-        return self.stands.parking(base, self.truck, bearing, max(buckets, 1.0))
-
-    def _clear(self, a: tuple[float, float], b: tuple[float, float], static: Pose) -> bool:
-        seg = LineString([a, b]) if a != b else Point(a)
-        if any(seg.intersects(ko) for ko in self.keep_outs):
-            return False
-        return seg.distance(Point(static.x, static.y)) >= self.exc.clearance + 0.05
-
-    def _truck_move(self, new_base: Pose, toward: tuple[float, float] | None = None) -> tuple[str, Pose] | None:
-        """Where the truck stands for a base at ``new_base`` and which machine drives first so
-        neither path passes the other machine (None: no spot works)."""
-        here = (self.base.x, self.base.y)
-        dest = (new_base.x, new_base.y)
-        truck_here = (self.truck.x, self.truck.y)
-        tried = 0
-        for tpose in self._truck_spots(new_base, toward):
-            spot = (tpose.x, tpose.y)
-            # excavator first (truck parked where it is), then truck; or the other way round
-            if self._clear(here, dest, self.truck) and self._clear(truck_here, spot, Pose(*dest)):
-                first = "excavator"
-            elif self._clear(truck_here, spot, self.base) and self._clear(here, dest, tpose):
-                first = "truck"
-            else:
-                continue
-            tried += 1
-            if self.stands.path_ok(self._truck_path(tpose, 0.0)):
-                return first, tpose  # the truck's way keeps its ground limits
-            if tried >= 40:
-                break
-        return None
-
-    def _truck_path(self, spot: Pose, t0: float) -> list[tuple[float, float, float, float]]:
-        return turn_drive_turn(self.truck, (spot.x, spot.y), t0, self.truck_spec.travel_speed, self.truck_spec.yaw_rate,
-                               final_yaw=spot.yaw)
-
-    def _go(self, new_base: Pose, toward: tuple[float, float] | None = None) -> bool:
-        """Bring the truck (and the excavator) for a base at ``new_base``; False if no spot works."""
-        move = self._truck_move(new_base, toward)
-        if move is not None:
-            self._drive_in_turn((new_base.x, new_base.y), *move)
-        return move is not None
-
-    def _drive_in_turn(self, dest: tuple[float, float], first: str, spot: Pose) -> None:
-        if first == "excavator":
-            self._drive("excavator", dest)
-            self._drive("truck", (spot.x, spot.y), spot.yaw)
-        else:
-            self._drive("truck", (spot.x, spot.y), spot.yaw)
-            self._drive("excavator", dest)
-
-    def _drive(self, machine: str, goal: tuple[float, float], yaw: float | None = None) -> None:
-        pose = self.base if machine == "excavator" else self.truck
-        spec = self.exc if machine == "excavator" else self.truck_spec
-        if math.hypot(goal[0] - pose.x, goal[1] - pose.y) < 1e-9 and (yaw is None or abs(wrap(yaw - pose.yaw)) < 1e-9):
-            return
-        path = turn_drive_turn(pose, goal, max(self.t, self.truck_ready), spec.travel_speed, spec.yaw_rate, final_yaw=yaw)
-        self.actions.append(Move(machine, tuple(path)))
-        self.t = path[-1][0]
-        end = Pose(path[-1][1], path[-1][2], path[-1][3])
-        if machine == "excavator":
-            self.base = end  # the upper body turns with the base: ``turn`` is relative
-        else:
-            self.truck = end
-            self.truck_ready = self.t

@@ -1,4 +1,6 @@
-"""The results store: one SQLite file (WAL mode), one row per run, one transaction per case.
+"""The results store: one SQLite file (WAL mode), one row per run, one transaction per case
+(docs/DESIGN.md §8). :class:`Store` opens, creates and migrates a store and reads and writes it
+through named methods; the tables are those of :mod:`earthbench.store.schema`.
 
 Why SQLite: embedded, a single file to copy or merge, safe against a killed writer (a run
 killed mid-case loses only that case: its transaction never commits), and readable by
@@ -26,27 +28,19 @@ pandas. Tables:
 * ``spot_checks`` — each re-timing of ``earthbench verify --sample`` (:mod:`earthbench.verify`), so a
   leaderboard's stamp can say how its solve times held up on another machine.
 
-Every SQL statement of earthbench is in this module: the rest reads and writes a store through
-:class:`Store`'s named methods.
+Every SQL statement of earthbench is in this package (:mod:`earthbench.store`): the rest reads
+and writes a store through :class:`Store`'s named methods and the readers of
+:mod:`earthbench.store.frames`.
 
 Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
 was drawn from (``sealed_from``), that suite's digest (``public_digest``) and the draw's
 ``commitment``; its scenarios and runs carry ``sealed = 1``. Nothing of the key is stored.
 
 The schema version is ``PRAGMA user_version`` and the file is tagged with
-``PRAGMA application_id``; a database from a newer schema is refused, never altered. A
-store from an older schema opened for writing is brought up to date by the named steps of
-:data:`MIGRATIONS` (version 2 added the ``steps`` column, version 3 the seal's columns, version 4
-``isolation``, the fences a case ran in (docs/isolation.md), and ``processes``, the most
-processes it held, from its cgroup; version 5 the machine's load around each case — ``load_before``,
-``load_after``, ``steal_share`` — and the build of the code, ``environments.earthbench_version``
-and ``environments.plugin``: the plugin's distribution, version and source commit as JSON);
-read-only, it is read as it is (a version-1 store's runs read as open-loop runs, a store before
-version 3 as public runs, runs stored before version 4 as ``isolation: none``: they ran with
-per-process fences, runs before version 5 without load or build; version 6 ``prepare_s`` and
-``prepare_cpu_s``, the planner's preparation, NULL before it; version 7 ``spot_checks``, which
-``verify`` created on its own before, so a store before it may or may not hold one; version 8
-``code_digest``, the digest of the code that provided the run's planner, NULL — unknown — before it).
+``PRAGMA application_id``; a database from a newer schema is refused, never altered. A store
+from an older schema opened for writing is brought up to date by the named steps of
+:data:`~earthbench.store.schema.MIGRATIONS`; read-only, it is read as it is, a column its
+version lacks read as its default (docs/DESIGN.md §8, "Schema versions").
 """
 
 from __future__ import annotations
@@ -55,63 +49,22 @@ import hashlib
 import json
 import os
 import sqlite3
-import zlib
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from datetime import datetime, UTC
 from pathlib import Path
 from urllib.parse import quote
-from typing import TYPE_CHECKING, Any, Protocol, overload
+from typing import TYPE_CHECKING, Any, Protocol
 
-from .errors import StoreError
-from .scoring import is_success, restate
-from .world import Scenario
+from ..errors import StoreError
+from ..world import Scenario
+from .blobs import compress, decompress
+from .schema import APPLICATION_ID, SCHEMA_VERSION, columns, migrate, write_schema
 
 if TYPE_CHECKING:  # pragma: no cover
-    import pandas as pd
+    from ..records import Case, CaseResult, SpotCheck
 
-    from .records import Case, CaseResult, SpotCheck
 
-#: The columns of ``spot_checks`` before ``context`` (the CPU ratios and load, issue 35) joined them.
-_SPOT_CHECK_COLUMNS = """
-    id INTEGER PRIMARY KEY, checked_at TEXT NOT NULL, planner TEXT NOT NULL, planner_version TEXT NOT NULL,
-    config_hash TEXT NOT NULL, run_ids TEXT NOT NULL, agree INTEGER NOT NULL, ratios TEXT NOT NULL,
-    disagreements TEXT NOT NULL, machine TEXT NOT NULL, stored_machines TEXT NOT NULL"""
-
-#: How an older store catches up, one step per schema version: step ``k`` (0-based) takes a
-#: store from version ``k + 1`` to ``k + 2``. Each feature that adds a column or a table appends
-#: its own named step (never edits an old one); a new store is created at the latest version
-#: by ``_SCHEMA``, which already holds every step's columns and tables. A statement that would
-#: add a column the table already has is skipped, so a step is safe to re-run.
-MIGRATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("2: the closed-loop steps of a run", ("ALTER TABLE runs ADD COLUMN steps TEXT",)),
-    ("3: sealed draws (earthbench.seal): a suite version's public origin and commitment, a sealed mark on scenarios and runs", (
-        "ALTER TABLE suites ADD COLUMN sealed_from TEXT",
-        "ALTER TABLE suites ADD COLUMN public_digest TEXT",
-        "ALTER TABLE suites ADD COLUMN commitment TEXT",
-        "ALTER TABLE scenarios ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
-        "ALTER TABLE runs ADD COLUMN sealed INTEGER NOT NULL DEFAULT 0",
-    )),
-    ("4: the isolation stamp and process count of a run",
-     ("ALTER TABLE runs ADD COLUMN isolation TEXT", "ALTER TABLE runs ADD COLUMN processes INTEGER")),
-    ("5: the machine's load around each case and the build of the code that ran it (issue 35)", (
-        "ALTER TABLE runs ADD COLUMN load_before REAL", "ALTER TABLE runs ADD COLUMN load_after REAL",
-        "ALTER TABLE runs ADD COLUMN steal_share REAL", "ALTER TABLE environments ADD COLUMN earthbench_version TEXT",
-        "ALTER TABLE environments ADD COLUMN plugin TEXT")),
-    ("6: the planner's preparation a run used, its wall and CPU seconds (docs/DESIGN.md §6 \"Preparation\")",
-     ("ALTER TABLE runs ADD COLUMN prepare_s REAL", "ALTER TABLE runs ADD COLUMN prepare_cpu_s REAL")),
-    # `earthbench verify --sample` created this table on its own before it was versioned, at first
-    # without ``context``: a store that has it keeps its rows, one without it gains it empty
-    ("7: the spot re-timings of `earthbench verify --sample`, kept in the store they sampled", (
-        "CREATE TABLE IF NOT EXISTS spot_checks (" + _SPOT_CHECK_COLUMNS + ")",
-        "ALTER TABLE spot_checks ADD COLUMN context TEXT")),
-    ("8: the digest of the code that provided a run's planner (docs/DESIGN.md §6 \"Plugin code\"); NULL: unknown",
-     ("ALTER TABLE runs ADD COLUMN code_digest TEXT",)),
-    # a run stored before it read as judged under rules version 1 (docs/referee.md "Rules versions")
-    ("9: the version of the referee's rules a run was judged under", ("ALTER TABLE runs ADD COLUMN rules INTEGER NOT NULL DEFAULT 1",)),
-)
-SCHEMA_VERSION = 1 + len(MIGRATIONS)
-APPLICATION_ID = 0x45424E43  # "EBNC"
 DEFAULT_DB = "earthbench.db"
 
 
@@ -129,85 +82,12 @@ METRIC_COLUMNS = (
     "digs", "mean_bucket_fill", "travel_m",
 )
 
-_SCHEMA = """
-CREATE TABLE environments (
-    id INTEGER PRIMARY KEY,
-    hash TEXT NOT NULL UNIQUE,
-    hostname TEXT, cpu_model TEXT, cores INTEGER, os TEXT, python TEXT,
-    packages TEXT, project_commit TEXT, plugin_commit TEXT, earthbench_version TEXT, plugin TEXT
-);
-CREATE TABLE planner_configs (
-    id INTEGER PRIMARY KEY,
-    name TEXT NOT NULL, version TEXT NOT NULL, config_hash TEXT NOT NULL,
-    config TEXT NOT NULL, source TEXT,
-    UNIQUE (name, version, config_hash)
-);
-CREATE TABLE scenarios (
-    digest TEXT PRIMARY KEY,
-    id TEXT NOT NULL, track TEXT NOT NULL, target_volume REAL NOT NULL,
-    doc BLOB NOT NULL, sealed INTEGER NOT NULL DEFAULT 0
-);
-CREATE TABLE suites (
-    id INTEGER PRIMARY KEY,
-    name TEXT NOT NULL, digest TEXT NOT NULL, track TEXT NOT NULL, threshold REAL NOT NULL,
-    description TEXT, registered_at TEXT, sealed_from TEXT, public_digest TEXT, commitment TEXT,
-    UNIQUE (name, digest)
-);
-CREATE TABLE suite_scenarios (
-    suite_id INTEGER NOT NULL REFERENCES suites(id),
-    scenario_id TEXT NOT NULL, scenario_digest TEXT NOT NULL, family TEXT, seed INTEGER,
-    PRIMARY KEY (suite_id, scenario_id)
-);
-CREATE INDEX suite_scenarios_digest ON suite_scenarios (scenario_digest);
-CREATE TABLE runs (
-    id INTEGER PRIMARY KEY,
-    suite TEXT NOT NULL, suite_digest TEXT NOT NULL,
-    scenario_id TEXT NOT NULL, scenario_digest TEXT NOT NULL REFERENCES scenarios(digest),
-    family TEXT, seed INTEGER, track TEXT, target_volume REAL,
-    planner TEXT NOT NULL, planner_version TEXT NOT NULL, config_hash TEXT NOT NULL,
-    planner_config_id INTEGER REFERENCES planner_configs(id),
-    environment_id INTEGER REFERENCES environments(id),
-    reason TEXT NOT NULL, success INTEGER NOT NULL, threshold REAL NOT NULL,
-    solve_time_s REAL, solve_cpu_s REAL, startup_s REAL, peak_rss_mb REAL,
-    valid INTEGER, volume_ratio REAL, loaded_volume REAL, makespan_s REAL, time_per_m3 REAL,
-    time_per_m3_ratio REAL, digs INTEGER, mean_bucket_fill REAL, travel_m REAL,
-    metrics TEXT, violations TEXT, plan BLOB, error TEXT, log_tail TEXT,
-    exit_status INTEGER, cores TEXT, started_at TEXT, finished_at TEXT, rescored_at TEXT, steps TEXT,
-    sealed INTEGER NOT NULL DEFAULT 0,
-    isolation TEXT, processes INTEGER,
-    load_before REAL, load_after REAL, steal_share REAL,
-    prepare_s REAL, prepare_cpu_s REAL, code_digest TEXT,
-    rules INTEGER NOT NULL DEFAULT 1,
-    UNIQUE (scenario_digest, planner, planner_version, config_hash)
-);
-CREATE INDEX runs_planner ON runs (planner, planner_version);
-CREATE TABLE spot_checks (""" + _SPOT_CHECK_COLUMNS + """, context TEXT);
-"""
-
-
-def _columns(db: sqlite3.Connection, table: str) -> set[str]:
-    return {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
-
 
 def _rules_version() -> int:
     """The version of the rules this earthbench's referee judges by (loaded with the first run written)."""
-    from .referee import RULES_VERSION
+    from ..referee import RULES_VERSION
 
     return RULES_VERSION
-
-
-#: The most a stored plan or scenario document may inflate to: twice the plan-size rule (64 MB
-#: of JSON; a closed loop's joined plan is a little larger than its steps' messages) and three
-#: times the largest scenario document (4,000,000 cells as base64, 43 MB).
-MAX_BLOB_BYTES = 128 * 2**20
-
-
-class BlobTooLargeError(StoreError, ValueError):
-    """A stored blob that inflates past :data:`MAX_BLOB_BYTES`."""
-
-
-def _compress(text: str) -> bytes:
-    return zlib.compress(text.encode(), 6)
 
 
 class SuiteRecord(Protocol):
@@ -228,36 +108,6 @@ class SuiteRecord(Protocol):
     def scenarios(self) -> Any: ...
 
 
-
-
-@overload
-def decompress(blob: bytes) -> str: ...
-@overload
-def decompress(blob: None) -> None: ...
-def decompress(blob: bytes | None) -> str | None:
-    """The text of a ``plan`` or ``scenarios`` blob as stored (zlib-compressed JSON), or None.
-
-    A blob that inflates past :data:`MAX_BLOB_BYTES` is refused (:class:`BlobTooLargeError`)
-    after inflating at most that much: a submitted store is hostile data, and a megabyte of
-    zeros compressed can claim a gigabyte of memory.
-    """
-    if blob is None:
-        return None
-    inflate = zlib.decompressobj()
-    text = inflate.decompress(blob, MAX_BLOB_BYTES + 1)
-    if len(text) > MAX_BLOB_BYTES or inflate.unconsumed_tail:
-        raise BlobTooLargeError(f"a stored blob of {len(blob):,} bytes inflates to more than {MAX_BLOB_BYTES / 2**20:.0f} MB "
-                                "(no plan or scenario is that large: a decompression bomb?); it was not read")
-    return text.decode()
-
-
-def _write_schema(db: sqlite3.Connection) -> None:
-    """The tables of a new store at the latest version, inside the caller's transaction."""
-    for stmt in _SCHEMA.strip().split(";"):
-        if stmt.strip():
-            db.execute(stmt)
-    db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
-    db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
 
 def _now() -> str:
@@ -311,7 +161,7 @@ class Store:
                 db.execute("PRAGMA journal_mode=WAL")
                 with db:
                     db.execute("BEGIN IMMEDIATE")
-                    _write_schema(db)
+                    write_schema(db)
             finally:
                 db.close()
             os.link(tmp, self.path)
@@ -341,7 +191,7 @@ class Store:
             self.db.execute("BEGIN IMMEDIATE")
             try:
                 if not {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}:
-                    _write_schema(self.db)
+                    write_schema(self.db)
                 self.db.execute("COMMIT")
             except BaseException:
                 self.db.execute("ROLLBACK")
@@ -357,20 +207,7 @@ class Store:
         if not self.read_only:
             self.db.execute("PRAGMA journal_mode=WAL")
             if version < SCHEMA_VERSION:
-                self._migrate(version)
-
-    def _migrate(self, version: int) -> None:
-        """Apply the :data:`MIGRATIONS` steps after ``version``, all in one transaction."""
-        with self.db:
-            self.db.execute("BEGIN IMMEDIATE")
-            for _, statements in MIGRATIONS[version - 1:]:
-                for stmt in statements:
-                    words = stmt.split()
-                    if words[:2] == ["ALTER", "TABLE"] and words[3:5] == ["ADD", "COLUMN"]:
-                        if words[5] in {r[1] for r in self.db.execute(f"PRAGMA table_info({words[2]})")}:
-                            continue
-                    self.db.execute(stmt)
-            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                migrate(self.db, version)
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
@@ -470,7 +307,7 @@ class Store:
                     **{c: (None if c not in m else (int(m[c]) if isinstance(m[c], bool) else m[c])) for c in METRIC_COLUMNS},
                     "metrics": _json(m) if result.metrics is not None else None,
                     "violations": _json(list(result.violations)),
-                    "plan": plan_blob if plan_blob is not None else _compress(result.plan_json) if result.plan_json is not None else None,
+                    "plan": plan_blob if plan_blob is not None else compress(result.plan_json) if result.plan_json is not None else None,
                     "error": result.error, "log_tail": result.log_tail, "exit_status": result.exit_status,
                     "cores": ",".join(map(str, result.cores)),
                     "started_at": result.started_at, "finished_at": result.finished_at,
@@ -499,7 +336,7 @@ class Store:
 
         For merging: the caller has checked that each document reproduces its digest.
         """
-        sealed = "sealed" if "sealed" in _columns(src.db, "scenarios") else "0"
+        sealed = "sealed" if "sealed" in columns(src.db, "scenarios") else "0"
         rows = [r for d in digests if (r := src.db.execute(
                 f"SELECT digest, id, track, target_volume, doc, {sealed} FROM scenarios WHERE digest=?", (d,)).fetchone())]
         try:
@@ -514,7 +351,7 @@ class Store:
         if not self.db.execute("SELECT 1 FROM scenarios WHERE digest=?", (sc.digest,)).fetchone():
             self.db.execute(
                 "INSERT INTO scenarios (digest, id, track, target_volume, doc, sealed) VALUES (?, ?, ?, ?, ?, ?)",
-                (sc.digest, sc.id, sc.track, sc.task.target_volume, _compress(sc.to_json()), int(bool(sc.meta.get("sealed")))),
+                (sc.digest, sc.id, sc.track, sc.task.target_volume, compress(sc.to_json()), int(bool(sc.meta.get("sealed")))),
             )
 
     def _planner_config(self, case: Case) -> int:
@@ -745,168 +582,3 @@ def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
     if key is not None:
         return key.suite, key.suite_digest, key.commitment
     return getattr(suite, "sealed_from", None), getattr(suite, "public_digest", None), getattr(suite, "commitment", None)
-
-
-def stored_steps(row: Any) -> tuple[tuple[int, float], ...] | None:
-    """A ``runs`` row's closed-loop steps ``((actions, compute seconds), …)``, None for an open-loop run."""
-    text = row["steps"] if "steps" in row.keys() else None
-    return None if not text else tuple((int(n), float(c)) for n, c in json.loads(text))
-
-
-def _suite_view(store: Store, suite: str) -> tuple[sqlite3.Row, dict[str, sqlite3.Row]]:
-    ver = store.suite_version(suite)
-    if ver is None:
-        known = store.suite_names()
-        raise StoreError(f"suite {suite!r} has no runs in {str(store.path)!r}; suites there: {', '.join(known) or '(none)'}")
-    members = {r["scenario_digest"]: r for r in store.suite_members(ver["id"])}
-    return ver, members
-
-
-def _joined_runs(store: Store) -> list[sqlite3.Row]:
-    """Every run joined with its configuration and environment, in the order stored; a column an
-    older schema lacks reads as NULL (0 for ``sealed``)."""
-    have_r, have_e = _columns(store.db, "runs"), _columns(store.db, "environments")
-    sealed = "r.sealed" if "sealed" in have_r else "0 AS sealed"
-    stamp = "r.isolation, r.processes" if "isolation" in have_r else "NULL AS isolation, NULL AS processes"
-    newer = ", ".join([*((f"r.{c}" if c in have_r else f"NULL AS {c}") for c in LOAD_COLUMNS),
-                       *((f"e.{c}" if c in have_e else f"NULL AS {c}") for c in ("earthbench_version", "plugin"))])
-    prep = ", ".join(f"r.{c}" if c in have_r else f"NULL AS {c}" for c in ("prepare_s", "prepare_cpu_s"))
-    prep += ", r.rules" if "rules" in have_r else ", 1 AS rules"
-    return store.db.execute(
-        f"""SELECT r.id, r.suite, r.suite_digest, r.scenario_id, r.scenario_digest, r.family, r.seed, r.track,
-                  r.target_volume, r.planner, r.planner_version, r.config_hash, c.config, r.reason, r.success,
-                  r.threshold, r.solve_time_s, r.solve_cpu_s, r.startup_s, r.peak_rss_mb, {prep}, r.metrics,
-                  r.violations, r.error, r.log_tail, r.exit_status, r.cores, r.started_at, r.finished_at, r.rescored_at,
-                  {stamp}, e.hostname, e.cpu_model, e.cores AS cpu_cores, e.os, e.python, e.packages,
-                  e.project_commit, e.plugin_commit, {sealed}, {newer}
-           FROM runs r LEFT JOIN planner_configs c ON c.id = r.planner_config_id
-                       LEFT JOIN environments e ON e.id = r.environment_id
-           ORDER BY r.id"""
-    ).fetchall()
-
-
-def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> pd.DataFrame:
-    """Stored runs as a pandas DataFrame, one row per run, metrics as flat columns.
-
-    Without ``suite``: every run, labelled with the suite it ran under. With ``suite``: the
-    runs of that suite's scenarios (its most recently run version), whichever suite ran them,
-    relabelled with the suite's name, digest, scenario ids and threshold (``success``
-    recomputed as valid and volume ratio ≥ threshold).
-
-    Columns: ``id``, ``suite``, ``suite_digest``, ``scenario_id``, ``scenario_digest``,
-    ``family``, ``seed``, ``track``, ``target_volume``, ``planner``, ``planner_version``,
-    ``config_hash``, ``config`` (JSON text), ``reason`` (ok | invalid | timeout | memory |
-    error | crashed), ``success`` (bool), ``threshold``, ``solve_time_s``, ``solve_cpu_s``,
-    ``startup_s``, ``peak_rss_mb``, ``prepare_s`` and ``prepare_cpu_s`` (the planner's preparation
-    the run used, NaN without one), ``rules`` (the version of the referee's rules that judged it:
-    1 for a run stored before versions were recorded), then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
-    ``n_violations`` (the metric ``violations``, renamed), ``loaded_volume``,
-    ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
-    ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
-    ``volume_prediction_error``, ``makespan_prediction_error`` and any metric a plugin adds —
-    then ``violation_rules`` (comma-separated rules broken), ``error``, ``log_tail`` (the end
-    of the case's stdout/stderr), ``exit_status``,
-    ``cores``, ``started_at``, ``finished_at``, ``rescored_at``, ``isolation`` (the fences the
-    case ran in: ``namespaces+cgroup-v1`` …, or ``none``), ``processes`` (the most processes it
-    held, from its cgroup) and the environment:
-    ``hostname``, ``cpu_model``, ``cpu_cores``, ``os``, ``python``, ``packages`` (JSON text),
-    ``project_commit`` (the commit the installed earthbench was built from, ``+dirty`` when its
-    tree had changes), ``plugin_commit``, ``sealed`` (a run of a sealed draw, :mod:`earthbench.seal`),
-    ``earthbench_version``, ``plugin`` (JSON text: the planner's distribution, version and source
-    commit), and the machine's load around the case: ``load_before``, ``load_after``, ``steal_share``
-    (missing in stores written before schema version 5). Metrics are NaN for runs without a plan
-    (timeout, memory, error, crashed); ``time_per_m3`` and ``time_per_target_m3`` are ``inf`` when a
-    plan loaded nothing or fell short of the target.
-    """
-    import pandas as pd
-
-    store = db if isinstance(db, Store) else Store(db, create=False)
-    try:
-        view = _suite_view(store, suite) if suite else None
-        rows = _joined_runs(store)
-    finally:
-        if not isinstance(db, Store):
-            store.close()
-    head = ["id", "suite", "suite_digest", "scenario_id", "scenario_digest", "family", "seed", "track", "target_volume",
-            "planner", "planner_version", "config_hash", "config", "reason", "success", "threshold", "solve_time_s",
-            "solve_cpu_s", "startup_s", "peak_rss_mb", "prepare_s", "prepare_cpu_s", "rules"]
-    tail = ["violation_rules", "error", "log_tail", "exit_status", "cores", "started_at", "finished_at", "rescored_at",
-            "isolation", "processes", "hostname", "cpu_model", "cpu_cores", "os", "python", "packages", "project_commit",
-            "plugin_commit", "sealed", *LOAD_COLUMNS, "earthbench_version", "plugin"]
-    metric_names: list[str] = []
-    records = []
-    for r in rows:
-        d = {k: r[k] for k in head}
-        d["success"] = bool(r["success"])
-        metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
-        if view is not None:
-            ver, members = view
-            m = members.get(r["scenario_digest"])
-            if m is None:
-                continue
-            d.update(suite=ver["name"], suite_digest=ver["digest"], scenario_id=m["scenario_id"], family=m["family"],
-                     seed=m["seed"], threshold=ver["threshold"])
-            d["success"] = is_success(metrics.get("valid"), metrics.get("volume_ratio"), ver["threshold"])
-        for k, v in metrics.items():
-            k = "n_violations" if k == "violations" else k
-            if k in ("success", "solve_time_s", "solve_cpu_s", "target_volume"):
-                continue
-            if k not in metric_names:
-                metric_names.append(k)
-            d[k] = v
-        d["violation_rules"] = ",".join(sorted({v["rule"] for v in json.loads(r["violations"] or "[]")}))
-        for k in tail[1:]:
-            d[k] = r[k]
-        d["isolation"] = d["isolation"] or "none"  # stored before the stamp existed: per-process fences
-        d["sealed"] = bool(r["sealed"])
-        records.append(d)
-    df = pd.DataFrame.from_records(records, columns=head + metric_names + tail)
-    return df.infer_objects()
-
-
-def rules_versions(runs: pd.DataFrame) -> list[int]:
-    """The versions of the referee's rules that judged ``runs`` (a :func:`load_runs` frame), lowest first."""
-    return sorted({int(v) for v in runs["rules"].dropna()}) if "rules" in runs and len(runs) else []
-
-
-def check_one_rules(runs: pd.DataFrame, *stores: str | Path | Store) -> None:
-    """Refuse to rank ``runs`` judged under more than one version of the referee's rules: a
-    ranking never mixes them (docs/referee.md "Rules versions"). The error names the command that
-    re-judges ``stores`` under this earthbench's rules."""
-    versions = rules_versions(runs)
-    if len(versions) > 1:
-        from .referee import RULES_VERSION
-
-        counts = runs["rules"].value_counts()
-        judged = ", ".join(f"{int(counts[v])} under rules {v}" for v in versions)
-        fix = "; ".join(f"earthbench rescore --db {getattr(s, 'path', s)}" for s in stores)
-        raise StoreError(f"these runs were judged under different versions of the referee's rules ({judged}); "
-                         f"a ranking never mixes them: re-judge them under this earthbench's rules {RULES_VERSION} "
-                         f"with `{fix}` (it reruns no planner)")
-
-
-def suite_members(db: str | Path | Store, suites: Iterable[str]) -> pd.DataFrame:
-    """The scenarios of each suite's most recently run version: ``suite``, ``scenario_digest``,
-    ``scenario_id``, ``family``, ``target_volume``, ``seed`` (the denominators of every aggregate)."""
-    import pandas as pd
-
-    store = db if isinstance(db, Store) else Store(db, create=False)
-    try:
-        rows = []
-        for name in suites:
-            ver = store.suite_version(name)
-            if ver is None:
-                continue
-            for r in store.db.execute(
-                "SELECT m.scenario_digest, m.scenario_id, m.family, s.target_volume, m.seed FROM suite_scenarios m "
-                "LEFT JOIN scenarios s ON s.digest = m.scenario_digest WHERE m.suite_id=?", (ver["id"],)
-            ):
-                target = r[3]
-                if target is None:  # no run stored yet: the id's documented tail, SUITE/FAMILY/sSEED/vTARGET
-                    tail = r[1].rsplit("/v", 1)
-                    target = float(tail[1]) if len(tail) == 2 and tail[1].replace(".", "", 1).isdigit() else None
-                rows.append((name, r[0], r[1], r[2], target, r[4]))
-    finally:
-        if not isinstance(db, Store):
-            store.close()
-    return pd.DataFrame(rows, columns=["suite", "scenario_digest", "scenario_id", "family", "target_volume", "seed"])
