@@ -16,10 +16,10 @@ from typing import Any
 
 #: Old module → (new module, the release that removes the old one) for modules that moved whole.
 MOVED_MODULES: dict[str, tuple[str, str]] = {
-    "earthbench.replay": ("earthbench.playback", "0.5.0"),  # moved after 0.2.0
-    "earthbench.runner": ("earthbench.harness", "0.5.0"),  # moved in 0.2.0
-    "earthbench.dask_executor": ("earthbench.harness.dask_executor", "0.5.0"),  # moved in 0.2.0
-    "earthbench.referee.replay": ("earthbench.referee.state", "0.5.0"),  # moved after 0.2.0
+    "earthbench.replay": ("earthbench.playback", "0.6.0"),  # moved after 0.2.0
+    "earthbench.runner": ("earthbench.harness", "0.6.0"),  # moved in 0.2.0
+    "earthbench.dask_executor": ("earthbench.harness.dask_executor", "0.6.0"),  # moved in 0.2.0
+    "earthbench.referee.replay": ("earthbench.referee.state", "0.6.0"),  # moved after 0.2.0
 }
 
 
@@ -27,7 +27,7 @@ def _names(names: str, to: str, removed_in: str) -> dict[str, tuple[str, str]]:
     return dict.fromkeys(names.split(), (to, removed_in))
 
 
-_RULES_FROM_REPLAY = _names("bodies_touch off_map_excess reach_of rectangles_touch", "earthbench.rules", "0.5.0")
+_RULES_FROM_REPLAY = _names("bodies_touch off_map_excess reach_of rectangles_touch", "earthbench.rules", "0.6.0")
 _BOARD_TABLES = ("FAILURE_COLUMNS FORMULA_STARTS PROVENANCE UNSEPARABLE Stamp builds_of load_text mark_mixed_solve_columns "
                  "mark_unseparable markdown_more_tables markdown_page markdown_table md_escape section_tables slug "
                  "spreadsheet_safe stamp table_rows table_sections write_csv")
@@ -40,21 +40,21 @@ _BOARD_SELECTION = ("closed_configs histories limit_to_seeds load_runs_empty pub
 #: Old module → {name: (new module, the release that removes the old name)}.
 MOVED_NAMES: dict[str, dict[str, tuple[str, str]]] = {
     # the cut model and the motion constants were documented in the referee until 0.1.0 (moved in 0.2.0)
-    "earthbench.referee": _names("apply_cut charge_cut cut_level footprint", "earthbench.cut", "0.5.0")
-    | _names("LOADER_DUMP_HALF_ANGLE", "earthbench.motion", "0.5.0"),
+    "earthbench.referee": _names("apply_cut charge_cut cut_level footprint", "earthbench.cut", "0.6.0")
+    | _names("LOADER_DUMP_HALF_ANGLE", "earthbench.motion", "0.6.0"),
     # the rules' predicates, public in earthbench.rules since 0.2.0
-    "earthbench.referee.backhoe": _names("ground_under track_level_and_tilt undermining_excess", "earthbench.rules", "0.5.0"),
+    "earthbench.referee.backhoe": _names("ground_under track_level_and_tilt undermining_excess", "earthbench.rules", "0.6.0"),
     "earthbench.referee.loader": _names("STEP_FLOOR cell_heights densify loader_base_level step_excess wheel_step_excess",
-                                        "earthbench.rules", "0.5.0"),
+                                        "earthbench.rules", "0.6.0"),
     "earthbench.referee.replay": _RULES_FROM_REPLAY,
     # a machine's samples over time belong to the motion model (issue 52)
     "earthbench.referee.state": _names("Timeline", "earthbench.motion", "0.6.0"),
     # the seal no longer imports the suite: drawing a sealed suite moved there after 0.2.0
-    "earthbench.seal": _names("new_key open_sealed", "earthbench.suite", "0.5.0"),
+    "earthbench.seal": _names("new_key open_sealed", "earthbench.suite", "0.6.0"),
     # publishing was split by job into earthbench.board in 0.3.0
-    "earthbench.publish": _names(_BOARD_TABLES, "earthbench.board.tables", "0.5.0")
-    | _names(_BOARD_PAGE, "earthbench.board.page", "0.5.0") | _names(_BOARD_FIGURES, "earthbench.board.figures", "0.5.0")
-    | _names(_BOARD_SELECTION, "earthbench.board.selection", "0.5.0") | _names("REASONS", "earthbench.aggregate", "0.5.0"),
+    "earthbench.publish": _names(_BOARD_TABLES, "earthbench.board.tables", "0.6.0")
+    | _names(_BOARD_PAGE, "earthbench.board.page", "0.6.0") | _names(_BOARD_FIGURES, "earthbench.board.figures", "0.6.0")
+    | _names(_BOARD_SELECTION, "earthbench.board.selection", "0.6.0") | _names("REASONS", "earthbench.aggregate", "0.6.0"),
     # what publishing and verify share moved beside the other labels (issue 52)
     "earthbench.verify": _names("latest_spot_checks machine_label", "earthbench.labels", "0.6.0"),
     # running a case (measure, then judge) left the sandbox, which only measures (issue 52)
