@@ -145,7 +145,7 @@ def main(argv: list[str]) -> None:
         row = {"id": sc.id, "valid": verdict.valid, "tpt": round(core_metrics(sc, plan, verdict)["time_per_target_m3"], 3),
                "cpu_s": round(cpu, 2), "build_s": round(info["build_time_s"], 2), "global_status": g.get("status"),
                "global_iterations": g.get("iterations", 0), "local_iterations": sum(r.get("iterations", 0) for r in info["local"]),
-               "local_solves": info["local_solves"], "nlps": info["nlp_cache"]}
+               "local_solves": info["local_solves"], "nlps": info["nlp_cache"], "solvers": info.get("solvers")}
         if args.side_by_side:
             row.update(old_cpu_s=round(old_cpu, 2), same_plan=digest(plan) == digest(old_plan), digest=digest(plan))
         rows.append(row)

@@ -58,7 +58,7 @@ import numpy as np
 from earthbench.world import ExcavatorSpec, TruckSpec
 from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
-from . import compiled, graph, nlp_cache
+from . import compiled, graph, nlp_cache, staged
 from .graph import tip_position  # noqa: F401  (its documented home until 0.11.0)
 from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, Shape, Solution, quantize
 
@@ -84,22 +84,28 @@ def nlp_truck(truck: TruckSpec) -> TruckSpec:
     return dataclasses.replace(truck, capacity=math.nan)
 
 
-def nlp_key(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> str:
-    """The name of an NLP in the disk cache and in the preparation's folder."""
-    return nlp_cache.key(shape, exc, nlp_truck(truck))
+def nlp_key(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec, staged_layout: bool = False) -> str:
+    """The name of an NLP in the disk cache and in the preparation's folder (``staged_layout``:
+    its stage-by-stage form, :mod:`.staged`)."""
+    return nlp_cache.key(shape, exc, nlp_truck(truck)) + ("_staged" if staged_layout else "")
 
 
-def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> tuple[str, dict[str, Any]]:
-    """The key and the built (uncompiled) functions of an NLP, from the disk cache or built here;
-    what the preparation compiles."""
-    name = nlp_key(shape, exc, truck)
+def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec,
+                    staged_layout: bool = False) -> tuple[str, dict[str, Any]]:
+    """The key and the built (uncompiled) functions of an NLP (``staged_layout``: of its
+    stage-by-stage form), from the disk cache or built here; what the preparation compiles."""
+    name = nlp_key(shape, exc, truck, staged_layout)
     path = nlp_cache.load(name)
-    fns = _unpack(path) if path is not None else None
+    fns = _unpack(path, staged.HELPER_NAMES if staged_layout else _FUNCTIONS + ("bounds",)) if path is not None else None
     if fns is None:
-        nlp = object.__new__(PhaseNLP)
-        nlp._setup(shape, exc, truck)
-        fns = nlp._build()
-        nlp_cache.save(name, lambda tmp: _pack(fns, tmp))  # where a case without the compiled ones finds it
+        if staged_layout:
+            fns = staged.build(shape, exc, nlp_truck(truck))
+        else:
+            nlp = object.__new__(PhaseNLP)
+            nlp._setup(shape, exc, truck)
+            fns = nlp._build()
+        built = fns
+        nlp_cache.save(name, lambda tmp: _pack(built, tmp))  # where a case without the compiled ones finds it
     return name, fns
 
 
@@ -141,7 +147,7 @@ def _pack(fns: dict[str, Any], path: str) -> None:
     del s  # closes the file
 
 
-def _unpack(path: Any) -> dict[str, Any] | None:
+def _unpack(path: Any, required: tuple[str, ...] = _FUNCTIONS + ("bounds",)) -> dict[str, Any] | None:
     """The functions :func:`_pack` wrote to ``path``; None when it does not hold them."""
     try:
         d = ca.FileDeserializer(str(path))
@@ -149,7 +155,7 @@ def _unpack(path: Any) -> dict[str, Any] | None:
     except RuntimeError:
         return None
     if not isinstance(names, list) or not isinstance(fns, list) or len(names) != len(fns) \
-            or not set(_FUNCTIONS + ("bounds",)) <= set(names):
+            or not set(required) <= set(names):
         return None
     return dict(zip(names, fns))
 
@@ -204,6 +210,8 @@ class PhaseNLP:
         self._solvers: dict[tuple, Any] = {}
         self._unreported_build_s = self.build_time_s
         self._cache_unreported = True
+        self._staged: staged.StagedSolver | None = None
+        self._counts = {"fatrop": 0, "ipopt": 0, "fallback": 0}  # solves not yet reported (take_solver_counts)
 
     def _setup(self, shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> None:
         """The sizes and layouts of the shape (what :meth:`_build` and the solves read)."""
@@ -458,27 +466,81 @@ class PhaseNLP:
               fixed_tasks: dict[str, np.ndarray] | None = None, max_dig_phases: int | None = None,
               max_iter: int = 300, options: dict[str, Any] | None = None,
               accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None,
-              stand: tuple[float, float, float] | None = None) -> Solution:
+              stand: tuple[float, float, float] | None = None, solver: str = "ipopt",
+              fatrop_options: dict[str, Any] | None = None) -> Solution:
         """Solve from ``w0``. ``success`` is IPOPT's own success, or an acceptable-level stop with
         violation < 1e-4, or — when ``accept_feasible`` > 0 — an iteration cap whose last
-        iterate violates no constraint by more than ``accept_feasible`` (status says which)."""
+        iterate violates no constraint by more than ``accept_feasible`` (status says which).
+        ``solver="fatrop"``: FATROP on the stage-by-stage NLP (:mod:`.staged`; ``options``' μ₀
+        and tolerance, ``fatrop_options`` on top), IPOPT from the same start when it fails
+        (``info["fallback"]``); every solve is counted (:meth:`take_solver_counts`)."""
         lb, ub = self.bounds(box, fixed_tasks, max_dig_phases, stand)
         params, w0 = quantize(params), np.clip(quantize(w0), lb, ub)
+        first: dict[str, Any] = {}
+        if solver == "fatrop" and self.staged() is not None:
+            sol = self._solve_staged(params, w0, lb, ub, max_iter, options or {}, fatrop_options or {})
+            if sol.success:
+                return sol
+            self._counts["fallback"] += 1
+            first = {"fallback": sol.status, "fatrop_iterations": sol.iterations, "fatrop_s": sol.solve_time_s}
+        elif solver not in ("ipopt", "fatrop"):
+            raise ValueError(f"unknown solver {solver!r}: 'fatrop' or 'ipopt'")
+        self._counts["ipopt"] += 1
         S = self.solver(max_iter, options, casadi_options)
         t0 = time.perf_counter()
         res = S(x0=w0, p=params, lbx=lb, ubx=ub, lbg=self.lbg, ubg=self.ubg)
-        dt = time.perf_counter() - t0
+        dt = time.perf_counter() - t0 + first.get("fatrop_s", 0.0)
         st = S.stats()
         w = np.array(res["x"]).reshape(-1)
-        gv = np.array(res["g"]).reshape(-1)
-        viol = float(np.max(np.concatenate([self.lbg - gv, gv - self.ubg, [0.0]])))
+        viol = self._violation(np.array(res["g"]).reshape(-1))
         status = st.get("return_status", "unknown")
         ok = bool(st.get("success", False)) or (status == "Solved_To_Acceptable_Level" and viol < 1e-4)
         if not ok and accept_feasible > 0 and status == "Maximum_Iterations_Exceeded" \
                 and viol < accept_feasible:
             ok, status = True, f"{status} (feasible iterate accepted)"
-        return self._solution(w, params, ok, status, int(st.get("iter_count", -1)), dt, float(res["f"]),
-                              {"max_violation": viol})
+        iters = int(st.get("iter_count", -1)) + first.get("fatrop_iterations", 0)
+        return self._solution(w, params, ok, status, iters, dt, float(res["f"]),
+                              {"max_violation": viol, "solver": "ipopt", **first})
+
+    def _violation(self, gv: np.ndarray) -> float:
+        return float(np.max(np.concatenate([self.lbg - gv, gv - self.ubg, [0.0]])))
+
+    def _solve_staged(self, params: np.ndarray, w0: np.ndarray, lb: np.ndarray, ub: np.ndarray, max_iter: int,
+                      options: dict[str, Any], fatrop_options: dict[str, Any]) -> Solution:
+        """FATROP's solve; a success only when the classic NLP's constraints hold to 1e-4 at it."""
+        assert self._staged is not None
+        opts = {**staged.FATROP_DEFAULTS, "max_iter": max_iter,
+                **{k: options[k] for k in ("mu_init", "tol") if k in options}, **fatrop_options}
+        self._counts["fatrop"] += 1
+        t0 = time.perf_counter()
+        w, ok, status, iters = self._staged.solve(params, w0, lb, ub, params[self.K + 2:self.K + 2 + NX], opts)
+        dt = time.perf_counter() - t0
+        f, gv = (np.array(v).reshape(-1) for v in self._nlp_fn(w, params))
+        viol = self._violation(gv)
+        ok = ok and viol < 1e-4
+        return self._solution(w, params, ok, "Solve_Succeeded" if ok else f"fatrop {status}", iters, dt, float(f[0]),
+                              {"max_violation": viol, "solver": "fatrop"})
+
+    def staged(self) -> staged.StagedSolver | None:
+        """FATROP's form of this NLP (:mod:`.staged`), loaded on first use like the classic one
+        (compiled, from the disk cache or built); None for a shape it does not cover."""
+        if self._staged is None and self.shape.symbolic == "SX" and self.shape.hold_truck:
+            t0 = time.perf_counter()
+            name = nlp_key(self.shape, self.exc, self.truck, staged_layout=True)
+            fns = compiled.load(prepared_dir(), name, staged.HELPER_NAMES)
+            done = fns is not None
+            fns = fns or build_functions(self.shape, self.exc, self.truck, staged_layout=True)[1]
+            self._staged = staged.StagedSolver(fns, self.site_box, compiled=done)
+            dt = time.perf_counter() - t0
+            self.build_time_s += dt
+            self._unreported_build_s += dt
+        return self._staged
+
+    def take_solver_counts(self) -> dict[str, int]:
+        """Solves by FATROP and by IPOPT, and FATROP's failures that IPOPT solved again
+        (``fallback``), since last asked."""
+        out, self._counts = self._counts, {"fatrop": 0, "ipopt": 0, "fallback": 0}
+        return out
 
     def reseed(self, sol: Solution, w0: np.ndarray, params: np.ndarray, eta_on: float, eta: float = 0.6) -> np.ndarray | None:
         """A restart for a solve that stopped short of its volume with idle phases.
