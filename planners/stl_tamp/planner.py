@@ -187,10 +187,17 @@ class StlTampPlanner(Planner):
     grade, cross-slope or step limits is replaced by a drive to a stand of
     ``planners/truck_stands.py`` (off the dig area, near the bearing of the NLP's stand),
     alongside the excavator's move when they keep the clearance. The NLPs are unchanged.
+
+    0.11.0 (issue 50): ``solver="fatrop"`` (the default): every NLP is also written stage by
+    stage (:mod:`.staged`: the same problem, its phase variables carried as states) and solved by
+    FATROP, which factorises stage by stage; IPOPT on the classic NLP takes over from the same
+    start when FATROP fails (counted in ``plan.info["solvers"]``). FATROP's path through the
+    nonconvex NLP is its own, so the plans move. ``solver="ipopt"`` gives 0.10.5's plans to the
+    bit (the model's code was reorganised, :mod:`.graph`; its functions are the same).
     """
 
     name = "stl-tamp"
-    version = "0.10.5"
+    version = "0.11.0"
     tracks = ("backhoe",)
     Config = Config
 
