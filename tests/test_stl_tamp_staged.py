@@ -8,13 +8,18 @@ import pytest
 
 from earthbench import Plan
 from earthbench.referee import judge
-from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench.world import ExcavatorSpec, TruckSpec
+from earthbench_planners.stl_tamp import StlTampPlanner, compiled, model, nlp_cache
 from earthbench_planners.stl_tamp.convert import SimState
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
 from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
 from earthbench_planners.stl_tamp.report import local_solve_counts
+from earthbench_planners.stl_tamp.problem import Shape
 from earthbench_planners.stl_tamp.surface import fit_rbf
 from earthbench_terrains.rbf import rbf
+
+SMALL = Shape(phases=1, steps=3, contact_step=1, unit_width=0.7, unit_length=1.0, unit_depth=0.4, vmax=0.28,
+              work_time=5.0, terrain_shape=(3, 4), terrain_spacing=0.6, terrain_sigma=0.6)
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +90,42 @@ def test_a_failed_fatrop_solve_falls_back_to_ipopt_and_is_counted(case):
     assert nlp.take_solver_counts() == {"fatrop": 1, "ipopt": 1, "fallback": 1}
 
 
+def test_the_default_is_ipopt_and_keeps_the_configuration_hash():
+    """``solver`` is left out of the configuration at its default: the stored runs and boards of
+    0.10.5 keep their key; ``solver=fatrop`` is another configuration."""
+    assert StlTampPlanner().config.solver == "ipopt" and "solver" not in StlTampPlanner().config_dict
+    assert StlTampPlanner(solver="fatrop").config_hash != StlTampPlanner().config_hash
+
+
+@pytest.mark.skipif(compiled.compiler() is None, reason="no C compiler")
+def test_the_preparation_compiles_the_staged_nlp_for_fatrop(tmp_path, monkeypatch):
+    """With ``solver=fatrop`` the preparation compiles both layouts of an NLP, and a case loads
+    FATROP's from the library: the same values as the built functions, to the bit."""
+    monkeypatch.setenv(nlp_cache.ENV, str(tmp_path / "nlp"))
+    monkeypatch.setattr(compiled, "SPLIT_ABOVE", 300)  # the large functions' path, on a small shape
+    monkeypatch.setattr(compiled, "PART_STATEMENTS", 50)
+    monkeypatch.setattr(compiled, "PART_FILE_STATEMENTS", 200)
+
+    class Small(StlTampPlanner):
+        def prepared_shapes(self):
+            return [("small", SMALL, ExcavatorSpec(), TruckSpec())]
+
+    summary = Small(solver="fatrop").prepare(tmp_path / "prepared", jobs=2)
+    assert set(summary["nlps"]) == {"small", "small staged"}
+    built = model.build_functions(SMALL, ExcavatorSpec(), TruckSpec(), staged_layout=True)[1]
+    model.use_prepared(tmp_path / "prepared")
+    try:
+        nlp = model.PhaseNLP(SMALL, ExcavatorSpec(), TruckSpec(), (0.0, 6.0, 0.0, 3.0))
+        st = nlp.staged()
+        assert st._derived is None  # the derivatives are the library's
+        rng = np.random.default_rng(2)
+        x, p = rng.normal(size=st.classic.shape[0]), rng.normal(size=st.fns["nlp"].size1_in(1))
+        for a, b in zip(st.fns["nlp"](x, p), built["nlp"](x, p)):
+            assert np.array_equal(np.array(a), np.array(b))
+    finally:
+        model.use_prepared(None)
+
+
 def test_unknown_solver_is_a_clear_error(case):
     nlp, p, w0, box, kw = case
     with pytest.raises(ValueError, match="'fatrop' or 'ipopt'"):
@@ -95,7 +136,7 @@ def test_unknown_solver_is_a_clear_error(case):
 
 def test_a_plan_counts_its_solvers_and_the_board_reads_them():
     sc = rbf(1, 1.5, n_bases=14)
-    plan = StlTampPlanner(global_layer=False).plan(sc)
+    plan = StlTampPlanner(global_layer=False, solver="fatrop").plan(sc)
     assert judge(sc, plan).valid
     counts = plan.info["solvers"]
     assert counts["fatrop"] >= len(plan.info["local"]) and counts["fallback"] <= counts["ipopt"]

@@ -490,7 +490,7 @@ class PhaseNLP:
         t0 = time.perf_counter()
         res = S(x0=w0, p=params, lbx=lb, ubx=ub, lbg=self.lbg, ubg=self.ubg)
         dt = time.perf_counter() - t0 + first.get("fatrop_s", 0.0)
-        st = S.stats()
+        st = self.last_stats = S.stats()
         w = np.array(res["x"]).reshape(-1)
         viol = self._violation(np.array(res["g"]).reshape(-1))
         status = st.get("return_status", "unknown")

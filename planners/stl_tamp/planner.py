@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +14,7 @@ import numpy as np
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
-from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
+from earthbench.world import LATER, ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
@@ -145,9 +145,11 @@ class Config(LocalNLPConfig):
     # last-bucket trimming: the paper's plans as they are (its Table I); the referee judges them
     as_planned: bool = False
     closed_loop: bool = closed_loop_setting()  # receding horizon, one local area per step (.receding)
-    # "fatrop": the NLPs stage by stage, solved by FATROP (.staged), IPOPT from the same start when
-    # it fails (counted in plan.info["solvers"]); "ipopt": the classic NLPs by IPOPT alone (0.10.5's)
-    solver: str = "fatrop"
+    # "ipopt": the classic NLPs by IPOPT (the plans of every board); "fatrop": the NLPs stage by
+    # stage, solved by FATROP (.staged), IPOPT from the same start when it fails (counted in
+    # plan.info["solvers"]) — measured slower here, so not the default (NOTES.md, "issue 50").
+    # Left out of the configuration's hash at its default, as closed_loop is.
+    solver: str = field(default="ipopt", metadata=LATER)
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -188,16 +190,15 @@ class StlTampPlanner(Planner):
     ``planners/truck_stands.py`` (off the dig area, near the bearing of the NLP's stand),
     alongside the excavator's move when they keep the clearance. The NLPs are unchanged.
 
-    0.11.0 (issue 50): ``solver="fatrop"`` (the default): every NLP is also written stage by
-    stage (:mod:`.staged`: the same problem, its phase variables carried as states) and solved by
-    FATROP, which factorises stage by stage; IPOPT on the classic NLP takes over from the same
-    start when FATROP fails (counted in ``plan.info["solvers"]``). FATROP's path through the
-    nonconvex NLP is its own, so the plans move. ``solver="ipopt"`` gives 0.10.5's plans to the
-    bit (the model's code was reorganised, :mod:`.graph`; its functions are the same).
+    Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash
+    the same): ``solver="fatrop"`` writes every NLP stage by stage too (:mod:`.staged`, the same
+    problem with its phase variables carried as states) and solves it by FATROP, IPOPT on the
+    classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``).
+    Measured slower than IPOPT on these NLPs, so an option (planners/stl_tamp/NOTES.md).
     """
 
     name = "stl-tamp"
-    version = "0.11.0"
+    version = "0.10.5"
     tracks = ("backhoe",)
     Config = Config
 

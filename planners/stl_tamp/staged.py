@@ -345,6 +345,7 @@ class StagedSolver:
         self.lbg, self.ubg = lbg, ubg
         self._derived = None if compiled else fns
         self._solvers: dict[str, Any] = {}
+        self.last_stats: dict[str, Any] = {}  # the last solve's, where its time went (scripts/stl_tamp_cpu.py)
 
     def solver(self, options: dict[str, Any]) -> Any:
         key = repr(sorted(options.items()))
@@ -365,7 +366,7 @@ class StagedSolver:
         lbs[c == -2] = ubs[c == -2] = s0
         x0 = np.clip(np.array(self.fns["lift"](w0, params)).reshape(-1), lbs, ubs)
         res = S(x0=x0, p=params, lbx=lbs, ubx=ubs, lbg=self.lbg, ubg=self.ubg)
-        st = S.stats()
+        st = self.last_stats = S.stats()
         w = w0.copy()
         w[c[mine]] = np.array(res["x"]).reshape(-1)[mine]
         return w, bool(st.get("success", False)), str(st.get("return_status", "unknown")), int(st.get("iter_count", -1))
