@@ -14,7 +14,7 @@ import numpy as np
 from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation, Planner, closed_loop_setting
-from earthbench.world import LATER, ExcavatorSpec, Scenario, TruckSpec
+from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
@@ -148,8 +148,8 @@ class Config(LocalNLPConfig):
     # "ipopt": the classic NLPs by IPOPT (the plans of every board); "fatrop": the NLPs stage by
     # stage, solved by FATROP (.staged), IPOPT from the same start when it fails (counted in
     # plan.info["solvers"]) — measured slower here, so not the default (NOTES.md, "issue 50").
-    # Left out of the configuration's hash at its default, as closed_loop is.
-    solver: str = field(default="ipopt", metadata=LATER)
+    # Left out of the configuration's hash at its default (as closed_loop is: earthbench.planner).
+    solver: str = field(default="ipopt", metadata={"omit_default": True})
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
