@@ -245,7 +245,10 @@ def solvers_side_by_side(args: argparse.Namespace) -> None:
             verdict = judge(sc, plan)
             out[which] = {"cpu_s": round(cpu, 3), "valid": verdict.valid, "succeeded": verdict.valid and verdict.loaded_volume
                           >= sc.task.target_volume * 0.98, "tpt": round(core_metrics(sc, plan, verdict)["time_per_target_m3"], 3),
-                          "solvers": plan.info["solvers"], "global_iterations": plan.info["global"].get("iterations", 0),
+                          "solvers": plan.info["solvers"], "nlps": plan.info["nlp_cache"],
+                          "staged_compiled": sorted(n._staged._derived is None for n in hierarchy._NLP_CACHE.values()
+                                                    if n._staged is not None),
+                          "global_iterations": plan.info["global"].get("iterations", 0),
                           "local_iterations": sum(r.get("iterations", 0) for r in plan.info["local"])}
         rows.append(out)
         print(json.dumps(out), flush=True)
