@@ -59,13 +59,16 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--prepared", metavar="DIR")
     ap.add_argument("--fatrop", type=json.loads, default={}, metavar="JSON")
     args = ap.parse_args(argv)
-    model.use_prepared(args.prepared)
+    calls = capture(args.seeds, args.target)
+    model.use_prepared(args.prepared)  # after the plans, which set their own (none)
     nlps: dict[Any, Any] = {}
     agg: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-    for c in capture(args.seeds, args.target):
+    for c in calls:
         if c["nlp"] not in nlps:
             nlps[c["nlp"]] = model.PhaseNLP(*c["nlp"])
             nlps[c["nlp"]].staged()
+            print(f"{c['nlp'][0].phases} phases: {nlps[c['nlp']].cache}, staged "
+                  f"{'compiled' if nlps[c['nlp']]._staged._derived is None else 'not compiled'}", flush=True)
         nlp, kw = nlps[c["nlp"]], c["kw"]
         lb, ub = nlp.bounds(c["box"], kw.get("fixed_tasks"), kw.get("max_dig_phases"), kw.get("stand"))
         params, w0 = quantize(c["params"]), np.clip(quantize(c["w0"]), lb, ub)
