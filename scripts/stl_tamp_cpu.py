@@ -25,12 +25,14 @@ area's solution moved rigidly onto the new area (an experiment, planners/stl_tam
 (alternating which goes first, both with ``--prepared``), and reports both CPU times, both time
 per target m³ and FATROP's fallbacks; ``--verify`` solves IPOPT again from every solution FATROP
 returns (not timed: its CPU is taken out of the plan's) and counts those IPOPT moves (cost by more
-than 1 % or more than 40 iterations): the check that FATROP's answers are the NLP's.
+than 1 % or more than 40 iterations): the check that FATROP's answers are the NLP's;
+``--global-ipopt`` leaves the global solves of FATROP's side to IPOPT.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import math
@@ -189,6 +191,7 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--start", choices=("guess", "neighbour"), default="guess")
     ap.add_argument("--solvers", action="store_true")
     ap.add_argument("--verify", action="store_true")
+    ap.add_argument("--global-ipopt", action="store_true", help="with --solvers: FATROP's side solves its global NLPs by IPOPT")
     args = ap.parse_args(argv)
     if args.solvers:
         return solvers_side_by_side(args)
@@ -228,6 +231,18 @@ def main(argv: list[str]) -> None:
               f"prepared (paired ratio, median {paired:.3f}); same plan {sum(r['same_plan'] for r in rows)}/{len(rows)}")
 
 
+class GlobalByIpopt(StlTampPlanner):
+    """stl-tamp whose global solves are IPOPT's whatever its ``solver`` (an experiment)."""
+
+    def _global(self, *a: Any, **kw: Any) -> Any:
+        config = self.config
+        self.config = dataclasses.replace(config, solver="ipopt")
+        try:
+            return super()._global(*a, **kw)
+        finally:
+            self.config = config
+
+
 def solvers_side_by_side(args: argparse.Namespace) -> None:
     """FATROP against IPOPT, each scenario planned by both in turn in this process."""
     if args.verify:
@@ -241,7 +256,8 @@ def solvers_side_by_side(args: argparse.Namespace) -> None:
         out: dict[str, Any] = {"id": sc.id}
         for which in (("fatrop", "ipopt") if n % 2 == 0 else ("ipopt", "fatrop")):
             VERIFY["on"] = which == "fatrop"
-            plan, cpu = plan_once(StlTampPlanner(**{**kw, "solver": which}), sc, args.prepared, args.fresh)
+            cls = GlobalByIpopt if which == "fatrop" and args.global_ipopt else StlTampPlanner
+            plan, cpu = plan_once(cls(**{**kw, "solver": which}), sc, args.prepared, args.fresh)
             verdict = judge(sc, plan)
             out[which] = {"cpu_s": round(cpu, 3), "valid": verdict.valid, "succeeded": verdict.valid and verdict.loaded_volume
                           >= sc.task.target_volume * 0.98, "tpt": round(core_metrics(sc, plan, verdict)["time_per_target_m3"], 3),
