@@ -388,8 +388,6 @@ def test_the_records_keep_their_old_import_paths():
 
 #: Functions over :data:`LONG` lines, each with the reason it stands; the list only shrinks.
 LONG_FUNCTIONS = {
-    ("planners/stl_tamp/model.py", "_build"): "the NLP builder: one problem's variables and constraints in order",
-    ("planners/stl_tamp/guess.py", "build_guess"): "the NLP's initial guess, built in the order of its variables",
 }
 LONG = 80
 

@@ -53,7 +53,7 @@ O1_LIMIT = 250_000
 #: Evaluated once per solve (the multipliers of the parameters), a few times per area (the
 #: helpers, for guesses and checks) or never (the oracle, which only tells ``nlpsol`` where the
 #: others are): not worth -O1's compile time.
-ONCE = ("nlp_grad", "nlp", *HELPER_NAMES)
+ONCE = ("nlp_grad", "nlp", *HELPER_NAMES, "lift", "layout")
 #: This module's code, part of a library's name: other flags or layout, another library.
 _SOURCE = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:8]
 
@@ -159,19 +159,23 @@ def solver_functions(fns: dict[str, Any]) -> dict[str, Any]:
 
 
 def build(fns: dict[str, Any], folder: Path, name: str, *, jobs: int = 1,
-          log: Callable[[str], None] | None = None) -> dict[str, float]:
+          log: Callable[[str], None] | None = None, staged: bool = False) -> dict[str, float]:
     """Compile the functions of one built NLP (``fns``, as :meth:`~.model.PhaseNLP._build` keys
     them) into ``folder`` as one library named ``name``: each function is its own C file (a large
     one several, :func:`split`), the files compile ``jobs`` at a time, then one link. Returns each
     function's compile seconds (its files' sum). Raises RuntimeError naming the function when the
-    compiler fails. A library already there is kept (same name, same code)."""
+    compiler fails. A library already there is kept (same name, same code). ``staged``: ``fns``
+    is the stage-by-stage NLP of :mod:`.staged`, whose solver is FATROP."""
     cc = compiler()
     if cc is None:
         raise RuntimeError("no C compiler (set $CC or install gcc): stl-tamp's NLPs cannot be compiled")
     folder.mkdir(parents=True, exist_ok=True)
     if library(folder, name).exists():
         return {}
-    todo = {**solver_functions(fns), **{k: fns[k] for k in HELPER_NAMES}}
+    from . import staged as staged_nlp
+
+    solver_fns = staged_nlp.solver_functions(fns) if staged else solver_functions(fns)
+    todo = {**solver_fns, **{k: fns[k] for k in (staged_nlp.HELPER_NAMES if staged else HELPER_NAMES)}}
     work = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=folder))
     try:
         units: list[tuple[str, Path, tuple[str, ...]]] = []  # (function, C file, flags)
@@ -223,12 +227,12 @@ def build(fns: dict[str, Any], folder: Path, name: str, *, jobs: int = 1,
         shutil.rmtree(work, ignore_errors=True)
 
 
-def load(folder: Path | None, name: str) -> dict[str, Any] | None:
+def load(folder: Path | None, name: str, helpers: tuple[str, ...] = HELPER_NAMES) -> dict[str, Any] | None:
     """The compiled functions of ``name`` in ``folder`` (``nlp`` is the oracle an ``nlpsol``
     finds the others in), or None when the library is not there or lacks one."""
     if folder is None or not library(folder, name).is_file():
         return None
     try:
-        return {k: ca.external(k, str(library(folder, name))) for k in ("nlp", *HELPER_NAMES)}
+        return {k: ca.external(k, str(library(folder, name))) for k in ("nlp", *helpers)}
     except RuntimeError:
         return None

@@ -66,8 +66,7 @@ def _turn_then_drive(x0: float, y0: float, yaw0: float, x1: float, y1: float, st
 
 def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], floor: float) -> np.ndarray:
     """A start vector ``w0`` for ``nlp`` from per-phase seeds (None: an idle phase, η = 0)."""
-    sh, exc, tr = nlp.shape, nlp.exc, nlp.truck
-    m1, n, N = nlp.m1, nlp.n, nlp.N
+    sh, m1, N = nlp.shape, nlp.m1, nlp.N
     X = np.zeros((N + 1, NX))
     X[0] = s0
     ph = {k: np.zeros(m1) for k in ("dtm", "dtw", "eta", "px", "py", "psi", "V")}
@@ -80,57 +79,10 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
         if seed is not None:
             last_seed = seed
         ref = seed or last_seed
-        kc = nlp.kc[i]
-        k0 = i * n
-        s = X[k0].copy()
-        # base travel during the move steps
-        if i == 0:
-            goal_b = first.base if first is not None else (s[0], s[1])
-        else:
-            goal_b = seed.base if seed is not None else (s[0], s[1])
-        base_nodes, dtm = _turn_then_drive(s[0], s[1], s[2], goal_b[0], goal_b[1], kc, exc.travel_speed, exc.yaw_rate)
-        # the truck moves only in phase 0, over all its steps
-        if i == 0 and first is not None:
-            truck_nodes, dtt = _turn_then_drive(s[6], s[7], s[8], first.truck[0], first.truck[1], n,
-                                                tr.travel_speed, tr.yaw_rate)
-            # phase 0 shares one step duration: make it long enough for both machines
-            dtm = max(dtm, dtt * n / max(kc, 1))
-        else:
-            truck_nodes = np.tile(s[6:9], (n + 1, 1))
-        for k in range(1, n + 1):
-            X[k0 + k] = X[k0]
-            X[k0 + k, 0:3] = base_nodes[min(k, kc)]
-            X[k0 + k, 6:9] = truck_nodes[k]
+        dtm = _travel(nlp, X, i, seed, first)
         dtw = 0.05
         if ref is not None and i > 0:
-            b = X[k0 + kc]
-            bear_c = math.atan2(ref.py - b[1], ref.px - b[0])
-            r_c = math.hypot(ref.px - b[0], ref.py - b[1])
-            turn_c = b[3] + wrap(bear_c - (b[2] + b[3]))
-            boom_c, arm_c = inverse_kinematics(r_c, ref.pz - floor - PIVOT_HEIGHT, exc)
-            bear_t = math.atan2(b[7] - b[1], b[6] - b[0])
-            r_t = math.hypot(b[6] - b[0], b[7] - b[1])
-            turn_t = turn_c + wrap(bear_t - bear_c)
-            boom_t, arm_t = inverse_kinematics(min(r_t, exc.boom_length + exc.arm_length - 0.05), DUMP_HEIGHT, exc)
-            prev = X[k0 + kc, 3:6].copy()
-            # the arm reaches the contact at node kc: spread its motion over the move steps
-            for k in range(1, kc + 1):
-                f = k / kc
-                X[k0 + k, 3:6] = prev + f * (np.array([turn_c, boom_c, arm_c]) - prev)
-            if kc == 0:
-                X[k0, 3:6] = (turn_c, boom_c, arm_c)
-            nw = n - kc
-            for k in range(kc + 1, n + 1):
-                f = (k - kc) / nw
-                X[k0 + k, 3:6] = (turn_c + f * (turn_t - turn_c), boom_c + f * (boom_t - boom_c), arm_c + f * (arm_t - arm_c))
-            jrate = 0.8 * min(exc.swing_rate, exc.joint_rate)
-            move_j = np.max(np.abs(np.array([turn_c, boom_c, arm_c]) - prev))
-            work_j = max(abs(turn_t - turn_c), abs(boom_t - boom_c), abs(arm_t - arm_c))
-            dtm = max(dtm, move_j / (jrate * max(kc, 1)))
-            eta = seed.eta if seed is not None else 0.0
-            swing = abs(turn_t - turn_c) / exc.swing_rate if sh.hold_base else 0.0  # priced on top (problem.Shape.hold_base)
-            dtw = max(work_j / (jrate * nw), ((1.0 - math.exp(-eta / sh.eta_saturation)) * sh.work_time + swing) * 1.05 / nw, 0.05)
-            ph["px"][i], ph["py"][i], ph["psi"][i], ph["eta"][i] = ref.px, ref.py, ref.psi, eta
+            dtm, dtw = _arm(nlp, X, ph, i, seed, ref, floor, dtm)
         elif ref is not None:
             ph["px"][i], ph["py"][i], ph["psi"][i] = ref.px, ref.py, ref.psi
         ph["dtm"][i] = min(max(dtm, 0.01), sh.dtm_max)
@@ -138,7 +90,76 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
     if not active:
         ph["px"][:] = s0[0]
         ph["py"][:] = s0[1]
-    # controls from the node differences (exact for turn-then-drive nodes)
+    U = _controls(nlp, X, ph)
+    w0 = nlp.pack_w(X, U, ph, np.zeros(2))
+    return w0
+
+
+def _travel(nlp: PhaseNLP, X: np.ndarray, i: int, seed: PhaseSeed | None, first: PhaseSeed | None) -> float:
+    """Phase ``i``'s base (and, in phase 0, truck) nodes, turn then drive; its move step."""
+    exc, tr, n, kc, k0 = nlp.exc, nlp.truck, nlp.n, nlp.kc[i], i * nlp.n
+    s = X[k0].copy()
+    # base travel during the move steps
+    if i == 0:
+        goal_b = first.base if first is not None else (s[0], s[1])
+    else:
+        goal_b = seed.base if seed is not None else (s[0], s[1])
+    base_nodes, dtm = _turn_then_drive(s[0], s[1], s[2], goal_b[0], goal_b[1], kc, exc.travel_speed, exc.yaw_rate)
+    # the truck moves only in phase 0, over all its steps
+    if i == 0 and first is not None:
+        truck_nodes, dtt = _turn_then_drive(s[6], s[7], s[8], first.truck[0], first.truck[1], n,
+                                            tr.travel_speed, tr.yaw_rate)
+        # phase 0 shares one step duration: make it long enough for both machines
+        dtm = max(dtm, dtt * n / max(kc, 1))
+    else:
+        truck_nodes = np.tile(s[6:9], (n + 1, 1))
+    for k in range(1, n + 1):
+        X[k0 + k] = X[k0]
+        X[k0 + k, 0:3] = base_nodes[min(k, kc)]
+        X[k0 + k, 6:9] = truck_nodes[k]
+    return dtm
+
+
+def _arm(nlp: PhaseNLP, X: np.ndarray, ph: dict[str, np.ndarray], i: int, seed: PhaseSeed | None, ref: PhaseSeed,
+         floor: float, dtm: float) -> tuple[float, float]:
+    """Dig phase ``i``'s arm by inverse kinematics, to the contact and on to the truck; its
+    task; its move and work steps."""
+    sh, exc, n, kc, k0 = nlp.shape, nlp.exc, nlp.n, nlp.kc[i], i * nlp.n
+    b = X[k0 + kc]
+    bear_c = math.atan2(ref.py - b[1], ref.px - b[0])
+    r_c = math.hypot(ref.px - b[0], ref.py - b[1])
+    turn_c = b[3] + wrap(bear_c - (b[2] + b[3]))
+    boom_c, arm_c = inverse_kinematics(r_c, ref.pz - floor - PIVOT_HEIGHT, exc)
+    bear_t = math.atan2(b[7] - b[1], b[6] - b[0])
+    r_t = math.hypot(b[6] - b[0], b[7] - b[1])
+    turn_t = turn_c + wrap(bear_t - bear_c)
+    boom_t, arm_t = inverse_kinematics(min(r_t, exc.boom_length + exc.arm_length - 0.05), DUMP_HEIGHT, exc)
+    prev = X[k0 + kc, 3:6].copy()
+    # the arm reaches the contact at node kc: spread its motion over the move steps
+    for k in range(1, kc + 1):
+        f = k / kc
+        X[k0 + k, 3:6] = prev + f * (np.array([turn_c, boom_c, arm_c]) - prev)
+    if kc == 0:
+        X[k0, 3:6] = (turn_c, boom_c, arm_c)
+    nw = n - kc
+    for k in range(kc + 1, n + 1):
+        f = (k - kc) / nw
+        X[k0 + k, 3:6] = (turn_c + f * (turn_t - turn_c), boom_c + f * (boom_t - boom_c), arm_c + f * (arm_t - arm_c))
+    jrate = 0.8 * min(exc.swing_rate, exc.joint_rate)
+    move_j = np.max(np.abs(np.array([turn_c, boom_c, arm_c]) - prev))
+    work_j = max(abs(turn_t - turn_c), abs(boom_t - boom_c), abs(arm_t - arm_c))
+    dtm = max(dtm, move_j / (jrate * max(kc, 1)))
+    eta = seed.eta if seed is not None else 0.0
+    swing = abs(turn_t - turn_c) / exc.swing_rate if sh.hold_base else 0.0  # priced on top (problem.Shape.hold_base)
+    dtw = max(work_j / (jrate * nw), ((1.0 - math.exp(-eta / sh.eta_saturation)) * sh.work_time + swing) * 1.05 / nw, 0.05)
+    ph["px"][i], ph["py"][i], ph["psi"][i], ph["eta"][i] = ref.px, ref.py, ref.psi, eta
+    return dtm, dtw
+
+
+def _controls(nlp: PhaseNLP, X: np.ndarray, ph: dict[str, np.ndarray]) -> np.ndarray:
+    """The inputs from the node differences (exact for turn-then-drive nodes), clipped to the
+    rates, and the nodes integrated again from them (``X`` in place)."""
+    exc, tr, m1, n, N = nlp.exc, nlp.truck, nlp.m1, nlp.n, nlp.N
     times_dt = [ph["dtm"][i] if k < nlp.kc[i] else ph["dtw"][i] for i in range(m1) for k in range(n)]
     U = np.zeros((N, NU))
     for k in range(N):
@@ -161,8 +182,7 @@ def build_guess(nlp: PhaseNLP, s0: np.ndarray, seeds: list[PhaseSeed | None], fl
         yb, yd = a[2] + 0.5 * u[1] * dt, a[8] + 0.5 * u[6] * dt
         X[k + 1] = a + dt * np.array([u[0] * math.cos(yb), u[0] * math.sin(yb), u[1], u[2], u[3], u[4],
                                       u[5] * math.cos(yd), u[5] * math.sin(yd), u[6]])
-    w0 = nlp.pack_w(X, U, ph, np.zeros(2))
-    return w0
+    return U
 
 
 def fill_volumes(nlp: PhaseNLP, w0: np.ndarray, params: np.ndarray, goals: list[float] | None = None) -> np.ndarray:

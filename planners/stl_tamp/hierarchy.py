@@ -116,10 +116,14 @@ class Trace:
     fallbacks: int = 0
     regenerated: int = 0
     nlp_cache: dict[str, int] = field(default_factory=dict)  # NLPs loaded ("hit") or built ("miss", "off")
+    # solves by FATROP and by IPOPT, and FATROP's failures IPOPT solved again ("fallback")
+    solvers: dict[str, int] = field(default_factory=lambda: {"fatrop": 0, "ipopt": 0, "fallback": 0})
 
     def add_build(self, nlp: PhaseNLP) -> None:
         """Count the NLP's construction seconds not yet reported and, once, how it was made."""
         self.build_time_s += nlp.take_build_time()
+        for k, v in nlp.take_solver_counts().items():
+            self.solvers[k] = self.solvers.get(k, 0) + v
         state = nlp.take_cache_state()
         if state is not None:
             self.nlp_cache[state] = self.nlp_cache.get(state, 0) + 1

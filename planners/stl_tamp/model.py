@@ -58,8 +58,9 @@ import numpy as np
 from earthbench.world import ExcavatorSpec, TruckSpec
 from .stl import And, Const, Finally, Globally, Or, Predicate, robustness_constraints
 
-from . import compiled, nlp_cache
-from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, PIVOT_HEIGHT, Shape, Solution, quantize
+from . import compiled, graph, nlp_cache, staged
+from .graph import tip_position  # noqa: F401  (its documented home until 0.11.0)
+from .problem import ARM_BOUNDS, BOOM_BOUNDS, NU, NX, Shape, Solution, quantize
 
 
 _PREPARED: list[Path | None] = [None]
@@ -83,22 +84,28 @@ def nlp_truck(truck: TruckSpec) -> TruckSpec:
     return dataclasses.replace(truck, capacity=math.nan)
 
 
-def nlp_key(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> str:
-    """The name of an NLP in the disk cache and in the preparation's folder."""
-    return nlp_cache.key(shape, exc, nlp_truck(truck))
+def nlp_key(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec, staged_layout: bool = False) -> str:
+    """The name of an NLP in the disk cache and in the preparation's folder (``staged_layout``:
+    its stage-by-stage form, :mod:`.staged`)."""
+    return nlp_cache.key(shape, exc, nlp_truck(truck)) + ("_staged" if staged_layout else "")
 
 
-def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> tuple[str, dict[str, Any]]:
-    """The key and the built (uncompiled) functions of an NLP, from the disk cache or built here;
-    what the preparation compiles."""
-    name = nlp_key(shape, exc, truck)
+def build_functions(shape: Shape, exc: ExcavatorSpec, truck: TruckSpec,
+                    staged_layout: bool = False) -> tuple[str, dict[str, Any]]:
+    """The key and the built (uncompiled) functions of an NLP (``staged_layout``: of its
+    stage-by-stage form), from the disk cache or built here; what the preparation compiles."""
+    name = nlp_key(shape, exc, truck, staged_layout)
     path = nlp_cache.load(name)
-    fns = _unpack(path) if path is not None else None
+    fns = _unpack(path, staged.HELPER_NAMES if staged_layout else _FUNCTIONS + ("bounds",)) if path is not None else None
     if fns is None:
-        nlp = object.__new__(PhaseNLP)
-        nlp._setup(shape, exc, truck)
-        fns = nlp._build()
-        nlp_cache.save(name, lambda tmp: _pack(fns, tmp))  # where a case without the compiled ones finds it
+        if staged_layout:
+            fns = staged.build(shape, exc, nlp_truck(truck))
+        else:
+            nlp = object.__new__(PhaseNLP)
+            nlp._setup(shape, exc, truck)
+            fns = nlp._build()
+        built = fns
+        nlp_cache.save(name, lambda tmp: _pack(built, tmp))  # where a case without the compiled ones finds it
     return name, fns
 
 
@@ -140,7 +147,7 @@ def _pack(fns: dict[str, Any], path: str) -> None:
     del s  # closes the file
 
 
-def _unpack(path: Any) -> dict[str, Any] | None:
+def _unpack(path: Any, required: tuple[str, ...] = _FUNCTIONS + ("bounds",)) -> dict[str, Any] | None:
     """The functions :func:`_pack` wrote to ``path``; None when it does not hold them."""
     try:
         d = ca.FileDeserializer(str(path))
@@ -148,26 +155,23 @@ def _unpack(path: Any) -> dict[str, Any] | None:
     except RuntimeError:
         return None
     if not isinstance(names, list) or not isinstance(fns, list) or len(names) != len(fns) \
-            or not set(_FUNCTIONS + ("bounds",)) <= set(names):
+            or not set(required) <= set(names):
         return None
     return dict(zip(names, fns))
 
 
-def _sigmoid(x: Any, k: float) -> Any:
-    return 1.0 / (1.0 + ca.exp(-k * x))
+class _Rows:
+    """The constraints g in order, with their bounds."""
 
+    def __init__(self) -> None:
+        self.g: list[Any] = []
+        self.lbg: list[float] = []
+        self.ubg: list[float] = []
 
-def _softplus(x: Any, delta: float = 0.01) -> Any:
-    """Smooth max(x, 0)."""
-    return 0.5 * (x + ca.sqrt(x * x + delta * delta))
-
-
-def tip_position(s: Any, spec: ExcavatorSpec, floor: Any = 0.0) -> tuple[Any, Any, Any]:
-    """Bucket tip (x, y, z) of state ``s`` (planar boom–arm on the swing bearing)."""
-    bear = s[2] + s[3]
-    r = spec.boom_length * ca.cos(s[4]) + spec.arm_length * ca.cos(s[4] + s[5])
-    z = floor + PIVOT_HEIGHT + spec.boom_length * ca.sin(s[4]) + spec.arm_length * ca.sin(s[4] + s[5])
-    return s[0] + r * ca.cos(bear), s[1] + r * ca.sin(bear), z
+    def add(self, expr: Any, lo: float, hi: float) -> None:
+        self.g.append(expr)
+        self.lbg.extend([lo] * expr.shape[0])
+        self.ubg.extend([hi] * expr.shape[0])
 
 
 class PhaseNLP:
@@ -206,6 +210,8 @@ class PhaseNLP:
         self._solvers: dict[tuple, Any] = {}
         self._unreported_build_s = self.build_time_s
         self._cache_unreported = True
+        self._staged: staged.StagedSolver | None = None
+        self._counts = {"fatrop": 0, "ipopt": 0, "fallback": 0}  # solves not yet reported (take_solver_counts)
 
     def _setup(self, shape: Shape, exc: ExcavatorSpec, truck: TruckSpec) -> None:
         """The sizes and layouts of the shape (what :meth:`_build` and the solves read)."""
@@ -225,213 +231,103 @@ class PhaseNLP:
 
     def _build(self) -> dict[str, Any]:
         """The CasADi graph: the NLP (x, p) → (f, g), its derivatives (SX) and the helpers."""
-        sh, exc, truck = self.shape, self.exc, self.truck
-        m1, n, N, K = self.m1, self.n, self.N, self.K
+        sh, m1, n, N = self.shape, self.m1, self.n, self.N
         sym = ca.SX.sym if sh.symbolic == "SX" else ca.MX.sym
-
-        # -- parameters -------------------------------------------------------------------------
-        P_w = sym("terrain_w", K)
-        P_o = sym("terrain_o", 2)
-        P_s0 = sym("s0", NX)
-        P_vt = sym("v_target")
-        P_a = sym("alpha", 5)  # α_u, α_t, α_v, α_η, α_term
-        P_goal = sym("goal", 2)
-        P_floor = sym("floor")
-        p = ca.vertcat(P_w, P_o, P_s0, P_vt, P_a, P_goal, P_floor)
-
-        # -- variables --------------------------------------------------------------------------
-        Xv = sym("X", NX, N)  # nodes 1..N (node 0 is the parameter s0)
-        Uv = sym("U", NU, N)
+        P = {k: sym(nm, ln) for k, nm, ln in (("w", "terrain_w", self.K), ("o", "terrain_o", 2), ("s0", "s0", NX),
+                                               ("vt", "v_target", 1), ("a", "alpha", 5), ("goal", "goal", 2),
+                                               ("floor", "floor", 1))}
+        p = ca.vertcat(*P.values())  # α = (α_u, α_t, α_v, α_η, α_term)
+        Xv, Uv = sym("X", NX, N), sym("U", NU, N)  # nodes 1..N (node 0 is the parameter s0)
         ph = {k: sym(k, m1) for k in _PHASE_VARS}
         slack = sym("slack", 2)
         w = ca.vertcat(ca.vec(Xv), ca.vec(Uv), *ph.values(), slack)
-
-        X = [P_s0] + [Xv[:, k] for k in range(N)]
+        X = [P["s0"]] + [Xv[:, k] for k in range(N)]
         U = [Uv[:, k] for k in range(N)]
-        dts = []
-        for i in range(m1):
-            for k in range(n):
-                dts.append(ph["dtm"][i] if k < self.kc[i] else ph["dtw"][i])
-        g: list[Any] = []
-        lbg: list[float] = []
-        ubg: list[float] = []
+        rows = _Rows()
+        for k in range(N):  # dynamics, Eq. (2), (13), (14)
+            i, j = divmod(k, n)
+            dt = ph["dtm"][i] if j < self.kc[i] else ph["dtw"][i]
+            rows.add(X[k + 1] - X[k] - graph.euler_step(X[k], U[k], dt), 0.0, 0.0)
+        terrain = graph.Terrain(sh, P["w"], P["o"])
+        cuts: list[graph.Cut] = []
+        pz, vol = [], []
+        for i in range(1, m1):  # terrain model, Eq. (1), (27), (28), and volume, Eq. (20)
+            cut = graph.Cut(ph["eta"][i], ph["px"][i], ph["py"][i], ca.cos(ph["psi"][i]), ca.sin(ph["psi"][i]))
+            pz_i, vol_i, cut = graph.dig(sh, terrain, cuts, cut, P["floor"])
+            cuts.append(cut)
+            pz.append(pz_i)
+            vol.append(vol_i)
+            rows.add(ph["V"][i] - vol_i, 0.0, 0.0)
+        tips = [graph.tip_position(X[k], self.exc, P["floor"]) for k in range(N + 1)]
+        site_rows = self._contacts(rows, X, ph, tips, cuts, pz)
+        rho = self._specs(rows, X, ph, tips, slack)
+        J = self._cost(X, U, ph, P)
+        G = ca.vertcat(*rows.g)
+        fns = self._derivatives(terrain, w, p, J, G) if terrain.lifted else {}
+        G, J, vol_v, pz_v, *rho = terrain.substitute([G, J, ca.vertcat(*vol), ca.vertcat(*pz), *rho])
+        fns["nlp"] = ca.Function("nlp", [w, p], [J, G], ["x", "p"], ["f", "g"])
+        fns["tip"] = ca.Function("tip", [Xv, P["s0"], P["floor"]], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
+        fns["rho"] = ca.Function("rho", [w, p], rho)
+        fns["vol"] = ca.Function("vol", [w, p], [vol_v])
+        # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
+        fns["pz"] = ca.Function("pz", [w, p], [pz_v])
+        fns["bounds"] = ca.Function("bounds", [], [ca.DM(rows.lbg), ca.DM(rows.ubg), ca.DM(site_rows)])
+        return fns
 
-        def add(expr: Any, lo: float, hi: float) -> None:
-            g.append(expr)
-            lbg.extend([lo] * expr.shape[0])
-            ubg.extend([hi] * expr.shape[0])
-
-        # -- dynamics, Eq. (2), (13), (14) -------------------------------------------------------
-        for k in range(N):
-            s, u, dt = X[k], U[k], dts[k]
-            yb = s[2] + 0.5 * u[1] * dt
-            yd = s[8] + 0.5 * u[6] * dt
-            f = ca.vertcat(u[0] * ca.cos(yb), u[0] * ca.sin(yb), u[1], u[2], u[3], u[4],
-                           u[5] * ca.cos(yd), u[5] * ca.sin(yd), u[6])
-            add(X[k + 1] - s - f * dt, 0.0, 0.0)
-
-        # -- terrain model, Eq. (1), (27), (28) ---------------------------------------------------
-        ny_t, nx_t = sh.terrain_shape
-        s2 = 2.0 * sh.terrain_sigma**2
-
-        Wmat = ca.reshape(P_w, nx_t, ny_t).T  # row-major (ny, nx) lattice weights
-        offs_x = ca.DM([a * sh.terrain_spacing for a in range(nx_t)])
-        offs_y = ca.DM([b * sh.terrain_spacing for b in range(ny_t)])
-
-        def rbf(x: Any, y: Any) -> Any:
-            ex = ca.exp(-((x - P_o[0] - offs_x) ** 2) / s2)
-            ey = ca.exp(-((y - P_o[1] - offs_y) ** 2) / s2)
-            return ca.mtimes(ey.T, ca.mtimes(Wmat, ex))
-
-        def rbf_taylor(x: Any, y: Any) -> Any:
-            """f0 at (x, y) with its gradient and Hessian, each one contraction with the weights."""
-            dx, dy = x - P_o[0] - offs_x, y - P_o[1] - offs_y
-            ex = ca.exp(-(dx**2) / s2)
-            ey = ca.exp(-(dy**2) / s2)
-            ax, ay = -2.0 * dx / s2, -2.0 * dy / s2
-            ex1, ey1 = ex * ax, ey * ay
-            ex2, ey2 = ex * (ax * ax - 2.0 / s2), ey * (ay * ay - 2.0 / s2)
-            w0, w1, w2 = ca.mtimes(Wmat, ex), ca.mtimes(Wmat, ex1), ca.mtimes(Wmat, ex2)
-            return [ca.mtimes(ey.T, w0), ca.mtimes(ey.T, w1), ca.mtimes(ey1.T, w0),
-                    ca.mtimes(ey.T, w2), ca.mtimes(ey1.T, w1), ca.mtimes(ey2.T, w0)]
-
-        lifted = sh.symbolic == "SX"
-        anchors: list[Any] = []  # per f0 point: the symbols (x̄, ȳ, c) and their values
-        anchor_vals: list[Any] = []
-
-        def f0(x: Any, y: Any) -> Any:
-            """The fitted terrain at (x, y); in SX its Taylor polynomial at (x̄, ȳ) = (x, y)."""
-            if not lifted:
-                return rbf(x, y)
-            a = ca.SX.sym(f"f0pt{len(anchors)}", 8)
-            anchors.append(a)
-            anchor_vals.append(ca.vertcat(x, y, *rbf_taylor(x, y)))
-            ddx, ddy = x - a[0], y - a[1]
-            return (a[2] + a[3] * ddx + a[4] * ddy + 0.5 * a[5] * ddx * ddx + a[6] * ddx * ddy
-                    + 0.5 * a[7] * ddy * ddy)
-
-        kk = sh.sigmoid_k
-        W, L, D = sh.unit_width, sh.unit_length, sh.unit_depth
-        ux = [ca.cos(ph["psi"][i]) for i in range(m1)]
-        uy = [ca.sin(ph["psi"][i]) for i in range(m1)]
-
-        def window(i: int, x: Any, y: Any) -> Any:
-            dx, dy = x - ph["px"][i], y - ph["py"][i]
-            a = dx * ux[i] + dy * uy[i]
-            c = -dx * uy[i] + dy * ux[i]
-            return (_sigmoid(a, kk) - _sigmoid(a - L, kk)) * (_sigmoid(c + W / 2, kk) - _sigmoid(c - W / 2, kk))
-
-        h: list[Any] = [None] * m1
-        pz: list[Any] = [None] * m1
-
-        def height_before(i: int, x: Any, y: Any) -> Any:
-            """f_i at (x, y): the fitted terrain after the cuts of phases 1..i-1."""
-            z = f0(x, y)
-            for j in range(1, i):
-                z = z - ph["eta"][j] * window(j, x, y) * _softplus(z - h[j])
-            return z
-
-        ga, wa = np.polynomial.legendre.leggauss(sh.quad[0])
-        gc, wc = np.polynomial.legendre.leggauss(sh.quad[1])
-        a_lo, a_hi = -sh.widen, L + sh.widen
-        c_lo, c_hi = -W / 2 - sh.widen, W / 2 + sh.widen
-        qa = a_lo + (ga + 1) * 0.5 * (a_hi - a_lo)
-        qc = c_lo + (gc + 1) * 0.5 * (c_hi - c_lo)
-        qw = np.outer(wa * 0.5 * (a_hi - a_lo), wc * 0.5 * (c_hi - c_lo))
-        vol_model = [0.0] * m1
-        for i in range(1, m1):
-            pz[i] = height_before(i, ph["px"][i], ph["py"][i])
-            h[i] = P_floor + _softplus(pz[i] - D - P_floor)
-            acc = 0
-            for ia, av in enumerate(qa):
-                for ic, cv in enumerate(qc):
-                    x = ph["px"][i] + av * ux[i] - cv * uy[i]
-                    y = ph["py"][i] + av * uy[i] + cv * ux[i]
-                    z = height_before(i, x, y)
-                    acc = acc + float(qw[ia, ic]) * window(i, x, y) * _softplus(z - h[i])
-            vol_model[i] = ph["eta"][i] * acc
-            add(ph["V"][i] - vol_model[i], 0.0, 0.0)  # Eq. (20)
-
-        # -- contact, reach and site constraints, Eq. (3), (15), (16) --------------------------------
-        rmin, rmax = exc.reach_min + sh.margin, exc.reach_max - sh.margin
-        site_rows: list[int] = []  # (x, y) rows of the dig corners, bounded by the site's box in __init__
-        tips = [tip_position(X[k], exc, P_floor) for k in range(N + 1)]
-        tip_fn = ca.Function("tip", [Xv, P_s0, P_floor], [ca.horzcat(*[ca.vertcat(*t) for t in tips])])
-        for i in range(1, m1):
+    def _contacts(self, rows: _Rows, X: list[Any], ph: dict[str, Any], tips: list[Any], cuts: list[graph.Cut],
+                  pz: list[Any]) -> list[int]:
+        """Contact, reach and site constraints, Eq. (3), (15), (16), and each dig phase's work
+        time; returns the rows of the dig corners (bounded by the site's box in __init__)."""
+        sh, n = self.shape, self.n
+        site_rows: list[int] = []
+        for i in range(1, self.m1):
             kn = i * n + self.kc[i]
-            s = X[kn]
-            tx, ty, tz = tips[kn]
-            bear = s[2] + s[3] + math.pi  # the drag runs back toward the machine
-            gap = ((tx - ph["px"][i]) ** 2 + (ty - ph["py"][i]) ** 2 + (tz - pz[i]) ** 2
-                   + (ca.cos(bear) - ux[i]) ** 2 + (ca.sin(bear) - uy[i]) ** 2)
-            add(ph["eta"][i] * (sh.eps_d - gap), 0.0, ca.inf)  # Eq. (3) with (16)
-            ex_, ey_ = ph["px"][i] + L * ux[i], ph["py"][i] + L * uy[i]
-            for qx, qy in ((ph["px"][i], ph["py"][i]), (ex_, ey_)):
-                add((qx - s[0]) ** 2 + (qy - s[1]) ** 2, rmin**2, rmax**2)
-            for sa in (0.0, L):
-                for sc in (-W / 2, W / 2):
-                    cx = ph["px"][i] + sa * ux[i] - sc * uy[i]
-                    cy = ph["py"][i] + sa * uy[i] + sc * ux[i]
-                    site_rows.append(len(lbg))
-                    add(ca.vertcat(cx, cy), -ca.inf, ca.inf)
-            reach_dt = exc.reach_max + truck.loading_radius - sh.margin
-            add((s[0] - s[6]) ** 2 + (s[1] - s[7]) ** 2, 0.0, reach_dt**2)
-            # a stroke and a dump take their full time however little the bucket takes in: the
-            # work time saturates in η (concave), which is what makes fewer, fuller digs cheaper
-            busy = 1.0 - ca.exp(-ph["eta"][i] / sh.eta_saturation)
-            if sh.hold_base:
-                # the referee's durations: a dump lasts its swing at the swing rate plus the dump
-                # time, a dig its swing plus the stroke time; the swing to the contact is the move
-                # steps' own (rate-bounded, nothing else moves then), the swing to the truck is
-                # priced here on top of stroke and dump: the net swing over the work steps (what
-                # the referee charges, the shortest way to the truck), a smooth |·|
-                dturn = X[(i + 1) * n][3] - X[i * n + self.kc[i]][3]
-                swing = ca.sqrt(dturn**2 + sh.swing_smooth**2)
-                add((n - self.kc[i]) * ph["dtw"][i] - swing / exc.swing_rate - busy * sh.work_time, 0.0, ca.inf)
-            else:
-                add((n - self.kc[i]) * ph["dtw"][i] - busy * sh.work_time, 0.0, ca.inf)
+            cut = cuts[i - 1]
+            for row in graph.contact_rows(sh, self.exc, X[kn], tips[kn], cut, pz[i - 1]):
+                rows.add(*row)
+            for corner in graph.corners(sh, cut):
+                site_rows.append(len(rows.lbg))
+                rows.add(corner, -ca.inf, ca.inf)
+            rows.add(*graph.dump_reach_row(sh, self.exc, self.truck, X[kn]))
+            dturn = X[(i + 1) * n][3] - X[kn][3]
+            rows.add(*graph.work_row(sh, self.exc, ph["eta"][i], ph["dtw"][i], dturn))
+        return site_rows
 
-        # -- STL specifications, Eq. (4)–(8), (17)–(19), (22)–(24) ---------------------------------
-        r2 = truck.loading_radius**2
-        lcol2 = (exc.clearance + sh.col_margin) ** 2
-        sig = {
-            "bx": [X[k][0] for k in range(N + 1)], "by": [X[k][1] for k in range(N + 1)],
-            "dx": [X[k][6] for k in range(N + 1)], "dy": [X[k][7] for k in range(N + 1)],
-            "tipx": [t[0] for t in tips], "tipy": [t[1] for t in tips],
-            "__len__": N + 1,
-        }
-        # A conjunction/G of lower bounds is imposed conjunct by conjunct (earthbench_planners.stl_tamp.stl.
-        # robustness_constraints): exact at the top level and sparse; the smoothing acts inside
-        # the disjunction (5) and the finally (18).
-        tasks = []
+    def _specs(self, rows: _Rows, X: list[Any], ph: dict[str, Any], tips: list[Any], slack: Any) -> list[Any]:
+        """The STL specifications, Eq. (4)–(8), (17)–(19), (22)–(24), as constraints ρ ≥ slack;
+        returns the task's and safety's smooth robustness (the ``rho`` helper)."""
+        sh, exc, truck, m1, n, N = self.shape, self.exc, self.truck, self.m1, self.n, self.N
+        sig = {"dx": [X[k][6] for k in range(N + 1)], "dy": [X[k][7] for k in range(N + 1)], "__len__": N + 1}
+        # A conjunction/G of lower bounds is imposed conjunct by conjunct (stl.robustness_constraints):
+        # exact at the top level and sparse; the smoothing acts inside the disjunction (5) and the
+        # finally (18).
+        rho_task_parts = []
         for i in range(1, m1):
             eta_i, V_i = ph["eta"][i], ph["V"][i]
             phi0 = Predicate(lambda s_, k, e=eta_i: sh.eps_eta - e, "φ0")
             phi1 = Predicate(lambda s_, k, e=eta_i: e - sh.eps_eta, "φ1")
             phi_v = Predicate(lambda s_, k, v=V_i: (v - sh.eps_v) / sh.vmax, "φv")
-            mu_load = Predicate(
-                lambda s_, k, e=eta_i: (r2 - e * ((s_["tipx"][k] - s_["dx"][k]) ** 2 + (s_["tipy"][k] - s_["dy"][k]) ** 2)) / r2,
-                "μload")
-            phi_load = Finally(mu_load, self.kc[i] + 1, n)
-            phi_task = Or((And((phi0, Const(1e3))), And((phi1, phi_v, phi_load))))  # Eq. (5), φ_I = true
-            tasks.append((phi_task, i * n))
+            load = Predicate(lambda s_, k, e=eta_i: graph.mu_load(truck, e, X[k], tips[k]), "μload")
+            phi_task = Or((And((phi0, Const(1e3))), And((phi1, phi_v, Finally(load, self.kc[i] + 1, n)))))  # Eq. (5)
+            rho_task_parts.append(phi_task.rho(sig, i * n, smooth=sh.beta))
         mu_dump = Predicate(
             lambda s_, k: (sh.eps_r**2 - (s_["dx"][k] - s_["dx"][n]) ** 2 - (s_["dy"][k] - s_["dy"][n]) ** 2) / sh.eps_r**2,
             "μdump")
-        mu_col = Predicate(
-            lambda s_, k: ((s_["bx"][k] - s_["dx"][k]) ** 2 + (s_["by"][k] - s_["dy"][k]) ** 2 - lcol2) / lcol2, "μcol")
+        mu_col = Predicate(lambda s_, k: graph.mu_col(sh, exc, X[k]), "μcol")
         phi_dump = Globally(mu_dump, n, N)
         phi_safe = And((phi_dump, Globally(mu_col, 0, N)))  # Eq. (22)–(24)
-        rho_task_parts = [phi.rho(sig, k0, smooth=sh.beta) for phi, k0 in tasks]
         for r in rho_task_parts:
-            add(r - slack[0], 0.0, ca.inf)
+            rows.add(r - slack[0], 0.0, ca.inf)
         safe_parts = robustness_constraints(Globally(mu_col, 0, N), sig, 0, smooth=sh.beta)
         if not sh.hold_truck:
             safe_parts += robustness_constraints(phi_dump, sig, 0, smooth=sh.beta)
         for r in safe_parts:
-            add(r - slack[1], 0.0, ca.inf)
+            rows.add(r - slack[1], 0.0, ca.inf)
+        return [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)]
 
-        # -- cost, Eq. (26) + terminal --------------------------------------------------------------
+    def _cost(self, X: list[Any], U: list[Any], ph: dict[str, Any], P: dict[str, Any]) -> Any:
+        """Eq. (26) plus the terminal cost toward the next area."""
+        sh, m1, n, N = self.shape, self.m1, self.n, self.N
         qu = ca.DM(list(sh.q_u) + list(sh.q_u_truck))
         J_u = 0
         for k in range(N):
@@ -440,32 +336,21 @@ class PhaseNLP:
         for i in range(m1):
             t_final = t_final + self.kc[i] * ph["dtm"][i] + (n - self.kc[i]) * ph["dtw"][i]
         V_tot = ca.sum1(ph["V"][1:])
-        J = (P_a[0] * J_u + P_a[1] * t_final + P_a[2] * (V_tot - P_vt) ** 2 + P_a[3] * ca.sum1(ph["eta"][1:])
-             + P_a[4] * ((X[N][0] - P_goal[0]) ** 2 + (X[N][1] - P_goal[1]) ** 2))
+        a, goal = P["a"], P["goal"]
+        return (a[0] * J_u + a[1] * t_final + a[2] * (V_tot - P["vt"]) ** 2 + a[3] * ca.sum1(ph["eta"][1:])
+                + a[4] * ((X[N][0] - goal[0]) ** 2 + (X[N][1] - goal[1]) ** 2))
 
-        G = ca.vertcat(*g)
-        vol = ca.vertcat(*[vol_model[i] for i in range(1, m1)])
-        pzv = ca.vertcat(*[pz[i] for i in range(1, m1)])
-        rho = [ca.mmin(ca.vertcat(*rho_task_parts)), phi_safe.rho(sig, 0)]
-        fns: dict[str, Any] = {}
-        if lifted:  # the terrain's derivatives from its Taylor coefficients (see f0 above)
-            A, Av = ca.vertcat(*anchors), ca.vertcat(*anchor_vals)
-            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", G.shape[0])
-            hess = ca.triu(ca.hessian(lam_f * J + ca.dot(lam_g, G), w)[0])
-            jac, grad = ca.jacobian(G, w), ca.gradient(J, w)
-            G, J, vol, pzv, hess, jac, grad, *rho = ca.substitute([G, J, vol, pzv, hess, jac, grad, *rho], [A], [Av])
-            fns["hess_lag"] = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
-                                          ["triu_hess_gamma_x_x"])
-            fns["jac_g"] = ca.Function("nlp_jac_g", [w, p], [G, jac], ["x", "p"], ["g", "jac_g_x"])
-            fns["grad_f"] = ca.Function("nlp_grad_f", [w, p], [J, grad], ["x", "p"], ["f", "grad_f_x"])
-        fns["nlp"] = ca.Function("nlp", [w, p], [J, G], ["x", "p"], ["f", "g"])
-        fns["tip"] = tip_fn
-        fns["rho"] = ca.Function("rho", [w, p], rho)
-        fns["vol"] = ca.Function("vol", [w, p], [vol])
-        # model terrain height at each dig phase's contact, after the earlier phases' cuts (guesses)
-        fns["pz"] = ca.Function("pz", [w, p], [pzv])
-        fns["bounds"] = ca.Function("bounds", [], [ca.DM(lbg), ca.DM(ubg), ca.DM(site_rows)])
-        return fns
+    @staticmethod
+    def _derivatives(terrain: graph.Terrain, w: Any, p: Any, J: Any, G: Any) -> dict[str, Any]:
+        """IPOPT's derivatives, the terrain's from its Taylor coefficients (:class:`.graph.Terrain`)."""
+        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", G.shape[0])
+        hess = ca.triu(ca.hessian(lam_f * J + ca.dot(lam_g, G), w)[0])
+        jac, grad = ca.jacobian(G, w), ca.gradient(J, w)
+        G, J, hess, jac, grad = terrain.substitute([G, J, hess, jac, grad])
+        return {"hess_lag": ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+                                        ["triu_hess_gamma_x_x"]),
+                "jac_g": ca.Function("nlp_jac_g", [w, p], [G, jac], ["x", "p"], ["g", "jac_g_x"]),
+                "grad_f": ca.Function("nlp_grad_f", [w, p], [J, grad], ["x", "p"], ["f", "grad_f_x"])}
 
     def take_build_time(self) -> float:
         """Construction seconds (the graph, then each IPOPT solver with its derivatives) not yet
@@ -581,27 +466,81 @@ class PhaseNLP:
               fixed_tasks: dict[str, np.ndarray] | None = None, max_dig_phases: int | None = None,
               max_iter: int = 300, options: dict[str, Any] | None = None,
               accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None,
-              stand: tuple[float, float, float] | None = None) -> Solution:
+              stand: tuple[float, float, float] | None = None, solver: str = "ipopt",
+              fatrop_options: dict[str, Any] | None = None) -> Solution:
         """Solve from ``w0``. ``success`` is IPOPT's own success, or an acceptable-level stop with
         violation < 1e-4, or — when ``accept_feasible`` > 0 — an iteration cap whose last
-        iterate violates no constraint by more than ``accept_feasible`` (status says which)."""
+        iterate violates no constraint by more than ``accept_feasible`` (status says which).
+        ``solver="fatrop"``: FATROP on the stage-by-stage NLP (:mod:`.staged`; ``options``' μ₀
+        and tolerance, ``fatrop_options`` on top), IPOPT from the same start when it fails
+        (``info["fallback"]``); every solve is counted (:meth:`take_solver_counts`)."""
         lb, ub = self.bounds(box, fixed_tasks, max_dig_phases, stand)
         params, w0 = quantize(params), np.clip(quantize(w0), lb, ub)
+        first: dict[str, Any] = {}
+        if solver == "fatrop" and self.staged() is not None:
+            sol = self._solve_staged(params, w0, lb, ub, max_iter, options or {}, fatrop_options or {})
+            if sol.success:
+                return sol
+            self._counts["fallback"] += 1
+            first = {"fallback": sol.status, "fatrop_iterations": sol.iterations, "fatrop_s": sol.solve_time_s}
+        elif solver not in ("ipopt", "fatrop"):
+            raise ValueError(f"unknown solver {solver!r}: 'fatrop' or 'ipopt'")
+        self._counts["ipopt"] += 1
         S = self.solver(max_iter, options, casadi_options)
         t0 = time.perf_counter()
         res = S(x0=w0, p=params, lbx=lb, ubx=ub, lbg=self.lbg, ubg=self.ubg)
-        dt = time.perf_counter() - t0
-        st = S.stats()
+        dt = time.perf_counter() - t0 + first.get("fatrop_s", 0.0)
+        st = self.last_stats = S.stats()
         w = np.array(res["x"]).reshape(-1)
-        gv = np.array(res["g"]).reshape(-1)
-        viol = float(np.max(np.concatenate([self.lbg - gv, gv - self.ubg, [0.0]])))
+        viol = self._violation(np.array(res["g"]).reshape(-1))
         status = st.get("return_status", "unknown")
         ok = bool(st.get("success", False)) or (status == "Solved_To_Acceptable_Level" and viol < 1e-4)
         if not ok and accept_feasible > 0 and status == "Maximum_Iterations_Exceeded" \
                 and viol < accept_feasible:
             ok, status = True, f"{status} (feasible iterate accepted)"
-        return self._solution(w, params, ok, status, int(st.get("iter_count", -1)), dt, float(res["f"]),
-                              {"max_violation": viol})
+        iters = int(st.get("iter_count", -1)) + first.get("fatrop_iterations", 0)
+        return self._solution(w, params, ok, status, iters, dt, float(res["f"]),
+                              {"max_violation": viol, "solver": "ipopt", **first})
+
+    def _violation(self, gv: np.ndarray) -> float:
+        return float(np.max(np.concatenate([self.lbg - gv, gv - self.ubg, [0.0]])))
+
+    def _solve_staged(self, params: np.ndarray, w0: np.ndarray, lb: np.ndarray, ub: np.ndarray, max_iter: int,
+                      options: dict[str, Any], fatrop_options: dict[str, Any]) -> Solution:
+        """FATROP's solve; a success only when the classic NLP's constraints hold to 1e-4 at it."""
+        assert self._staged is not None
+        opts = {**staged.FATROP_DEFAULTS, "max_iter": max_iter,
+                **{k: options[k] for k in ("mu_init", "tol") if k in options}, **fatrop_options}
+        self._counts["fatrop"] += 1
+        t0 = time.perf_counter()
+        w, ok, status, iters = self._staged.solve(params, w0, lb, ub, params[self.K + 2:self.K + 2 + NX], opts)
+        dt = time.perf_counter() - t0
+        f, gv = (np.array(v).reshape(-1) for v in self._nlp_fn(w, params))
+        viol = self._violation(gv)
+        ok = ok and viol < 1e-4
+        return self._solution(w, params, ok, "Solve_Succeeded" if ok else f"fatrop {status}", iters, dt, float(f[0]),
+                              {"max_violation": viol, "solver": "fatrop"})
+
+    def staged(self) -> staged.StagedSolver | None:
+        """FATROP's form of this NLP (:mod:`.staged`), loaded on first use like the classic one
+        (compiled, from the disk cache or built); None for a shape it does not cover."""
+        if self._staged is None and self.shape.symbolic == "SX" and self.shape.hold_truck:
+            t0 = time.perf_counter()
+            name = nlp_key(self.shape, self.exc, self.truck, staged_layout=True)
+            fns = compiled.load(prepared_dir(), name, staged.HELPER_NAMES)
+            done = fns is not None
+            fns = fns or build_functions(self.shape, self.exc, self.truck, staged_layout=True)[1]
+            self._staged = staged.StagedSolver(fns, self.site_box, compiled=done)
+            dt = time.perf_counter() - t0
+            self.build_time_s += dt
+            self._unreported_build_s += dt
+        return self._staged
+
+    def take_solver_counts(self) -> dict[str, int]:
+        """Solves by FATROP and by IPOPT, and FATROP's failures that IPOPT solved again
+        (``fallback``), since last asked."""
+        out, self._counts = self._counts, {"fatrop": 0, "ipopt": 0, "fallback": 0}
+        return out
 
     def reseed(self, sol: Solution, w0: np.ndarray, params: np.ndarray, eta_on: float, eta: float = 0.6) -> np.ndarray | None:
         """A restart for a solve that stopped short of its volume with idle phases.

@@ -47,7 +47,7 @@ def key(*parts: object) -> str:
         h.update(repr(part).encode())
         h.update(b"\0")
     here = Path(__file__).resolve().parent
-    for name in ("model.py", "stl.py", "problem.py", "nlp_cache.py"):
+    for name in ("model.py", "graph.py", "staged.py", "stl.py", "problem.py", "nlp_cache.py"):
         h.update((here / name).read_bytes())
     return h.hexdigest()[:32]
 
