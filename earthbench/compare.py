@@ -262,7 +262,7 @@ def format_comparison(c: Comparison, alpha: float | None = None, fmt: str = "tex
     head, body = _cells(c)
     top, succ, tail = _lines(c)
     if fmt == "markdown":
-        from .publish import md_escape
+        from .board.tables import md_escape
 
         lines = [f"- {md_escape(t)}" for t in top] + ["", md_escape(succ), "",
                  "| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 2) + "---|"]

@@ -56,6 +56,14 @@ def test_motion_along_heading(scenario, lateral, ok):
     assert ("heading" not in rules(judge(scenario, Plan((m,))))) == ok
 
 
+@pytest.mark.parametrize("sideways, ok", [(4e-15, True), (5e-7, True), (1e-2, False)])
+def test_a_rounding_error_is_no_slide_but_a_short_slide_is(scenario, sideways, ok):
+    # a step straight sideways (north, the truck facing west): a rounding error's worth is no move
+    # at all, while a centimetre is a slide however short the chord (the slack shrinks with it)
+    m = Move("truck", ((0.0, 9.0, 9.0, math.pi), (1.0, 9.0, 9.0 + sideways, math.pi)))
+    assert ("heading" not in rules(judge(scenario, Plan((m,))))) == ok
+
+
 def test_a_turning_arc_follows_its_chord(scenario):
     # a unicycle arc: the chord points along the mean heading, so no lateral slip is flagged
     r, dth = 2.0, 0.3  # forward (west) from yaw π, turning counter-clockwise on a 2 m circle

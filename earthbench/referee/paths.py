@@ -43,7 +43,9 @@ def move(r: Replay, n: int, a: Move) -> dict[str, np.ndarray]:
         if rates[k] > limit * (1 + RATE_TOL):
             r.violations.append(Violation(n, rule, float(rates[k] - limit),
                 f"{a.machine} {doing.format(rates[k])} between samples {k} and {k + 1}; limit {limit} {unit}"))
-    slack = spec.chord_tolerance * np.minimum(1.0, arc["chord"] / SLIP_LENGTH)
+    # the slack shrinks with the chord (no sliding sideways in short steps), down to the referee's
+    # absolute tolerance: a rounding error's worth of sideways is no move at all
+    slack = spec.chord_tolerance * np.minimum(1.0, arc["chord"] / SLIP_LENGTH) + ABS_TOL
     k = int(np.argmax(arc["lateral"] - slack))
     if arc["lateral"][k] > slack[k]:
         r.violations.append(Violation(n, "heading", float(arc["lateral"][k]),
