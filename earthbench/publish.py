@@ -125,8 +125,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         spot_checks = latest_spot_checks(store)
         for sec, ((suite, track), srun) in zip(sections, groups):
             st = sec["stamp"] = stamp(srun, suite, track, generated, spot_checks, seed_note)
-            classes = {store.scenario(d).machines.machine_class for d in srun["scenario_digest"].unique()}
-            st.classes, st.production = ", ".join(sorted(classes)), production_note(classes, track)
+            sec["classes"] = {store.scenario(d).machines.machine_class for d in srun["scenario_digest"].unique()}
+            st.classes = ", ".join(sorted(sec["classes"]))
             sec["run_rows"] = run_rows(srun.sort_values("id"))
             sec["scale_rows"] = mark_mixed_solve_columns(sec["scale_rows"], st.mixed) if sec["scale_rows"] else sec["scale_rows"]
         viewer = viewer_section(store, runs, replays)
@@ -138,6 +138,8 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         closed = closed_configs(runs)
         for sec in sections:
             ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]
+            whole = ssum.loc[ssum["scope"] == "suite", "production_m3h_median"]
+            sec["stamp"].production = production_note(sec["classes"], sec["track"], best=whole.max() if len(whole) else None)
             sec["replay_runs"] = replay_runs(runs, sec["suite"], sec["track"], picked)
             sec.update(table_sections(ssum, all_versions, closed, sec["stamp"].mixed))
             if renderer is not None:

@@ -117,3 +117,8 @@ def test_production_is_bank_m3_an_hour_and_the_stamp_names_the_class_s_band():
     note = production_note({"20t"}, "backhoe")
     assert "bank m³ an hour" in note and "44–107 m³/h" in note
     assert "uncalibrated" in production_note({"compact"}, "backhoe")
+    # the board says where its best median lies against the band, and by how much
+    assert "226 m³/h, lies 2.1 × the band's top" in production_note({"20t"}, "backhoe", best=226.3)
+    assert "lies inside it" in production_note({"20t"}, "backhoe", best=80.0)
+    assert "2.2 × below its bottom" in production_note({"20t"}, "backhoe", best=20.0)
+    assert "lies" not in production_note({"20t"}, "backhoe", best=0.0)  # no run reached the target

@@ -418,10 +418,11 @@ __all__ = ["BREAKDOWN_NOTE", "FAILURE_COLUMNS", "FORMULA_STARTS", "HISTORY_NOTE"
            "stamp", "table_rows", "table_sections", "write_csv"]
 
 
-def production_note(classes: set[str], track: str) -> str:
+def production_note(classes: set[str], track: str, best: float | None = None) -> str:
     """The stamp's production line: bank m³ an hour from the time per target m³, and for each
     calibrated machine class of the table the handbook's production band of its digging machine
-    (docs/machine-classes.md)."""
+    (docs/machine-classes.md), with where the table's best median production (``best``) lies
+    against it: a board says by how much it is outside a site's figures, not only that it is."""
     note = "bank m³ an hour = 3600 ÷ the median time per target m³ (the target is bank m³; the referee applies no job efficiency)"
     machine = "excavator" if track == "backhoe" else "loader"
     for name in sorted(classes):
@@ -431,6 +432,11 @@ def production_note(classes: set[str], track: str) -> str:
             src = next(b.source for b in mc.bands if b.what == "production" and b.machine == machine)
             note += (f"; the {name} class's {machine}: handbook {band[0]:g}–{band[1]:g} m³/h across materials and conditions "
                      f"({src}), which includes a job efficiency of about 0.6–0.8")
+            if best is not None and best > 0 and math.isfinite(best):
+                where = (f"{best / band[1]:.1f} × the band's top" if best > band[1] else
+                         f"{band[0] / best:.1f} × below its bottom" if best < band[0] else "inside it")
+                note += (f"; the best median here, {best:.0f} m³/h, lies {where} (why: docs/machine-classes.md, "
+                         "\"Against the handbook\")")
         elif mc is not None and mc.calibrated:
             note += f"; the {name} class's {machine}: no handbook production band"
         else:
