@@ -32,6 +32,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .sensing import observe
     from .world import Budget, ExcavatorSpec, Heightmap, LoaderSpec, Machines, Pose, Scenario, Sensing, Site, Soil, Task, TruckSpec
 
-__version__ = "0.4.0"
+__version__ = "0.5.0"
 
 __getattr__ = lazy_getattr(globals())
