@@ -6,6 +6,7 @@ import os
 import shutil
 import signal
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -64,6 +65,18 @@ def isolation_off(monkeypatch):
     yield
     monkeypatch.delenv(isolation.SWITCH)
     isolation.support.cache_clear()
+
+
+@pytest.fixture
+def prepared_root(tmp_path, monkeypatch):
+    """A preparation cache of the test's own, with the planners that prepare
+    (``tests/plugins/preparing_planners.py``) registered."""
+    from earthbench.registry import load_plugin_file
+
+    root = tmp_path / "prepared"
+    monkeypatch.setenv("EARTHBENCH_PREPARED", str(root))
+    load_plugin_file(str(Path(__file__).parent / "plugins" / "preparing_planners.py"))
+    return root
 
 
 @pytest.fixture

@@ -22,17 +22,10 @@ from earthbench.world import Budget
 
 from helpers import tiny_suite_toml
 
+
 PLUGIN = str(Path(__file__).parent / "plugins" / "preparing_planners.py")
 
-pytestmark = pytest.mark.usefixtures("forget_test_planners")
-
-
-@pytest.fixture(autouse=True)
-def prepared_root(tmp_path, monkeypatch):
-    root = tmp_path / "prepared"
-    monkeypatch.setenv("EARTHBENCH_PREPARED", str(root))
-    load_plugin_file(PLUGIN)
-    return root
+pytestmark = pytest.mark.usefixtures("forget_test_planners", "prepared_root")
 
 
 def _run(tmp_path, planners, seeds="0-1", budget="", config="", db="r.db"):

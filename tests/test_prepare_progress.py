@@ -15,23 +15,15 @@ from earthbench.harness.prepare import PrepareError, PrepareStatus, ensure, esti
 from earthbench.harness.protocol import PROGRESS_BURST, PROGRESS_RATE
 from earthbench.planner import PrepareProgress
 from earthbench.records import PlannerRef
-from earthbench.registry import load_plugin_file
 from earthbench.suite import parse_suite
 from earthbench.world import Budget
 
 from helpers import tiny_suite_toml
 
+
 PLUGIN = str(Path(__file__).parent / "plugins" / "preparing_planners.py")
 
-pytestmark = pytest.mark.usefixtures("forget_test_planners")
-
-
-@pytest.fixture(autouse=True)
-def prepared_root(tmp_path, monkeypatch):
-    root = tmp_path / "prepared"
-    monkeypatch.setenv("EARTHBENCH_PREPARED", str(root))
-    load_plugin_file(PLUGIN)
-    return root
+pytestmark = pytest.mark.usefixtures("forget_test_planners", "prepared_root")
 
 
 def _steps(statuses: list[PrepareStatus]) -> list[PrepareProgress]:
