@@ -202,3 +202,29 @@ def test_a_spot_check_table_made_before_it_was_versioned_keeps_its_rows(tmp_path
     assert (new.checked_at, new.cpu_ratios, new.steal, new.ratios) == ("2026-02-01T00:00:00+00:00", (1.25,), 0.01, (1.5, 0.5))
     Store(tmp_path / "fresh.db").close()
     assert _columns(path)["spot_checks"] == _columns(tmp_path / "fresh.db")["spot_checks"]
+
+
+def test_reading_a_published_store_leaves_its_file_as_committed(tmp_path, capsys):
+    """A committed board's store is a VACUUM'd copy without write-ahead logging; `runs`, `leaderboard`
+    and a merge's inputs only read it, so its bytes stay as git has them. The first write turns the
+    log on, as before."""
+    import shutil
+    from pathlib import Path
+
+    from earthbench.cli import main
+    from earthbench.merge import merge
+
+    db = tmp_path / "pile.db"
+    shutil.copyfile(Path(__file__).parents[1] / "leaderboard" / "pile" / "pile.db", db)
+    before = db.read_bytes()
+    assert before[18:20] == b"\x01\x01"  # rollback journal, as VACUUM INTO writes it
+    assert main(["runs", "--db", str(db), "--short"]) == 0
+    assert main(["leaderboard", "--db", str(db), "--out", str(tmp_path / "board"), "--no-figures"]) == 0
+    merge(tmp_path / "merged.db", [db])
+    with Store(db, create=False) as store:
+        assert len(store.run_suites()) == 1
+    capsys.readouterr()
+    assert db.read_bytes() == before
+    with Store(db, create=False) as store:
+        store.check_writable()  # a writer: the log goes on
+    assert db.read_bytes()[18:20] == b"\x02\x02"

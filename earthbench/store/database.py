@@ -140,6 +140,7 @@ class Store:
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open results database {str(self.path)!r}: {exc}") from None
         self.db.row_factory = sqlite3.Row
+        self._logged = False  # write-ahead logging switched on by this connection (see _begin)
         try:
             self._open()
         except sqlite3.DatabaseError as exc:
@@ -187,8 +188,7 @@ class Store:
         version = self.db.execute("PRAGMA user_version").fetchone()[0]
         tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if app == 0 and not tables and not self.read_only:
-            self.db.execute("PRAGMA journal_mode=WAL")
-            self.db.execute("BEGIN IMMEDIATE")
+            self._begin()
             try:
                 if not {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}:
                     write_schema(self.db)
@@ -204,15 +204,26 @@ class Store:
                 f"results database {str(self.path)!r} has schema version {version}, newer than this earthbench "
                 f"understands ({SCHEMA_VERSION}); upgrade earthbench to use it (it was left untouched)"
             )
-        if not self.read_only:
+        if not self.read_only and version < SCHEMA_VERSION:
+            self._log_ahead()
+            migrate(self.db, version)
+
+    def _log_ahead(self) -> None:
+        if not self._logged:
             self.db.execute("PRAGMA journal_mode=WAL")
-            if version < SCHEMA_VERSION:
-                migrate(self.db, version)
+            self._logged = True
+
+    def _begin(self) -> None:
+        """Start a write. A store turns on write-ahead logging (readers never wait for a writer) at its
+        first write, not when it is opened: reading a published store (`leaderboard`, `merge`, `runs`)
+        leaves its file byte for byte as committed."""
+        self._log_ahead()
+        self.db.execute("BEGIN IMMEDIATE")
 
     def check_writable(self) -> None:
         """Fail now, with a clear message, if another process holds the write lock."""
         try:
-            self.db.execute("BEGIN IMMEDIATE")
+            self._begin()
             self.db.execute("COMMIT")
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
@@ -252,7 +263,7 @@ class Store:
             return row[0]
         try:
             with self.db:
-                self.db.execute("BEGIN IMMEDIATE")
+                self._begin()
                 seal = sealed_origin(suite)
                 cur = self.db.execute(
                     "INSERT INTO suites (name, digest, track, threshold, description, registered_at, sealed_from, public_digest,"
@@ -283,7 +294,7 @@ class Store:
         sc = case.scenario
         m = result.metrics or {}
         try:
-            self.db.execute("BEGIN IMMEDIATE")
+            self._begin()
             try:
                 key_sql = "scenario_digest=? AND planner=? AND planner_version=? AND config_hash=?"
                 if replace:
@@ -341,7 +352,7 @@ class Store:
                 f"SELECT digest, id, track, target_volume, doc, {sealed} FROM scenarios WHERE digest=?", (d,)).fetchone())]
         try:
             with self.db:
-                self.db.execute("BEGIN IMMEDIATE")
+                self._begin()
                 self.db.executemany("INSERT OR IGNORE INTO scenarios (digest, id, track, target_volume, doc, sealed)"
                                     " VALUES (?, ?, ?, ?, ?, ?)", [tuple(r) for r in rows])
         except sqlite3.OperationalError as exc:
@@ -386,7 +397,7 @@ class Store:
         sets = ", ".join(f"{c}=:{c}" for c in cols)
         try:
             with self.db:
-                self.db.execute("BEGIN IMMEDIATE")
+                self._begin()
                 self.db.execute(
                     f"UPDATE runs SET reason=:reason, success=:success, metrics=:metrics, violations=:violations,"
                     f" rescored_at=:at, rules=:rules, {sets} WHERE id=:id",
@@ -410,7 +421,7 @@ class Store:
         ids = [(_rules_version(), i) for i in run_ids]
         try:
             with self.db:
-                self.db.execute("BEGIN IMMEDIATE")
+                self._begin()
                 self.db.executemany("UPDATE runs SET rules=? WHERE id=?", ids)
         except sqlite3.OperationalError as exc:
             raise StoreError(self._explain(exc)) from None
@@ -419,7 +430,7 @@ class Store:
         """Keep spot re-timings in the store they sampled, so the leaderboard's stamp can show them (one transaction)."""
         try:
             with self.db:
-                self.db.execute("BEGIN IMMEDIATE")
+                self._begin()
                 self.db.executemany(
                     "INSERT INTO spot_checks (checked_at, planner, planner_version, config_hash, run_ids, agree, ratios, "
                     "disagreements, machine, stored_machines, context) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
