@@ -18,6 +18,7 @@ import itertools
 import os
 import signal
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 #: The v1 controllers a case's cgroup needs.
@@ -85,7 +86,7 @@ def probe() -> tuple[str | None, str]:
     return None, "cannot create a case cgroup (" + "; ".join(tried) + ")"
 
 
-class CaseCgroup:
+class CaseCgroup(ABC):
     """One case's cgroup: its limits, the figures the kernel counts, freeze, kill, remove.
 
     The interface the sandbox uses; :class:`CgroupV1` and :class:`CgroupV2` say how each
@@ -119,36 +120,38 @@ class CaseCgroup:
 
     # -- what each hierarchy says its own way ------------------------------------------------
     @classmethod
+    @abstractmethod
     def bases(cls) -> dict[str, str] | None:
         """This process's own cgroup folder per controller, or None when the hierarchy lacks one."""
-        raise NotImplementedError
 
     @classmethod
     def prepare_bases(cls, bases: dict[str, str]) -> None:
         """Make the folders under ``bases`` able to hold a case's controllers (nothing to do by default)."""
+        return None
 
+    @abstractmethod
     def limit(self, cpus: str, memory_bytes: int, pids_max: int) -> None:
-        raise NotImplementedError
+        """Pin the case to ``cpus`` and cap its memory and its number of processes."""
 
+    @abstractmethod
     def control(self, ctrl: str, name: str) -> str:
         """The path of the control file ``name`` of controller ``ctrl``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def cpu_s(self) -> float:
         """CPU seconds (user + system) of every process the case ever had, counted by the kernel."""
-        raise NotImplementedError
 
+    @abstractmethod
     def freeze(self, frozen: bool = True, timeout: float = 2.0, wait: bool = True) -> bool:
         """Stop (or restart) every process of the case; True once the kernel says it is done.
 
         ``wait=False`` asks and returns: a process stops at its next return to user space
         whether or not anyone waits for it (the closed loop does not wait, so a step costs no
         polling)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def kill_all(self) -> None:
         """Ask the kernel to SIGKILL every process of the case (it may take a moment)."""
-        raise NotImplementedError
 
     peak_file = ""
     oom_file = ""
