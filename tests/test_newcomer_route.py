@@ -17,6 +17,7 @@ then ``earthbench leaderboard`` ranks all three against greedy.
 from __future__ import annotations
 
 import os
+import shlex
 import sqlite3
 import subprocess
 import sys
@@ -132,7 +133,9 @@ def test_the_readme_route_and_every_printed_command_run_as_written(tmp_path):
     # step 4: the new planner ranked beside the published board's planners, none of which ran here
     ranked = (route.workdir / "ranked" / "README.md").read_text()
     assert all(f"| {name} " in ranked for name in ("my-planner", "greedy", "singh-cannon-backhoe", "stl-tamp")), ranked[:2000]
-    assert not any(c.startswith("earthbench run ") and "--planner my-planner" not in c for c in ran)
+    runs = [shlex.split(c) for c in ran if c.startswith("earthbench run ")]
+    assert runs and all({w for a, w in zip(r, r[1:]) if a == "--planner"} == {"my-planner"} for r in runs), runs
+    assert "greedy" in next(s.output for s in route.steps if s.command.startswith("earthbench compare ranked.db"))
 
 
 def test_hints_are_read_as_printed():
