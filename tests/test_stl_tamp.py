@@ -19,7 +19,7 @@ from earthbench_planners.separate.planner import SeparatePlanner
 from earthbench_planners.stl_tamp import Config, StlTampPlanner, StlTampSolveError, TargetTooLargeError
 from earthbench_planners.stl_tamp.convert import Converter, SimState, fastest_steps, integrate, min_distance
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
-from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box, site_layout
+from earthbench_planners.stl_tamp.hierarchy import candidate_areas, local_seeds, site_box, site_layout
 from earthbench_planners.stl_tamp.model import tip_position
 from earthbench_planners.stl_tamp.problem import inverse_kinematics
 from earthbench_terrains.rbf import rbf
@@ -28,23 +28,13 @@ from earthbench_planners.stl_tamp.surface import fit_rbf
 import casadi as ca
 
 from helpers import block_scenario
+from helpers.stl_tamp import richest_local_area
 
 
 @pytest.fixture(scope="module")
 def local_setup():
     """The local NLP (built once, as in a run), the richest area of a 14-basis map, its fit."""
-    sc = rbf(0, 1.0, n_bases=14)
-    pl = StlTampPlanner()
-    c = pl.config
-    nlp, _ = get_nlp(pl.local_shape(sc), sc, site_box(sc))
-    st = SimState.start(sc)
-    areas = candidate_areas(sc, st.z, pl.area_side(sc), c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
-    area = max(areas, key=lambda a: a.estimate)
-    cx, cy = area.centre
-    hw = c.local_fit_half
-    surf = fit_rbf(sc.terrain, spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                   shape=nlp.shape.terrain_shape, margin=0)
-    return sc, pl, nlp, st, area, surf
+    return richest_local_area()
 
 
 def _solve(local_setup, target, *, k_active=5, eta0=1.0, fixed=None, max_iter=300):

@@ -10,13 +10,13 @@ from earthbench import Plan
 from earthbench.referee import judge
 from earthbench.world import ExcavatorSpec, TruckSpec
 from earthbench_planners.stl_tamp import StlTampPlanner, compiled, model, nlp_cache
-from earthbench_planners.stl_tamp.convert import SimState
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes, settle_contacts
-from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
+from earthbench_planners.stl_tamp.hierarchy import local_seeds
 from earthbench_planners.stl_tamp.report import local_solve_counts
 from earthbench_planners.stl_tamp.problem import Shape
-from earthbench_planners.stl_tamp.surface import fit_rbf
 from earthbench_terrains.rbf import rbf
+
+from helpers.stl_tamp import richest_local_area
 
 SMALL = Shape(phases=1, steps=3, contact_step=1, unit_width=0.7, unit_length=1.0, unit_depth=0.4, vmax=0.28,
               work_time=5.0, terrain_shape=(3, 4), terrain_spacing=0.6, terrain_sigma=0.6)
@@ -25,17 +25,9 @@ SMALL = Shape(phases=1, steps=3, contact_step=1, unit_width=0.7, unit_length=1.0
 @pytest.fixture(scope="module")
 def case():
     """The local NLP as a plan poses it: the area's V_max, its seeded digs, its stand."""
-    sc = rbf(0, 1.0, n_bases=14)
-    pl = StlTampPlanner()
+    sc, pl, nlp, st, area, surf = richest_local_area()
     c = pl.config
-    nlp, _ = get_nlp(pl.local_shape(sc), sc, site_box(sc))
-    st = SimState.start(sc)
-    area = max(candidate_areas(sc, st.z, pl.area_side(sc), c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset),
-               key=lambda a: a.estimate)
     cx, cy = area.centre
-    hw = c.local_fit_half
-    surf = fit_rbf(sc.terrain, spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                   shape=nlp.shape.terrain_shape, margin=0)
     p = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=c.area_vmax,
                    alpha=(c.alpha_u, c.alpha_t, c.alpha_v, c.alpha_eta, 0.0), goal=area.base, floor=0.0)
     seeds = local_seeds(area, c.m_local, c.m_local, 0.7, 1.0, surf, c.eta_init, area.truck)
