@@ -30,6 +30,7 @@ EXPECTED = {
     "h-forge-ready": "error", "h-forge-started": "error", "h-forge-done": "error", "h-plan-42": "error",
     "h-dict-plan": "error", "h-garbage": "error", "h-bloated": "error", "h-escape": "ok", "h-kill-warden": "crashed",
     "h-orphan-burn": "ok", "h-segv": "crashed", "h-log-flood": "error", "h-after-result": "error", "h-blank-lines": "error",
+    "h-progress": "error",
 }
 
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
@@ -74,6 +75,8 @@ def test_the_zoo_in_one_run(tmp_path, monkeypatch):
     assert "wrote more than 64 MB to its stdout" in df.error["h-log-flood"] and len(df.log_tail["h-log-flood"]) <= 4000
     assert "after its result" in df.error["h-after-result"] and df.solve_cpu_s["h-after-result"] < 1.0
     assert "empty line" in df.error["h-blank-lines"] and df.solve_time_s["h-blank-lines"] < WALL_S
+    # progress is a preparation's message: from a case, even with the right nonce, a protocol fault
+    assert "only a preparation reports progress" in df.error["h-progress"] and df.solve_time_s["h-progress"] < WALL_S
     # 0 orphans: every process a case started has ended (the pids the planners could write
     # down, without isolation; every process with a case's tag, in both modes)
     pids = [int(x) for f in tmp_path.glob("*.pids") for x in f.read_text().split()]

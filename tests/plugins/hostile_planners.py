@@ -385,3 +385,23 @@ class FloodsBlankLines(Planner):
             os.write(_harness_pipe(), b"\n" * 65536)
         time.sleep(12)
         return Plan()
+
+
+class ForgesProgress(Planner):
+    """Digs the job's nonce out of the bootstrap's frames and reports preparation progress from a
+    case, a message only a preparation may send (its text a terminal's clear-screen)."""
+
+    name = "h-progress"
+
+    def plan(self, scenario):
+        import json
+
+        frame, nonce = sys._getframe(), None
+        while frame is not None and nonce is None:
+            given = frame.f_locals.get("given")
+            nonce = given.get("nonce") if isinstance(given, dict) else None
+            frame = frame.f_back
+        msg = {"event": "progress", "done": 1, "total": 2, "what": "\x1b[2J", "nonce": nonce}
+        os.write(_harness_pipe(), (json.dumps(msg) + "\n").encode())
+        time.sleep(12)
+        return Plan()
