@@ -2,13 +2,15 @@
 
 The data flows one way: suite → scenarios → planner → plan → referee → metrics → store →
 leaderboard. This package holds the core; planners, terrains and metrics register as plugins
-through entry points (docs/DESIGN.md §1–2); the core never imports them.
+through entry points (docs/DESIGN.md §1–2); the core never imports them. At run time the face
+imports two small modules: the lazy-export helper and the table of moved paths (earthbench.compat).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from . import compat
 from .lazy import lazy_getattr
 
 #: The public names, one list: type checkers read these imports as they are; at run time each
@@ -35,3 +37,4 @@ if TYPE_CHECKING:  # pragma: no cover
 __version__ = "0.5.0"
 
 __getattr__ = lazy_getattr(globals())
+compat.install()  # the old paths of the modules that moved (earthbench.compat.MOVED_MODULES)

@@ -4,17 +4,26 @@
 Users' code keeps working for at least one release after a documented name moves (docs/plugins.md,
 "The public API"); the history lives here and in CHANGELOG.md ("Removal schedule"), not in the
 modules the names left. A module that lost names keeps one line, ``__getattr__ =
-compat.forward(__name__)``; a module that moved whole is that line and its docstring.
+compat.forward(__name__)``; a module or package that moved whole leaves no file behind: its old
+path is an alias of the new module (:func:`install`, called by the package's face), so the folders
+show only where the code is (docs/DESIGN.md §2).
 """
 
 from __future__ import annotations
 
 import importlib
+import sys
 import warnings
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from importlib.machinery import ModuleSpec
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, cast
 
-#: Old module → (new module, the release that removes the old one) for modules that moved whole.
+if TYPE_CHECKING:  # pragma: no cover
+    from importlib.abc import Loader  # not at run time: it imports importlib.resources
+
+#: Old module → (new module, the release that removes the old one) for modules that moved whole;
+#: a package's old path carries its submodules with it (``earthbench.harness.sandbox`` and so on).
 MOVED_MODULES: dict[str, tuple[str, str]] = {
     "earthbench.replay": ("earthbench.playback", "0.6.0"),  # moved after 0.2.0
     "earthbench.runner": ("earthbench.harness", "0.6.0"),  # moved in 0.2.0
@@ -62,27 +71,63 @@ MOVED_NAMES: dict[str, dict[str, tuple[str, str]]] = {
 }
 
 
+def new_path(old: str) -> tuple[str, str] | None:
+    """(new module, the release that removes the old path) for an old module path, a submodule of a
+    moved package included; None for a path that did not move."""
+    for moved, (new, removed_in) in MOVED_MODULES.items():
+        if old == moved or old.startswith(moved + "."):
+            return new + old[len(moved):], removed_in
+    return None
+
+
+def _old_names(module: str) -> dict[str, tuple[str, str, str]]:
+    """name → (the old module it was documented in, its new module, the release that removes it) for
+    the names that moved out of ``module`` or out of an old path that is now ``module``."""
+    out: dict[str, tuple[str, str, str]] = {}
+    for old, names in MOVED_NAMES.items():
+        if old == module or (new_path(old) or ("",))[0] == module:
+            out |= {name: (old, target, removed_in) for name, (target, removed_in) in names.items()}
+    return out
+
+
 def forward(module: str) -> Callable[[str], Any]:
-    """The module ``__getattr__`` of ``module``: a moved name (:data:`MOVED_NAMES`) warns and comes
-    from its new place; in a module that moved whole (:data:`MOVED_MODULES`), which warns once on
-    import, every other name comes from its new module; anything else raises ``AttributeError``."""
-    names = MOVED_NAMES.get(module, {})
-    whole = MOVED_MODULES.get(module)
-    if whole is not None:
-        warnings.warn(f"the module {module} moved to {whole[0]}; import from there (the old name goes in {whole[1]})",
-                      DeprecationWarning, stacklevel=3)
+    """The module ``__getattr__`` of ``module``: a name that moved out of it, or out of an old path of
+    it (:data:`MOVED_NAMES`), warns and comes from its new place; anything else raises ``AttributeError``."""
+    names = _old_names(module)
 
     def __getattr__(name: str) -> Any:
         if name in names:
-            target, removed_in = names[name]
-            warnings.warn(f"{module}.{name} moved to {target}.{name}; import it from there (the old name goes in {removed_in})",
+            old, target, removed_in = names[name]
+            warnings.warn(f"{old}.{name} moved to {target}.{name}; import it from there (the old name goes in {removed_in})",
                           DeprecationWarning, stacklevel=2)
             return getattr(importlib.import_module(target), name)
-        if whole is not None:
-            try:
-                return getattr(importlib.import_module(whole[0]), name)
-            except AttributeError:
-                raise AttributeError(f"module {module!r} (now {whole[0]!r}) has no attribute {name!r}") from None
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
 
     return __getattr__
+
+
+class _MovedModules:
+    """The import-system finder and loader of the old paths (:data:`MOVED_MODULES`): importing one
+    warns once and binds the old path to the new module itself, so both names are one object (one
+    module state, never a copy loaded twice)."""
+
+    def find_spec(self, fullname: str, path: Sequence[str] | None = None, target: ModuleType | None = None) -> ModuleSpec | None:
+        return ModuleSpec(fullname, cast("Loader", self)) if new_path(fullname) is not None else None
+
+    def create_module(self, spec: ModuleSpec) -> None:
+        return None  # a placeholder module; exec_module puts the real one in its place
+
+    def exec_module(self, module: ModuleType) -> None:
+        old = module.__name__
+        new, removed_in = new_path(old)  # type: ignore[misc]  # find_spec took only moved paths
+        if old in MOVED_MODULES:  # once, for the path the user named (not for each submodule under it)
+            warnings.warn(f"the module {old} moved to {new}; import from there (the old name goes in {removed_in})",
+                          DeprecationWarning, stacklevel=2)
+        sys.modules[old] = importlib.import_module(new)  # the import system returns what sys.modules holds
+
+
+def install() -> None:
+    """Make the old paths importable (once per process), ahead of the file finders so that an old
+    package's submodule is never found, and loaded a second time, under its old name."""
+    if not any(isinstance(finder, _MovedModules) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _MovedModules())
