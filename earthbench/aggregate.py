@@ -22,7 +22,7 @@ its CSVs alike:
   ``time_per_target_m3_bound_ratio`` (to its lower bound per target m³, which counts whole
   buckets, the fill factor and the travel to the first dump; NaN in stores not rescored since it
   was added) and ``time_per_target_m3_best_ratio`` (to the scenario's best known plan,
-  :mod:`earthbench.best`: over the valid runs of scenarios that have one; NaN without a best-known
+  :mod:`earthbench.publishing.best`: over the valid runs of scenarios that have one; NaN without a best-known
   folder), and over runs that loaded
   something (the others are counted in ``loaded_nothing``) ``time_per_m3``.
 * ``target_share_mean``: the mean over valid runs of the share of the target loaded, capped at 1

@@ -22,13 +22,21 @@ from typing import TYPE_CHECKING, Any, cast
 if TYPE_CHECKING:  # pragma: no cover
     from importlib.abc import Loader  # not at run time: it imports importlib.resources
 
+
+def _into(layer: str, modules: str, removed_in: str) -> dict[str, tuple[str, str]]:
+    """``earthbench.<module>`` → ``earthbench.<layer>.<module>``: modules moved into their layer's folder."""
+    return {f"earthbench.{name}": (f"earthbench.{layer}.{name}", removed_in) for name in modules.split()}
+
+
 #: Old module → (new module, the release that removes the old one) for modules that moved whole;
-#: a package's old path carries its submodules with it (``earthbench.harness.sandbox`` and so on).
+#: a package's old path carries its submodules with it (``earthbench.board.tables`` and so on).
 MOVED_MODULES: dict[str, tuple[str, str]] = {
     "earthbench.replay": ("earthbench.playback", "0.6.0"),  # moved after 0.2.0
     "earthbench.runner": ("earthbench.harness", "0.6.0"),  # moved in 0.2.0
     "earthbench.dask_executor": ("earthbench.harness.dask_executor", "0.6.0"),  # moved in 0.2.0
     "earthbench.referee.replay": ("earthbench.referee.state", "0.6.0"),  # moved after 0.2.0
+    # the folders show the layers (issue 52, docs/DESIGN.md §2)
+    **_into("publishing", "verify merge best board publish compare", "0.6.0"),
 }
 
 
@@ -61,9 +69,10 @@ MOVED_NAMES: dict[str, dict[str, tuple[str, str]]] = {
     # the seal no longer imports the suite: drawing a sealed suite moved there after 0.2.0
     "earthbench.seal": _names("new_key open_sealed", "earthbench.suite", "0.6.0"),
     # publishing was split by job into earthbench.board in 0.3.0
-    "earthbench.publish": _names(_BOARD_TABLES, "earthbench.board.tables", "0.6.0")
-    | _names(_BOARD_PAGE, "earthbench.board.page", "0.6.0") | _names(_BOARD_FIGURES, "earthbench.board.figures", "0.6.0")
-    | _names(_BOARD_SELECTION, "earthbench.board.selection", "0.6.0") | _names("REASONS", "earthbench.aggregate", "0.6.0"),
+    "earthbench.publish": _names(_BOARD_TABLES, "earthbench.publishing.board.tables", "0.6.0")
+    | _names(_BOARD_PAGE, "earthbench.publishing.board.page", "0.6.0")
+    | _names(_BOARD_FIGURES, "earthbench.publishing.board.figures", "0.6.0")
+    | _names(_BOARD_SELECTION, "earthbench.publishing.board.selection", "0.6.0") | _names("REASONS", "earthbench.aggregate", "0.6.0"),
     # what publishing and verify share moved beside the other labels (issue 52)
     "earthbench.verify": _names("latest_spot_checks machine_label", "earthbench.labels", "0.6.0"),
     # running a case (measure, then judge) left the sandbox, which only measures (issue 52)

@@ -78,7 +78,7 @@ def _iqr(row: pd.Series, col: str, spec: str) -> tuple[str, str, float]:
 
 
 def scale_rows(summary: pd.DataFrame) -> list[dict[str, Any]]:
-    """The ``scale`` table in :func:`earthbench.publish.html_table`'s row format (cells of
+    """The ``scale`` table in :func:`earthbench.publishing.publish.html_table`'s row format (cells of
     heading, text and sort key): medians with their interquartile ranges, by target then planner."""
     rows = []
     for _, r in summary.sort_values(["target_volume", "solver"]).iterrows():
@@ -144,7 +144,7 @@ SCALE_CAPTION = "Cost growth: solve time per m³ and time per m³ against the ta
 
 def scale_section(runs: pd.DataFrame, figure_base: str, title: str) -> tuple[list[dict[str, Any]], tuple | None]:
     """For a size ladder: the ``scale`` table's rows and the cost-growth figure job for
-    :class:`earthbench.publish.Renderer`; for any other suite, ``([], None)``."""
+    :class:`earthbench.publishing.publish.Renderer`; for any other suite, ``([], None)``."""
     if not is_size_ladder(runs):
         return [], None
     return scale_rows(scale_summary(runs)), ("cost-growth", figure_base, (runs[SCALE_COLUMNS], title))

@@ -4,7 +4,7 @@ Reads every run of ``stl-tamp`` and ``separate`` on the ``paper-extensive`` maps
 that suite's runs or those of its family in ``standard``) and on
 ``paper-separate-sweep`` (the paper's division sweep, ``scripts/separate_sweep.py``) from one or
 more results databases, draws them with the leaderboard's own figure code
-(:func:`earthbench.board.figures.volume_time_figure`) and prints the numbers behind it: per method the
+(:func:`earthbench.publishing.board.figures.volume_time_figure`) and prints the numbers behind it: per method the
 runs, valid plans, mean loaded volume and makespan, median time per m³, the least-squares slope
 of makespan over volume, and — on the paper-extensive scenarios both planners solved — the
 median ratio of ``separate``'s time per m³ to ``stl-tamp``'s. With ``--placed``, the same ratio
@@ -22,7 +22,7 @@ import json
 import numpy as np
 import pandas as pd
 
-from earthbench.board.figures import volume_time_figure
+from earthbench.publishing.board.figures import volume_time_figure
 from earthbench.aggregate import version_key
 from earthbench.store import load_runs
 

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from earthbench.aggregate import latest_versions
-from earthbench.board.selection import shown_runs
+from earthbench.publishing.board.selection import shown_runs
 from earthbench.labels import config_labels
 from earthbench.store import load_runs
 

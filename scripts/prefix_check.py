@@ -1,6 +1,6 @@
 """Check docs/metrics.md's promise, "no prefix of a plan scores or ranks better than the plan
 itself", on every plan stored in one or more stores (issue 35): each stored plan is judged again
-with every time-ordered prefix (:func:`earthbench.verify.prefix_violations`), against the
+with every time-ordered prefix (:func:`earthbench.publishing.verify.prefix_violations`), against the
 scenario stored beside it and its suite's success threshold.
 
     python scripts/prefix_check.py leaderboard-store.db other.db --jobs 2
@@ -19,7 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from earthbench.plan import Plan
 from earthbench.scoring import DEFAULT_SUCCESS_THRESHOLD
 from earthbench.store import Store, decompress
-from earthbench.verify import prefix_violations
+from earthbench.publishing.verify import prefix_violations
 from earthbench.world import Scenario
 
 

@@ -68,13 +68,29 @@ def test_names_documented_in_0_1_still_import_with_a_warning(old, name, new):
 @pytest.mark.parametrize("old, new, name", [("earthbench.runner", "earthbench.harness", "run_suite"),
                                             ("earthbench.dask_executor", "earthbench.harness.dask_executor", "DaskExecutor"),
                                             ("earthbench.replay", "earthbench.playback", "replay_data"),
-                                            ("earthbench.referee.replay", "earthbench.referee.state", "Replay")])
+                                            ("earthbench.referee.replay", "earthbench.referee.state", "Replay"),
+                                            ("earthbench.publish", "earthbench.publishing.publish", "publish"),
+                                            ("earthbench.compare", "earthbench.publishing.compare", "compare")])
 def test_moved_modules_still_import_with_a_warning(old, new, name):
     code = (f"import warnings; warnings.simplefilter('always')\nfrom {old} import {name} as got\n"
             f"import {new} as m\nassert got is m.{name}")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert f"the module {old} moved to {new}" in res.stderr and "DeprecationWarning" in res.stderr
+
+
+def test_a_moved_package_brings_its_modules_as_the_same_objects():
+    """An old package path's submodules are the new modules themselves, each loaded once (a copy
+    under the old name would hold a second module state), with one warning, for the package."""
+    code = ("import sys, warnings; warnings.simplefilter('always')\n"
+            "import earthbench.board.tables as old\nfrom earthbench.board import page\n"
+            "import earthbench.publishing.board.tables as new, earthbench.publishing.board.page as new_page\n"
+            "assert old is new and page is new_page and sys.modules['earthbench.board.tables'] is new\n"
+            "files = [m.__file__ for m in {id(m): m for m in sys.modules.values()}.values() if getattr(m, '__file__', None)]\n"
+            "assert len(files) == len(set(files)), 'a module loaded twice'")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("DeprecationWarning") == 1 and "the module earthbench.board moved to earthbench.publishing.board" in res.stderr
 
 
 def test_a_plugin_written_against_the_previous_readme_runs(tmp_path):

@@ -171,7 +171,7 @@ def test_a_refused_leaderboard_writes_nothing(tmp_path, capsys):
 
 
 def test_published_csv_cells_never_run_as_formulas(tmp_path):
-    from earthbench.publish import publish
+    from earthbench.publishing.publish import publish
 
     from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 

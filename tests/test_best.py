@@ -1,4 +1,4 @@
-"""Best known plans (earthbench.best, ``earthbench best``): only a re-judged, strictly faster valid plan under
+"""Best known plans (earthbench.publishing.best, ``earthbench best``): only a re-judged, strictly faster valid plan under
 today's rules is kept; the committed set holds; the boards show each planner's ratio to it."""
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from earthbench.best import check, file_candidates, judged_figures, kept, update, with_best_known
+from earthbench.publishing.best import check, file_candidates, judged_figures, kept, update, with_best_known
 from earthbench.cli import main
 from earthbench.plan import Move, Plan
-from earthbench.publish import publish
+from earthbench.publishing.publish import publish
 from earthbench.referee import RULES_VERSION
 from earthbench.suite import load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner

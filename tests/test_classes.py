@@ -111,7 +111,7 @@ def test_the_optimisation_planners_refuse_another_class_at_once(name):
 
 def test_production_is_bank_m3_an_hour_and_the_stamp_names_the_class_s_band():
     from earthbench.aggregate import production
-    from earthbench.board.tables import production_note
+    from earthbench.publishing.board.tables import production_note
 
     assert production(18.0) == pytest.approx(200.0) and production(float("inf")) == 0.0
     note = production_note({"20t"}, "backhoe")

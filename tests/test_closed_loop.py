@@ -18,7 +18,7 @@ from earthbench.referee import judge
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs, stored_steps
 from earthbench.suite import parse_suite
-from earthbench.verify import audit
+from earthbench.publishing.verify import audit
 from helpers import tiny_suite_toml
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "step_planners.py")

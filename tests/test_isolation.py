@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.harness import LocalExecutor, build_cases, cgroups, isolation, run_cases
-from earthbench.board.tables import stamp
+from earthbench.publishing.board.tables import stamp
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from earthbench.cli import main
-from earthbench.compare import CompareError, Selector
+from earthbench.publishing.compare import CompareError, Selector
 from earthbench.labels import config_labels, label
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 

@@ -15,7 +15,7 @@ import json
 import pytest
 
 from chromium import chromium_page, needs_browser
-from earthbench.publish import publish
+from earthbench.publishing.publish import publish
 from helpers.leaderboard import EVIL, fill_store, standard_behaviours, suite_of
 
 pytestmark = needs_browser

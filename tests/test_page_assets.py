@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 from earthbench import assets
-from earthbench.board.page import html_page
+from earthbench.publishing.board.page import html_page
 from earthbench.playback import SCRIPT
 
 

@@ -25,7 +25,7 @@ from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import DEFAULT_SUCCESS_THRESHOLD, evaluate, is_success, run_order, time_per_target
 from earthbench.store import Store, load_runs, suite_members
 from earthbench.suite import load_suite
-from earthbench.verify import prefix_violations
+from earthbench.publishing.verify import prefix_violations
 from earthbench_metrics import lower_bound_time_per_m3
 from helpers.leaderboard import suite_of
 
@@ -190,7 +190,7 @@ def test_a_store_written_under_the_old_rule_reads_under_the_new(wrapper_store, t
     import shutil
     import sqlite3
 
-    from earthbench.verify import audit
+    from earthbench.publishing.verify import audit
 
     old = tmp_path / "old.db"
     shutil.copy(wrapper_store, old)

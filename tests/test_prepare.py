@@ -156,7 +156,7 @@ def test_a_version_4_store_gains_the_preparation_columns(tmp_path):
 
 
 def test_a_board_shows_the_preparation_beside_the_solve_times(tmp_path):
-    from earthbench.publish import publish
+    from earthbench.publishing.publish import publish
 
     _run(tmp_path, ["t-prepares"], seeds="0-0")
     res = publish(tmp_path / "r.db", tmp_path / "lb", figures=False, generated="(fixed)")

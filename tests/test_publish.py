@@ -13,11 +13,11 @@ import pytest
 import earthbench
 
 from earthbench.cli import main
-from earthbench.compare import Selector, compare
-from earthbench.merge import MergeError, merge
-from earthbench.board.selection import seed_list
-from earthbench.board.tables import md_escape
-from earthbench.publish import publish
+from earthbench.publishing.compare import Selector, compare
+from earthbench.publishing.merge import MergeError, merge
+from earthbench.publishing.board.selection import seed_list
+from earthbench.publishing.board.tables import md_escape
+from earthbench.publishing.publish import publish
 from earthbench.store import load_runs
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import matplotlib.colors as mcolors
 import pytest
 
-from earthbench.board.figures import profiles_figure, volume_time_figure
-from earthbench.board.selection import published_runs
+from earthbench.publishing.board.figures import profiles_figure, volume_time_figure
+from earthbench.publishing.board.selection import published_runs
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 

@@ -84,7 +84,7 @@ def test_no_string_escapes_the_data_block(case):
 def test_pick_runs_takes_a_success_and_an_invalid_run_per_planner(tmp_path):
     behaviours = standard_behaviours() + [Behaviour(ref("jumpy"), teleport=4.0)]
     db = fill_store(tmp_path / "r.db", suite_of(2), behaviours)
-    from earthbench.board.selection import published_runs
+    from earthbench.publishing.board.selection import published_runs
 
     with Store(db, create=False) as store:
         runs = published_runs(store)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from earthbench.board.selection import published_runs
-from earthbench.publish import publish
+from earthbench.publishing.board.selection import published_runs
+from earthbench.publishing.publish import publish
 from earthbench.scaling import is_size_ladder, scale_summary
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, suite_of
 

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from earthbench.aggregate import aggregate
 from earthbench.cli import main
 from earthbench.plan import Dump, Plan
-from earthbench.publish import publish
+from earthbench.publishing.publish import publish
 from earthbench.referee import Verdict, judge
 from earthbench.scoring import evaluate, is_success
 from earthbench.world import Task

@@ -25,7 +25,7 @@ from earthbench.errors import EarthbenchError
 from earthbench.generalisation import gap_table
 from earthbench.harness import build_cases, run_case
 from earthbench.identity import variant_name
-from earthbench.merge import MergeError, merge
+from earthbench.publishing.merge import MergeError, merge
 from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import score
 from earthbench.seal import SealError, SealKey, SiteTransform, public_name

@@ -212,7 +212,7 @@ def test_reading_a_published_store_leaves_its_file_as_committed(tmp_path, capsys
     from pathlib import Path
 
     from earthbench.cli import main
-    from earthbench.merge import merge
+    from earthbench.publishing.merge import merge
 
     db = tmp_path / "pile.db"
     shutil.copyfile(Path(__file__).parents[1] / "leaderboard" / "pile" / "pile.db", db)

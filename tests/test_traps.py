@@ -211,7 +211,7 @@ def test_a_local_suite_file_named_like_a_registered_suite_is_refused(tmp_path, c
 
 
 def test_a_new_board_removes_the_figures_of_the_old_one(tmp_path):
-    from earthbench.publish import publish
+    from earthbench.publishing.publish import publish
 
     a = fill_store(tmp_path / "a.db", suite_of(2, name="one"), [Behaviour(ref("greedy"))])
     b = fill_store(tmp_path / "b.db", suite_of(2, name="two"), [Behaviour(ref("greedy"))])

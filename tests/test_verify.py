@@ -18,10 +18,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from earthbench.cli import main
-from earthbench.merge import MergeError, merge
+from earthbench.publishing.merge import MergeError, merge
 from earthbench.store import Store, load_runs
 from earthbench.registry import PLANNERS
-from earthbench.verify import Judgement, audit, differences, rejudge, same
+from earthbench.publishing.verify import Judgement, audit, differences, rejudge, same
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 
@@ -273,7 +273,7 @@ def test_verify_reruns_a_sample_here_and_the_leaderboard_shows_it(tmp_path, caps
     assert main(["verify", str(db), "--sample", "1", "--seed", "3"]) == 0
     out = capsys.readouterr().out
     assert "greedy" in out and "1/1" in out and "solve ratio median" in out and "CPU ratio median" in out and "load here" in out
-    from earthbench.publish import publish
+    from earthbench.publishing.publish import publish
 
     page = publish(db, tmp_path / "board", figures=False)
     md = (page.out / "README.md").read_text()
@@ -285,7 +285,7 @@ def test_verify_reruns_a_sample_here_and_the_leaderboard_shows_it(tmp_path, caps
 
 
 def test_leaderboard_names_the_machine_of_each_planners_solve_times(tmp_path):
-    from earthbench.publish import publish
+    from earthbench.publishing.publish import publish
 
     suite = suite_of(1)
     a = fill_store(tmp_path / "a.db", suite, [Behaviour(ref("greedy"))])

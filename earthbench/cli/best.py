@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from ..best import DEFAULT_DIR
+    from ..publishing.best import DEFAULT_DIR
 
     p = sub.add_parser("best", help="keep and check the best known plan of every scenario of a suite",
                        description=plain(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..best import BestError
+    from ..publishing.best import BestError
     from ..suite import load_suite
 
     if args.action == "check":
@@ -69,7 +69,7 @@ def _store_suites(db: str) -> list[str]:
 
 
 def _update(args: argparse.Namespace, suites: list[Suite]) -> int:
-    from ..best import file_candidates, store_candidates, update
+    from ..publishing.best import file_candidates, store_candidates, update
     from ..store import Store
 
     refused_files = 0
@@ -103,7 +103,7 @@ def _update(args: argparse.Namespace, suites: list[Suite]) -> int:
 
 
 def _check(root: str, suites: list[Suite]) -> int:
-    from ..best import check
+    from ..publishing.best import check
 
     failed = False
     for suite in suites:

@@ -43,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..compare import DEFAULT_METRICS, SUCCESS, CompareError, Selector, compare, format_comparison
+    from ..publishing.compare import DEFAULT_METRICS, SUCCESS, CompareError, Selector, compare, format_comparison
     from ..errors import UnknownNameError
     import pandas as pd
 

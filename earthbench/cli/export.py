@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..merge import export
+    from ..publishing.merge import export
 
     report = export(args.db, args.out, args.suite, args.planner)
     print(f"exported {report.runs} run(s) of {', '.join(args.planner)} on {args.suite} into {args.out}; "

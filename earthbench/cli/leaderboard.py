@@ -60,7 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..publish import publish
+    from ..publishing.publish import publish
     from ..suite import parse_seed_range
 
     from ..store import Store
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _best_dir(given: str | None) -> Path | None:
     """The best-known folder the board reads: the one named, else the committed one when it is here."""
-    from ..best import BestError, DEFAULT_DIR
+    from ..publishing.best import BestError, DEFAULT_DIR
 
     if given == "none":
         return None
@@ -107,7 +107,7 @@ def _checked_keys(db: str, paths: list[str]) -> list[SealKey]:
     its draw there is an error, and nothing is published."""
     from ..seal import SealError, SealKey
     from ..store import Store
-    from ..verify import check_seal
+    from ..publishing.verify import check_seal
 
     keys = [SealKey.read(p) for p in paths]
     if keys:

@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..merge import merge
+    from ..publishing.merge import merge
 
     report = merge(args.out, args.inputs, rescore=args.rescore, as_variant=args.as_variant, skip_duplicates=args.skip_duplicates)
     for line in report.changes[:20]:

@@ -19,7 +19,7 @@ import sys
 from collections import Counter
 
 from ..store import Store, decompress, default_db, stored_steps
-from ..verify import rejudge
+from ..publishing.verify import rejudge
 from ._common import check_filters, plain
 
 

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _suites_and_plans(store, keys, *, rejudge_all: bool) -> bool:
     """The identity check, each key's draw and the re-judging; prints what it finds, returns whether anything failed."""
-    from ..verify import audit, check_seal, identity_problems
+    from ..publishing.verify import audit, check_seal, identity_problems
 
     problems = identity_problems(store)
     print(f"suite names: {len(problems)} problem(s)" if problems else "suite names: every suite version is stored under its own name")
@@ -94,7 +94,7 @@ def _suites_and_plans(store, keys, *, rejudge_all: bool) -> bool:
 
 
 def _spot(store, args: argparse.Namespace) -> bool:
-    from ..verify import spot_check
+    from ..publishing.verify import spot_check
 
     if not args.no_record:
         store.check_writable()

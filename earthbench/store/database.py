@@ -25,7 +25,7 @@ pandas. Tables:
   plugin (its distribution and source commit, or a plugin file's SHA-256), hostname;
   deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
-* ``spot_checks`` — each re-timing of ``earthbench verify --sample`` (:mod:`earthbench.verify`), so a
+* ``spot_checks`` — each re-timing of ``earthbench verify --sample`` (:mod:`earthbench.publishing.verify`), so a
   leaderboard's stamp can say how its solve times held up on another machine.
 
 Every SQL statement of earthbench is in this package (:mod:`earthbench.store`): the rest reads
@@ -92,7 +92,7 @@ def _rules_version() -> int:
 
 class SuiteRecord(Protocol):
     """What :meth:`Store.register_suite` reads of a suite: a loaded :class:`~earthbench.suite.Suite`,
-    or a suite version read back from another store (:mod:`earthbench.merge`)."""
+    or a suite version read back from another store (:mod:`earthbench.publishing.merge`)."""
 
     @property
     def name(self) -> str: ...
@@ -588,7 +588,7 @@ def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
     """(public suite name, its digest, commitment) of a sealed suite version; Nones for a public one.
 
     Reads a loaded :class:`~earthbench.suite.Suite` (its ``sealing`` key) or a stored version
-    (:mod:`earthbench.merge`'s records: ``sealed_from``, ``public_digest``, ``commitment``)."""
+    (:mod:`earthbench.publishing.merge`'s records: ``sealed_from``, ``public_digest``, ``commitment``)."""
     key = getattr(suite, "sealing", None)
     if key is not None:
         return key.suite, key.suite_digest, key.commitment

@@ -22,7 +22,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
-from earthbench.publish import publish
+from earthbench.publishing.publish import publish
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Speed of re-judging on ``earthbench merge`` (goal, issue 23: ≤ 10 ms per run on average for ``standard``).
 
-Two measurements, each per run stored: :func:`earthbench.verify.audit` alone (every plan judged
+Two measurements, each per run stored: :func:`earthbench.publishing.verify.audit` alone (every plan judged
 again against its stored scenario document, every figure compared) and the whole ``merge``
 into a new store (audit, then one transaction per copied run). The committed store is small
 and generated (greedy on 2 × 12 rbf scenarios, built once per session); point
@@ -23,9 +23,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
-from earthbench.merge import merge
+from earthbench.publishing.merge import merge
 from earthbench.store import Store
-from earthbench.verify import audit
+from earthbench.publishing.verify import audit
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from chromium import chromium_page, needs_browser
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
-from earthbench.publish import publish
+from earthbench.publishing.publish import publish
 
 pytestmark = needs_browser
 

@@ -1,8 +1,8 @@
 """What sealing adds to ``earthbench verify`` beyond re-judging (goal, issue 34: ≤ 10 ms per run).
 
-:func:`earthbench.verify.check_seal` is that cost: the commitment recomputed from the revealed
+:func:`earthbench.publishing.verify.check_seal` is that cost: the commitment recomputed from the revealed
 key (every sealed scenario regenerated with the public generators), the store's draw compared
-with it, and the draw's runs gathered for re-judging (which :func:`earthbench.verify.audit` then
+with it, and the draw's runs gathered for re-judging (which :func:`earthbench.publishing.verify.audit` then
 does, as for any store; ``test_bench_merge.py`` times that part).
 
 Two measurements, each reported per run in ``extra_info``:
@@ -36,7 +36,7 @@ from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 from earthbench.seal import SealKey
 from earthbench.store import Store
 from earthbench.suite import load_suite, new_key, open_sealed
-from earthbench.verify import check_seal
+from earthbench.publishing.verify import check_seal
 
 #: Runs a board of every built-in backhoe planner stores for one sealed draw of ``standard``.
 STANDARD_RUNS = 440

@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .errors import EarthbenchError
-from .store import Store
-from .suite import Suite
+from ..errors import EarthbenchError
+from ..store import Store
+from ..suite import Suite
 from .verify import rejudge, same
-from .world import Scenario
+from ..world import Scenario
 
 #: The format tag of a kept file.
 FORMAT = "earthbench-best/1"
@@ -72,7 +72,7 @@ class Outcome:
 
 
 def _rules() -> int:
-    from .referee import RULES_VERSION
+    from ..referee import RULES_VERSION
 
     return RULES_VERSION
 
@@ -268,7 +268,7 @@ def producer_text(producer: dict[str, Any]) -> str:
 
 
 
-# -- on the boards (earthbench.publish) ---------------------------------------------------------
+# -- on the boards (earthbench.publishing.publish) ---------------------------------------------------------
 
 #: The per-run column of the boards: time per target m³ over the scenario's best known one.
 BEST_RATIO = "time_per_target_m3_best_ratio"

@@ -31,14 +31,14 @@ from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
-from . import compat, labels
-from .errors import EarthbenchError, UnknownNameError
-from .records import SpotCheck  # a record the store also reads; importable from here as before
-from .harness.steps import step_metrics
-from .store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
-from .suite import suite_digest
-from .plan import Plan
-from .world import Scenario
+from .. import compat, labels
+from ..errors import EarthbenchError, UnknownNameError
+from ..records import SpotCheck  # a record the store also reads; importable from here as before
+from ..harness.steps import step_metrics
+from ..store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
+from ..suite import suite_digest
+from ..plan import Plan
+from ..world import Scenario
 
 #: Float round-off allowed between a stored figure and the re-judged one.
 REL_TOL = 1e-9
@@ -69,7 +69,7 @@ class Judgement:
 
 def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
     """The core scoring entry point (referee verdict and every metric), called from this one place."""
-    from .scoring import score
+    from ..scoring import score
 
     return score(scenario, plan_json, threshold)
 
@@ -107,8 +107,8 @@ def prefix_violations(scenario: Scenario, plan: Plan, threshold: float) -> tuple
     per target m³, a success the plan lacks, or a better :func:`~earthbench.scoring.run_order`.
     Returns how many valid prefixes were judged and one line per prefix that breaks it (an invalid
     prefix is never ranked, so it cannot rank better; an invalid plan's prefixes are only counted)."""
-    from .referee import judge
-    from .scoring import evaluate, run_order
+    from ..referee import judge
+    from ..scoring import evaluate, run_order
 
     m = evaluate(scenario, plan, judge(scenario, plan), threshold)
     full = run_order(m["success"], m["time_per_target_m3"], m["volume_ratio"])
@@ -167,7 +167,7 @@ def differences(row: Any, judged: Judgement) -> list[str]:
     except ValueError:
         stored = "unreadable"
     if isinstance(stored, dict):
-        from .scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
+        from ..scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
 
         restate(stored)  # a store written under the rule before issue 35 is not a tampered one
     fresh = judged.metrics
@@ -231,7 +231,7 @@ class Audit:
         """One line on runs judged under other rules than this referee's (empty when there are none)."""
         if not self.other_rules:
             return ""
-        from .referee import RULES_VERSION
+        from ..referee import RULES_VERSION
 
         older = ", ".join(f"{n} under rules {v}" for v, n in sorted(self.other_rules.items()))
         return (f"{sum(self.other_rules.values())} run(s) were judged under other rules than this referee's "
@@ -281,7 +281,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
     """Re-check every run of ``store`` (or the given ``runs`` rows); writes nothing. A run stored
     as judged under other rules than this referee's is counted in ``other_rules``, and its
     finding says so when its figures differ."""
-    from .referee import RULES_VERSION as current_rules
+    from ..referee import RULES_VERSION as current_rules
 
     result = Audit(str(store.path))
     _check_suites(store, result)
@@ -341,7 +341,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from .harness.probe import resolve
+    from ..harness.probe import resolve
 
     try:
         ref = resolve(row["planner"], config)
@@ -363,9 +363,9 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from .harness import LocalExecutor, isolation
-    from .records import Case
-    from .harness.environment import environment  # the package attribute is the submodule once it is loaded
+    from ..harness import LocalExecutor, isolation
+    from ..records import Case
+    from ..harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:
         raise VerifyError("--sample must be at least 1")
@@ -435,7 +435,7 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
 
 def suite_versions(store: Store) -> list[Any]:
     """Every suite version ``store`` lists, as :mod:`earthbench.identity` reads it."""
-    from .identity import Version
+    from ..identity import Version
 
     out = []
     for s in store.suite_versions():
@@ -447,7 +447,7 @@ def suite_versions(store: Store) -> list[Any]:
 
 def identity_problems(store: Store) -> list[str]:
     """Every suite version of ``store`` stored under a name that is not its own (:mod:`earthbench.identity`)."""
-    from .identity import problems
+    from ..identity import problems
 
     return problems(suite_versions(store))
 
@@ -469,8 +469,8 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     of the draw is the regenerated one. Re-judging the draw's runs is :func:`audit`'s
     (on ``run_rows``); this is the cost sealing adds to verifying a store.
     """
-    from .seal import SealError
-    from .suite import open_sealed, public_suite
+    from ..seal import SealError
+    from ..suite import open_sealed, public_suite
 
     out = SealCheck(key.name)
     try:

@@ -12,9 +12,9 @@ from typing import Any
 
 import pandas as pd
 
-from .. import assets
-from ..aggregate import RANKING_RULE
-from ..stats import INTERVAL_NOTE
+from ... import assets
+from ...aggregate import RANKING_RULE
+from ...stats import INTERVAL_NOTE
 from .tables import BREAKDOWN_NOTE, FAILURE_COLUMNS, HISTORY_NOTE, UNSEPARABLE, number_text, slug
 
 
@@ -152,7 +152,7 @@ def replay_links(runs: list[dict[str, Any]]) -> str:
 
 def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") -> str:
     """The self-contained page; ``viewer`` is the replay section (:func:`earthbench.playback.viewer_section`)."""
-    from ..playback import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
+    from ...playback import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
 
     e = html.escape
     script = f"\n{_JS}\n{REPLAY_SCRIPT}"  # the content-security-policy hash below is of exactly this text

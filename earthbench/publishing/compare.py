@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .errors import EarthbenchError
-from .stats import (INTERVAL_NOTE, holm, mcnemar_p, median_ci, min_separating_n, min_wilcoxon_p, paired_differences,
+from ..errors import EarthbenchError
+from ..stats import (INTERVAL_NOTE, holm, mcnemar_p, median_ci, min_separating_n, min_wilcoxon_p, paired_differences,
                     separation_note, wilcoxon_p)
 
 #: +1 where higher is better, −1 where lower is better.
@@ -68,7 +68,7 @@ class Selector:
 
     def pick(self, runs: pd.DataFrame, side: str) -> pd.DataFrame:
         """The runs of exactly one (planner, version, config); an error lists the choices otherwise."""
-        from .labels import config_labels
+        from ..labels import config_labels
 
         names = config_labels(runs)
         label = pd.Series([names.get((str(p), str(c)), str(p)) for p, c in zip(runs["planner"], runs["config_hash"])],

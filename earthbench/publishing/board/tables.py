@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..aggregate import RANKING_RULE, RANK_ALPHA, ci_text
-from ..classes import machine_classes
-from ..provenance import build_text
-from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
-from ..store import rules_versions
-from ..labels import machine_label
+from ...aggregate import RANKING_RULE, RANK_ALPHA, ci_text
+from ...classes import machine_classes
+from ...provenance import build_text
+from ...stats import INTERVAL_NOTE, min_separating_n, separation_note
+from ...store import rules_versions
+from ...labels import machine_label
 
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -59,7 +59,7 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
     rows = []
     # the preparation's wall seconds (docs/DESIGN.md §6), in a column of their own when a row has one
     prepared = "prepare_max" in summary and bool(summary["prepare_max"].notna().any())
-    # the ratio to each scenario's best known plan (earthbench.best), in a column when some scenario has one
+    # the ratio to each scenario's best known plan (earthbench.publishing.best), in a column when some scenario has one
     best = "time_per_target_m3_best_ratio_median" in summary and bool(summary["time_per_target_m3_best_ratio_median"].notna().any())
     for _, r in summary.iterrows():
         vr = number_text(r["volume_ratio_mean"]) + ("" if pd.isna(r["volume_ratio_sd"]) else f" ± {number_text(r['volume_ratio_sd'])}")
@@ -232,7 +232,7 @@ def _machine_of(runs: pd.DataFrame) -> pd.Series:
 
 def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_checks: Sequence[Any] = (),
           seeds: str = "") -> Stamp:
-    """The stamp of one table; ``spot_checks`` (:class:`earthbench.verify.SpotCheck`) of its planners are listed;
+    """The stamp of one table; ``spot_checks`` (:class:`earthbench.publishing.verify.SpotCheck`) of its planners are listed;
     ``seeds`` names the seed selection the board was limited to."""
     def uniq(col: str) -> list[str]:
         return sorted({str(v) for v in runs[col].dropna()}) if col in runs else []
@@ -265,7 +265,7 @@ def stamp(runs: pd.DataFrame, suite: str, track: str, generated: str, spot_check
 
 def rules_text(runs: pd.DataFrame) -> str:
     """The version of the referee's rules a table's runs were judged under, and whether it is this earthbench's."""
-    from ..referee import RULES_VERSION
+    from ...referee import RULES_VERSION
 
     versions = rules_versions(runs)
     if not versions:

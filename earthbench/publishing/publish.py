@@ -13,7 +13,7 @@
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
   :func:`earthbench.store.load_runs`;
-* ``best.csv`` — with a folder of best known plans (``best``, :mod:`earthbench.best`): each kept
+* ``best.csv`` — with a folder of best known plans (``best``, :mod:`earthbench.publishing.best`): each kept
   scenario's bracket [target bound, best known time per target m³] and who produced the plan; the
   runs and tables then carry each run's ratio to its scenario's best known time (``× best known``);
 * ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
@@ -39,10 +39,10 @@
   generates; regenerating the suite instead would cost seconds per suite (7 s for
   ``standard``) and fail on a machine without the suite's plugins).
 
-The work is split by job (``earthbench.board``): :mod:`~earthbench.board.selection` (which runs and
-versions a board shows), :mod:`~earthbench.board.tables` (rows, stamps, Markdown and CSV),
-:mod:`~earthbench.board.figures` (the figures and the worker pool that draws them) and
-:mod:`~earthbench.board.page` (the HTML page); :func:`publish` runs them in turn, the figures
+The work is split by job (``earthbench.publishing.board``): :mod:`~earthbench.publishing.board.selection` (which runs and
+versions a board shows), :mod:`~earthbench.publishing.board.tables` (rows, stamps, Markdown and CSV),
+:mod:`~earthbench.publishing.board.figures` (the figures and the worker pool that draws them) and
+:mod:`~earthbench.publishing.board.page` (the HTML page); :func:`publish` runs them in turn, the figures
 first so the workers draw while the tables are made. The names they define are importable from
 here too, as before the split.
 """
@@ -58,18 +58,18 @@ from typing import Any
 
 import pandas as pd
 
-from . import compat
-from .aggregate import SCOPES, aggregate, latest_versions
+from .. import compat
+from ..aggregate import SCOPES, aggregate, latest_versions
 from .best import bracket_lines, bracket_markdown, bracket_table, with_best_known
 from .board.figures import Renderer, figure_jobs
 from .board.page import html_page, replay_runs, run_rows
 from .board.selection import closed_configs, histories, limit_to_seeds, published_runs, shown_runs
 from .board.tables import (mark_mixed_solve_columns, markdown_page, production_note, slug, spreadsheet_safe, stamp, table_sections,
                            write_csv)
-from .generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
-from .labels import latest_spot_checks
-from .scaling import SCALE_CAPTION, scale_section
-from .store import Store, suite_members
+from ..generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
+from ..labels import latest_spot_checks
+from ..scaling import SCALE_CAPTION, scale_section
+from ..store import Store, suite_members
 
 
 @dataclass
@@ -100,10 +100,10 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     ``workers``: processes drawing the figures (default: one per core this process may use);
     ``replays``: how many runs the page's replay viewer embeds (0: none);
     ``all_versions``: rank every stored version, not only each planner's latest;
-    ``best``: the folder of best known plans (:mod:`earthbench.best`): each run's ratio to its
+    ``best``: the folder of best known plans (:mod:`earthbench.publishing.best`): each run's ratio to its
     scenario's best known time per target m³ (a "× best known" column) and ``best.csv`` (the brackets).
     """
-    from .playback import pick_runs, viewer_section
+    from ..playback import pick_runs, viewer_section
 
     out = Path(out)
     generated = generated or datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
@@ -216,6 +216,6 @@ def _remove_stale_figures(fig_dir: Path, files: list[Path]) -> list[Path]:
 
 
 __all__ = ["Published", "publish"]
-#: The names of earthbench.board's modules that were defined here before the split (0.3.0) still
+#: The names of earthbench.publishing.board's modules that were defined here before the split (0.3.0) still
 #: import from here, with a warning (earthbench.compat).
 __getattr__ = compat.forward(__name__)

@@ -11,7 +11,7 @@ written; a new output is not even created) when:
   not know — those rows would be published under the wrong suite;
 * a suite name is a registered suite's but its digest is not (:mod:`earthbench.identity`):
   a different world under a known name (``as_variant`` stores it as ``NAME~variant-D``);
-* :func:`earthbench.verify.audit` finds a run that does not hold: its plan re-judged against
+* :func:`earthbench.publishing.verify.audit` finds a run that does not hold: its plan re-judged against
   its stored scenario document gives other referee figures (unless ``rescore``, which merges
   the re-judged figures instead), it claims a verdict without a plan, its scenario document
   or suite does not reproduce its digest, or its threshold is not its suite's.
@@ -39,10 +39,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from . import identity
-from .errors import StoreError, not_stored
-from .records import Case, CaseResult, PlannerRef
-from .store import LOAD_COLUMNS, Store, decompress, stored_steps
+from .. import identity
+from ..errors import StoreError, not_stored
+from ..records import Case, CaseResult, PlannerRef
+from ..store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 
 

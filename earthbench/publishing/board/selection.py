@@ -11,7 +11,7 @@ from typing import Any
 
 import pandas as pd
 
-from ..store import Store, check_one_rules, load_runs
+from ...store import Store, check_one_rules, load_runs
 
 
 def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) -> pd.DataFrame:
