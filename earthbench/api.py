@@ -47,6 +47,6 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     # scripts and notebooks: run suites, read results
     "earthbench.suite": ("MAX_CELLS", "load_suite"),
     "earthbench.store": ("Store", "load_runs"),
-    "earthbench.harness": ("LocalExecutor", "run_suite"),
-    "earthbench.harness.dask_executor": ("DaskExecutor",),
+    "earthbench.running.harness": ("LocalExecutor", "run_suite"),
+    "earthbench.running.harness.dask_executor": ("DaskExecutor",),
 }

@@ -31,11 +31,12 @@ def _into(layer: str, modules: str, removed_in: str) -> dict[str, tuple[str, str
 #: Old module → (new module, the release that removes the old one) for modules that moved whole;
 #: a package's old path carries its submodules with it (``earthbench.board.tables`` and so on).
 MOVED_MODULES: dict[str, tuple[str, str]] = {
-    "earthbench.replay": ("earthbench.playback", "0.6.0"),  # moved after 0.2.0
-    "earthbench.runner": ("earthbench.harness", "0.6.0"),  # moved in 0.2.0
-    "earthbench.dask_executor": ("earthbench.harness.dask_executor", "0.6.0"),  # moved in 0.2.0
+    "earthbench.replay": ("earthbench.running.playback", "0.6.0"),  # moved after 0.2.0
+    "earthbench.runner": ("earthbench.running.harness", "0.6.0"),  # moved in 0.2.0
+    "earthbench.dask_executor": ("earthbench.running.harness.dask_executor", "0.6.0"),  # moved in 0.2.0
     "earthbench.referee.replay": ("earthbench.referee.state", "0.6.0"),  # moved after 0.2.0
     # the folders show the layers (issue 52, docs/DESIGN.md §2)
+    **_into("running", "harness playback figures scaling", "0.6.0"),
     **_into("publishing", "verify merge best board publish compare", "0.6.0"),
 }
 
@@ -76,7 +77,7 @@ MOVED_NAMES: dict[str, dict[str, tuple[str, str]]] = {
     # what publishing and verify share moved beside the other labels (issue 52)
     "earthbench.verify": _names("latest_spot_checks machine_label", "earthbench.labels", "0.6.0"),
     # running a case (measure, then judge) left the sandbox, which only measures (issue 52)
-    "earthbench.harness.sandbox": _names("run_case", "earthbench.harness.run", "0.6.0"),
+    "earthbench.harness.sandbox": _names("run_case", "earthbench.running.harness.run", "0.6.0"),
 }
 
 

@@ -1,7 +1,7 @@
 """Lazy package exports (PEP 562): a package names its public objects without importing them.
 
 A case's process imports only what its planner needs; the packages that re-export many
-modules' names (``earthbench``, ``earthbench.harness``) load each module on first use
+modules' names (``earthbench``, ``earthbench.running.harness``) load each module on first use
 (docs/DESIGN.md §10, start-up).
 """
 

@@ -3,7 +3,7 @@
 The store keeps them and the harness makes them, so they live below both (docs/DESIGN.md §2):
 the store reads these types and imports nothing of the harness. They are plain frozen
 dataclasses, picklable, so any executor can ship a case to where it runs and its result back.
-``earthbench.harness.cases`` and ``earthbench.harness`` still export them under their old names.
+``earthbench.running.harness.cases`` and ``earthbench.running.harness`` still export them under their old names.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ class PlannerRef:
     def resolve(cls, name: str, overrides: dict[str, Any] | None = None) -> PlannerRef:
         """Look ``name`` up in this process's registry (the built-in planners and those a script
         registered) and check ``overrides`` against its ``Config``. Another distribution's planner or
-        a plugin file is resolved by :func:`earthbench.harness.probe.resolve`, never imported here."""
+        a plugin file is resolved by :func:`earthbench.running.harness.probe.resolve`, never imported here."""
         klass = PLANNERS.get(name)
         overrides = dict(overrides or {})
         probe = object.__new__(klass)  # the base initialiser only: a heavy subclass __init__ runs in the case
@@ -184,7 +184,7 @@ class CaseResult:
     isolation: str = "none"
     #: The most processes the case held at once, from its cgroup (None without one).
     processes: int | None = None
-    #: The machine's load around the case (:func:`earthbench.harness.load.around`): ``load_before``,
+    #: The machine's load around the case (:func:`earthbench.running.harness.load.around`): ``load_before``,
     #: ``load_after``, ``steal_share``; empty where it was not measured (e.g. a merged run of an older store).
     machine_load: dict[str, Any] = field(default_factory=dict)
     #: The wall and CPU seconds of the planner's preparation this case used (None: it has none);

@@ -9,7 +9,7 @@ Unknown names raise :class:`UnknownNameError` with the known names and close mat
 
 Only the earthbench distribution's own entry points are imported into this process
 (docs/DESIGN.md §6 "Plugin code"): another distribution's planners are recorded in ``foreign``
-and read by a fenced probe (:mod:`earthbench.harness.probe`), its terrains and metrics are not
+and read by a fenced probe (:mod:`earthbench.running.harness.probe`), its terrains and metrics are not
 loaded unless ``$EARTHBENCH_TRUST`` names the distribution.
 """
 
@@ -154,7 +154,7 @@ class Registry(Generic[T]):
         dist = distribution_of(ep) or "an unknown distribution"
         if self.kind == "planner":
             return (f"planner {name!r} comes from the distribution {dist}, whose code earthbench imports only inside "
-                    f"a fenced process (earthbench.harness.probe)")
+                    f"a fenced process (earthbench.running.harness.probe)")
         return (f"{self.kind} {name!r} comes from the distribution {dist}, and earthbench loads only its own "
                 f"{self.kind}s in its own process (they run there, unfenced); set {TRUST_ENV}={dist} to trust it")
 

@@ -2,7 +2,7 @@
 target m³ and steps per scenario, for comparing two versions of earthbench side by side.
 
 Seeds 0 and 1 of every family at the suite's smallest target, through
-``earthbench.harness.steps.run_closed_loop`` (the harness's own step loop, without the sandbox)
+``earthbench.running.harness.steps.run_closed_loop`` (the harness's own step loop, without the sandbox)
 and judged by ``earthbench.scoring.score``. To compare with an older earthbench, put its package
 first on the path (the planners stay the installed ones)::
 
@@ -17,7 +17,7 @@ import argparse
 import statistics
 
 import earthbench
-from earthbench.harness.steps import run_closed_loop
+from earthbench.running.harness.steps import run_closed_loop
 from earthbench.registry import PLANNERS
 from earthbench.scoring import score
 from earthbench.suite import load_suite

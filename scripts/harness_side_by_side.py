@@ -22,7 +22,7 @@ from pathlib import Path
 WORKER = r'''
 import dataclasses, sys, time
 from pathlib import Path
-from earthbench.harness import build_cases, run_case
+from earthbench.running.harness import build_cases, run_case
 from earthbench.records import PlannerRef
 from earthbench.registry import load_plugin_file
 from earthbench.suite import load_suite

@@ -6,7 +6,7 @@
 On a loaded machine, two benchmark runs minutes apart differ by more than isolation costs, so
 this alternates isolation on and off within one process (the order swapped every pair) and
 prints the medians and the median of the paired differences. ``case``: one case's wall time
-through :func:`earthbench.harness.run_case` (spawn, start-up, plan, judge), split into start-up,
+through :func:`earthbench.running.harness.run_case` (spawn, start-up, plan, judge), split into start-up,
 solve and the rest. ``step``: (closed-loop run − open-loop run of the same plan) ÷ steps, per
 mode. Exits with status 2 where isolation is not available (it says why).
 """
@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from earthbench.harness import build_cases, isolation, run_case
+from earthbench.running.harness import build_cases, isolation, run_case
 from earthbench.records import PlannerRef
 from earthbench.registry import load_plugin_file
 from earthbench.suite import load_suite

@@ -17,7 +17,7 @@ import sys
 import time
 from collections.abc import Callable
 
-from earthbench.harness.isolation import bwrap_binary, bwrap_args, visible_paths
+from earthbench.running.harness.isolation import bwrap_binary, bwrap_args, visible_paths
 
 CMD = ["/usr/bin/python3", "-c", "pass"]
 
@@ -36,7 +36,7 @@ def main(argv: list[str]) -> int:
     n = int(argv[0]) if argv else 15
     ways: dict[str, Callable[[], object]] = {"bare": lambda: subprocess.run(CMD, check=True)}
     bwrap = bwrap_binary()
-    if bwrap:  # a case's own command line (earthbench.harness.isolation.bwrap_args), without its cgroup
+    if bwrap:  # a case's own command line (earthbench.running.harness.isolation.bwrap_args), without its cgroup
         args = bwrap_args(bwrap, visible_paths(), 64 << 20)
         ways["bubblewrap, a case's namespaces"] = lambda: subprocess.run([*args, *CMD], check=True)
     try:

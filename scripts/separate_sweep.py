@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from earthbench.progress import Progress
-from earthbench.harness import Case, LocalExecutor, PlannerRef, run_cases
+from earthbench.running.harness import Case, LocalExecutor, PlannerRef, run_cases
 from earthbench.store import Store
 from earthbench.suite import load_suite, parse_seed_range
 

@@ -18,12 +18,12 @@ _NLP_CACHE_ENV = "EARTHBENCH_NLP_CACHE"  # earthbench_planners.stl_tamp.nlp_cach
 
 
 #: The test planners' own settings, given to their cases by name (a case gets no other variable
-#: of the harness's environment: earthbench.harness.sandbox.PASSED_VARS).
+#: of the harness's environment: earthbench.running.harness.sandbox.PASSED_VARS).
 _TEST_VARS = ("EARTHBENCH_TEST_PIDDIR,EARTHBENCH_TEST_PIDFILE,EARTHBENCH_TEST_NAP,EARTHBENCH_TEST_RESULT_MB,"
               "EARTHBENCH_TEST_VICTIM")
 
 
-_PROBES_ENV = "EARTHBENCH_PROBES"  # earthbench.harness.probe.ENV
+_PROBES_ENV = "EARTHBENCH_PROBES"  # earthbench.running.harness.probe.ENV
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -58,7 +58,7 @@ def valid_plan() -> Plan:
 @pytest.fixture
 def isolation_off(monkeypatch):
     """Cases of this test run with per-process fences only (``EARTHBENCH_ISOLATION=off``)."""
-    from earthbench.harness import isolation
+    from earthbench.running.harness import isolation
 
     monkeypatch.setenv(isolation.SWITCH, "off")
     isolation.support.cache_clear()

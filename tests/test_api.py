@@ -65,12 +65,14 @@ def test_names_documented_in_0_1_still_import_with_a_warning(old, name, new):
     assert ns["got"] is getattr(importlib.import_module(new), name)
 
 
-@pytest.mark.parametrize("old, new, name", [("earthbench.runner", "earthbench.harness", "run_suite"),
-                                            ("earthbench.dask_executor", "earthbench.harness.dask_executor", "DaskExecutor"),
-                                            ("earthbench.replay", "earthbench.playback", "replay_data"),
+@pytest.mark.parametrize("old, new, name", [("earthbench.runner", "earthbench.running.harness", "run_suite"),
+                                            ("earthbench.dask_executor", "earthbench.running.harness.dask_executor", "DaskExecutor"),
+                                            ("earthbench.replay", "earthbench.running.playback", "replay_data"),
                                             ("earthbench.referee.replay", "earthbench.referee.state", "Replay"),
                                             ("earthbench.publish", "earthbench.publishing.publish", "publish"),
-                                            ("earthbench.compare", "earthbench.publishing.compare", "compare")])
+                                            ("earthbench.compare", "earthbench.publishing.compare", "compare"),
+                                            ("earthbench.harness", "earthbench.running.harness", "run_suite"),
+                                            ("earthbench.playback", "earthbench.running.playback", "replay_data")])
 def test_moved_modules_still_import_with_a_warning(old, new, name):
     code = (f"import warnings; warnings.simplefilter('always')\nfrom {old} import {name} as got\n"
             f"import {new} as m\nassert got is m.{name}")
@@ -148,14 +150,14 @@ def test_version_is_real_and_the_changelog_names_it(capsys):
 
 
 def test_the_package_face_exports_one_list():
-    """``earthbench`` and ``earthbench.harness`` name their exports once, in their
+    """``earthbench`` and ``earthbench.running.harness`` name their exports once, in their
     ``TYPE_CHECKING`` imports (:func:`earthbench.lazy.lazy_getattr`); ``__all__`` is that list."""
-    import earthbench.harness
+    import earthbench.running.harness
 
     assert set(earthbench.__all__) | {"__version__"} == set(PUBLIC["earthbench"])
-    assert {"LocalExecutor", "run_suite"} <= set(earthbench.harness.__all__)
-    for name in earthbench.harness.__all__:
-        assert getattr(earthbench.harness, name) is not None
+    assert {"LocalExecutor", "run_suite"} <= set(earthbench.running.harness.__all__)
+    for name in earthbench.running.harness.__all__:
+        assert getattr(earthbench.running.harness, name) is not None
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         earthbench.nothing  # noqa: B018
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from earthbench.harness import LocalExecutor, build_cases, run_cases
-from earthbench.harness.steps import observation
+from earthbench.running.harness import LocalExecutor, build_cases, run_cases
+from earthbench.running.harness.steps import observation
 from earthbench.referee import judge
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs, stored_steps
@@ -140,7 +140,7 @@ def test_execution_step_by_step_is_judge_of_the_prefix(suite_name, planner):
 
 
 def test_run_closed_loop_in_process_on_the_exact_world_gives_the_open_loop_plan():
-    from earthbench.harness.steps import run_closed_loop
+    from earthbench.running.harness.steps import run_closed_loop
     from earthbench.registry import PLANNERS
 
     sc = parse_suite(suite_toml("inproc")).scenarios[0]
@@ -152,7 +152,7 @@ def test_run_closed_loop_in_process_on_the_exact_world_gives_the_open_loop_plan(
 @pytest.mark.slow
 def test_stl_tamp_in_receding_horizon():
     """Each step solves the remaining areas again and executes one local area (planners/stl_tamp/receding.py)."""
-    from earthbench.harness.steps import run_closed_loop
+    from earthbench.running.harness.steps import run_closed_loop
     from earthbench.registry import PLANNERS
     from earthbench.suite import load_suite
 

@@ -19,9 +19,9 @@ distributed = pytest.importorskip("distributed")
 dask = pytest.importorskip("dask")
 
 from earthbench.cli import main  # noqa: E402
-from earthbench.harness.dask_executor import DaskError, DaskExecutor, host_slot  # noqa: E402
+from earthbench.running.harness.dask_executor import DaskError, DaskExecutor, host_slot  # noqa: E402
 from earthbench.registry import load_plugin_file  # noqa: E402
-from earthbench.harness import LocalExecutor, build_cases, run_cases, run_suite  # noqa: E402
+from earthbench.running.harness import LocalExecutor, build_cases, run_cases, run_suite  # noqa: E402
 from earthbench.store import Store  # noqa: E402
 from earthbench.suite import load_suite, parse_suite  # noqa: E402
 
@@ -108,7 +108,7 @@ def _kill_a_worker_mid_case(pids: dict[str, int], done: threading.Event, killed:
     while not done.is_set():
         for addr, pid in pids.items():
             try:
-                kids = [k for k in psutil.Process(pid).children() if "earthbench.harness.child" in " ".join(k.cmdline())]
+                kids = [k for k in psutil.Process(pid).children() if "earthbench.running.harness.child" in " ".join(k.cmdline())]
             except psutil.Error:
                 continue
             if kids:
@@ -161,7 +161,7 @@ def _case_processes(pids: dict[str, int]) -> list[psutil.Process]:
     out = []
     for pid in pids.values():
         try:
-            out += [k for k in psutil.Process(pid).children() if "earthbench.harness.child" in " ".join(k.cmdline())]
+            out += [k for k in psutil.Process(pid).children() if "earthbench.running.harness.child" in " ".join(k.cmdline())]
         except psutil.Error:
             pass
     return out
@@ -229,7 +229,7 @@ def _isolation_switch(value: str | None):
             os.environ.pop("EARTHBENCH_ISOLATION", None)
         else:
             os.environ["EARTHBENCH_ISOLATION"] = value
-        __import__("earthbench.harness.isolation", fromlist=["support"]).support.cache_clear()
+        __import__("earthbench.running.harness.isolation", fromlist=["support"]).support.cache_clear()
     return switch
 
 

@@ -11,6 +11,8 @@ from pathlib import Path
 
 
 ROOT = Path(__file__).parents[1] / "earthbench"
+#: The harness's modules (the running layer's folder).
+HARNESS = ROOT / "running" / "harness"
 #: The store's modules: every SQL statement of earthbench is in them.
 STORE = sorted((ROOT / "store").glob("*.py"))
 #: Import name of each plugin package → its folder in the repository (pyproject's package-dir).
@@ -32,7 +34,7 @@ def _imports(path: Path) -> list[tuple[str, str, bool]]:
 
 
 def test_no_private_name_crosses_a_harness_module():
-    for path in [*sorted((ROOT / "harness").glob("*.py")), ROOT / "records.py", *STORE, ROOT / "progress.py"]:
+    for path in [*sorted((HARNESS).glob("*.py")), ROOT / "records.py", *STORE, ROOT / "progress.py"]:
         for module, name, _ in _imports(path):
             if module.startswith(".") or module.startswith("earthbench"):
                 assert not name.startswith("_"), f"{path.name} imports the private {module}.{name}"
@@ -43,12 +45,12 @@ def test_the_store_and_progress_line_never_import_the_harness_and_the_harness_im
     run; the records sit below both, so neither a store nor a record reaches up into the harness,
     not even for type checking."""
     for path in (*STORE, ROOT / "progress.py", ROOT / "records.py"):
-        found = {m for m, _ in _all_imports(path, in_functions=True, type_checking=True) if m.startswith("earthbench.harness")}
+        found = {m for m, _ in _all_imports(path, in_functions=True, type_checking=True) if m.startswith("earthbench.running.harness")}
         assert found == set(), f"{path.name} imports {found}"
     up = {"earthbench.store", "earthbench.progress", "earthbench.publishing", "earthbench.cli"}
     found = {m for m, _ in _all_imports(ROOT / "records.py", in_functions=True, type_checking=True) if m.startswith(tuple(up))}
     assert found == set()
-    for path in sorted((ROOT / "harness").glob("*.py")):
+    for path in sorted((HARNESS).glob("*.py")):
         for module, name, guarded in _imports(path):
             if module.lstrip(".") in ("store", "progress", "suite"):
                 assert guarded, f"harness/{path.name} imports {module}.{name} at run time"
@@ -69,18 +71,18 @@ def test_the_sandbox_runs_and_measures_and_judges_nothing():
     neither the referee nor the scoring rule, not even through another module or on first use;
     the judge is a step of its own, and the closed loop's step is the step loop's."""
     graph = _core_graph(in_functions=True)
-    for module in ("earthbench.harness.sandbox", "earthbench.harness.supervisor", "earthbench.harness.isolation"):
+    for module in ("earthbench.running.harness.sandbox", "earthbench.running.harness.supervisor", "earthbench.running.harness.isolation"):
         reached = _reached(graph, module)
-        assert not {m for m in reached if m.startswith(("earthbench.referee", "earthbench.scoring", "earthbench.harness.steps",
-                                                         "earthbench.harness.judge"))}, module
-    assert "earthbench.scoring" in graph["earthbench.harness.judge"]
-    assert "earthbench.referee" in _reached(graph, "earthbench.harness.steps")
+        assert not {m for m in reached if m.startswith(("earthbench.referee", "earthbench.scoring", "earthbench.running.harness.steps",
+                                                         "earthbench.running.harness.judge"))}, module
+    assert "earthbench.scoring" in graph["earthbench.running.harness.judge"]
+    assert "earthbench.referee" in _reached(graph, "earthbench.running.harness.steps")
 
 
 def test_the_harness_names_no_planner():
     """A planner declares what its cases read (``Planner.reads``) as it declares its preparation:
     the harness knows no planner by name."""
-    found = [(p.name, n) for p in sorted((ROOT / "harness").glob("*.py"))
+    found = [(p.name, n) for p in sorted((HARNESS).glob("*.py"))
              for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"stl|nlp", line, re.I)]
     assert found == []
 
@@ -88,13 +90,13 @@ def test_the_harness_names_no_planner():
 def test_run_case_imported_from_its_old_place_still_works_with_a_warning():
     import warnings
 
-    import earthbench.harness
-    from earthbench.harness import sandbox
+    import earthbench.running.harness
+    from earthbench.running.harness import sandbox
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        assert sandbox.run_case is earthbench.harness.run_case
-    assert [w.category for w in caught] == [DeprecationWarning] and "earthbench.harness.run" in str(caught[0].message)
+        assert sandbox.run_case is earthbench.running.harness.run_case
+    assert [w.category for w in caught] == [DeprecationWarning] and "earthbench.running.harness.run" in str(caught[0].message)
 
 
 #: The longest a module of the harness may be (lines).
@@ -102,7 +104,7 @@ HARNESS_MODULE_LINES = 600
 
 
 def test_no_harness_module_runs_over_600_lines():
-    long = {p.name: n for p in sorted((ROOT / "harness").glob("*.py")) if (n := len(p.read_text().splitlines())) > HARNESS_MODULE_LINES}
+    long = {p.name: n for p in sorted((HARNESS).glob("*.py")) if (n := len(p.read_text().splitlines())) > HARNESS_MODULE_LINES}
     assert long == {}
 
 
@@ -170,9 +172,10 @@ def test_the_graph_sees_every_kind_of_import():
     assert ("earthbench.records", "Case") in _all_imports(ROOT / "store" / "database.py", in_functions=False, type_checking=True)
     assert ("earthbench.records", "Case") not in _all_imports(ROOT / "store" / "database.py", in_functions=True)
     graph = _core_graph(in_functions=True)
-    assert {"earthbench.harness.environment", "earthbench.scoring"} <= graph["earthbench.harness.judge"]  # from .x, from ..x
+    judge = graph["earthbench.running.harness.judge"]
+    assert {"earthbench.running.harness.environment", "earthbench.scoring"} <= judge  # from .x, from ...x
     assert "earthbench.scoring" not in _core_graph(in_functions=False)["earthbench.publishing.verify"]  # imported on first use
-    assert {"earthbench.scoring", "earthbench.harness.environment"} <= graph["earthbench.publishing.verify"]
+    assert {"earthbench.scoring", "earthbench.running.harness.environment"} <= graph["earthbench.publishing.verify"]
     assert _cycle({"a": {"b"}, "b": {"a"}}) is not None and _cycle({"a": {"b"}, "b": set()}) is None
 
 
@@ -202,7 +205,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "judge": ("referee",),
     "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "suite_checks",
                 "identity", "calibration", "provenance"),
-    "running": ("harness", "playback", "figures", "scaling"),
+    "running": ("running",),
     "publishing": ("publishing",),
     "commands": ("cli", "__main__"),
 }
@@ -239,8 +242,8 @@ def test_every_core_module_has_one_layer():
 
 def test_the_layer_rule_refuses_an_import_that_runs_back_up():
     store, planners = _RANK["store"], list(LAYERS).index(PLUGIN_LAYERS["planners"])
-    assert _runs_up(store, "earthbench.harness", "Case") == "earthbench.harness"
-    assert _runs_up(store, "earthbench.harness.cases", "Case") == "earthbench.harness.cases"
+    assert _runs_up(store, "earthbench.running.harness", "Case") == "earthbench.running.harness"
+    assert _runs_up(store, "earthbench.running.harness.cases", "Case") == "earthbench.running.harness.cases"
     assert _runs_up(planners, "earthbench.referee", "judge") == "earthbench.referee"
     assert _runs_up(planners, "earthbench.referee", "state") == "earthbench.referee.state"
     assert _runs_up(planners, "earthbench", "judge") == "earthbench.judge"
@@ -379,12 +382,12 @@ def test_no_sql_outside_the_store():
 
 
 def test_the_records_keep_their_old_import_paths():
-    import earthbench.harness
+    import earthbench.running.harness
     import earthbench.records
-    from earthbench.harness import cases
+    from earthbench.running.harness import cases
 
     for name in ("REASONS", "Case", "CaseResult", "PlannerRef"):
-        assert getattr(cases, name) is getattr(earthbench.records, name) is getattr(earthbench.harness, name)
+        assert getattr(cases, name) is getattr(earthbench.records, name) is getattr(earthbench.running.harness, name)
 
 
 # -- functions a reader can hold in mind -----------------------------------------------------------

@@ -325,7 +325,7 @@ class _Rescanner:
 def _rescan(moving: bool):
     import numpy as np
 
-    from earthbench.harness.steps import run_closed_loop
+    from earthbench.running.harness.steps import run_closed_loop
     from earthbench.suite import parse_suite
 
     truth = parse_suite(RESCAN).scenarios[0]
@@ -363,7 +363,7 @@ def test_scans_from_two_stations_are_two_scans_and_each_costs_the_drive_and_the_
 def test_a_step_that_starts_before_the_scan_ends_is_refused():
     """A planner that ignores the sweep (its next actions start as the last ones end) is told so."""
     from earthbench.errors import PlanFormatError
-    from earthbench.harness.steps import run_closed_loop
+    from earthbench.running.harness.steps import run_closed_loop
     from earthbench.plan import Move, Plan
     from earthbench.suite import parse_suite
 

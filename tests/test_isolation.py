@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from earthbench.harness import LocalExecutor, build_cases, cgroups, isolation, run_cases
+from earthbench.running.harness import LocalExecutor, build_cases, cgroups, isolation, run_cases
 from earthbench.publishing.board.tables import stamp
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
@@ -247,7 +247,7 @@ UNPRIVILEGED = r'''
 import json, sys
 sys.path.insert(0, sys.argv[1])
 from helpers import tiny_suite_toml
-from earthbench.harness import build_cases, isolation, run_case
+from earthbench.running.harness import build_cases, isolation, run_case
 from earthbench.registry import load_plugin_file
 from earthbench.suite import parse_suite
 load_plugin_file(sys.argv[2])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from earthbench import judge
-from earthbench.harness.steps import run_closed_loop
+from earthbench.running.harness.steps import run_closed_loop
 from earthbench.scoring import evaluate
 from earthbench.sensing import observe
 from earthbench.soil import draw

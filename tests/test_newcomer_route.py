@@ -32,7 +32,7 @@ pytestmark = pytest.mark.slow
 SCRIPT = '''
 import earthbench
 from earthbench import Plan, Planner
-from earthbench.harness import run_suite
+from earthbench.running.harness import run_suite
 from earthbench.store import Store
 from earthbench.suite import load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner

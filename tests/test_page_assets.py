@@ -14,7 +14,7 @@ import pytest
 
 from earthbench import assets
 from earthbench.publishing.board.page import html_page
-from earthbench.playback import SCRIPT
+from earthbench.running.playback import SCRIPT
 
 
 def _page() -> str:

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from earthbench.errors import PluginError
-from earthbench.harness import build_cases, isolation, run_case
-from earthbench.harness.visible import check_shared, shared_folders
+from earthbench.running.harness import build_cases, isolation, run_case
+from earthbench.running.harness.visible import check_shared, shared_folders
 from earthbench.planner import SharedFolder
 from earthbench.suite import parse_suite
 

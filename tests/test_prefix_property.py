@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from earthbench.aggregate import aggregate
 from earthbench.cli import main
-from earthbench.harness.environment import environment
+from earthbench.running.harness.environment import environment
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS, load_plugin_file
 from earthbench.scoring import DEFAULT_SUCCESS_THRESHOLD, evaluate, is_success, run_order, time_per_target
@@ -134,7 +134,7 @@ def test_no_prefix_of_the_optimising_planners_ranks_better(planner):
 @pytest.fixture(scope="module")
 def wrapper_store(tmp_path_factory):
     """Greedy and the truncation wrapper on 10 scenarios, scored by the one rule and stored through the store's API."""
-    from earthbench.harness import Case, CaseResult, PlannerRef
+    from earthbench.running.harness import Case, CaseResult, PlannerRef
     from earthbench.scoring import score
 
     load_plugin_file(PLUGIN)

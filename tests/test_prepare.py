@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from earthbench.cli import main
-from earthbench.harness import LocalExecutor, build_cases, run_cases
+from earthbench.running.harness import LocalExecutor, build_cases, run_cases
 from earthbench.records import PlannerRef
-from earthbench.harness.prepare import PrepareError, ensure, find, prepare_key
+from earthbench.running.harness.prepare import PrepareError, ensure, find, prepare_key
 from earthbench.registry import load_plugin_file
 from earthbench.store import SCHEMA_VERSION, Store, load_runs
 from earthbench.suite import parse_suite

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from earthbench.cli.preparing import PrepareDisplay, duration, status_line
-from earthbench.harness import build_cases, run_case
-from earthbench.harness.prepare import PrepareError, PrepareStatus, ensure, estimate, forget, last_recorded
-from earthbench.harness.protocol import PROGRESS_BURST, PROGRESS_RATE
+from earthbench.running.harness import build_cases, run_case
+from earthbench.running.harness.prepare import PrepareError, PrepareStatus, ensure, estimate, forget, last_recorded
+from earthbench.running.harness.protocol import PROGRESS_BURST, PROGRESS_RATE
 from earthbench.planner import PrepareProgress
 from earthbench.records import PlannerRef
 from earthbench.suite import parse_suite

@@ -24,8 +24,8 @@ import pytest
 import earthbench.scoring
 from earthbench.cli import main
 from earthbench.errors import PluginError
-from earthbench.harness import probe
-from earthbench.harness.prepare import prepare_key
+from earthbench.running.harness import probe
+from earthbench.running.harness.prepare import prepare_key
 from earthbench.records import PlannerRef
 from earthbench.registry import plugin_module_name
 
@@ -257,7 +257,7 @@ def test_a_probe_that_dies_is_a_clear_error_and_imports_nothing_here(caches, cap
 
 
 def test_a_given_plugin_file_that_fails_stops_a_suite_of_every_planner(caches):
-    from earthbench.harness import build_cases
+    from earthbench.running.harness import build_cases
     from earthbench.suite import load_suite
 
     plugin = caches / "broken.py"

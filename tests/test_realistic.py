@@ -392,7 +392,7 @@ def test_a_coarser_scan_averages_blocks_and_without_sensing_the_terrain_is_exact
 # -- the harness hands the planner the observation -------------------------------------------------
 
 def test_the_case_process_gets_only_the_observation(tmp_path):
-    from earthbench.harness import build_cases, run_case
+    from earthbench.running.harness import build_cases, run_case
     from earthbench.registry import load_plugin_file
 
     load_plugin_file(PLUGIN)

@@ -42,7 +42,7 @@ def test_a_broken_plugin_is_reported_and_does_not_hide_the_others(monkeypatch):
 
 
 def test_another_distributions_entry_points_are_never_imported_here(monkeypatch):
-    """Its planners are probed in a fence (earthbench.harness.probe); its terrains and metrics are
+    """Its planners are probed in a fence (earthbench.running.harness.probe); its terrains and metrics are
     loaded only when $EARTHBENCH_TRUST names it (docs/DESIGN.md §6 "Plugin code")."""
     eps = [EntryPoint("theirs", "earthbench_no_such_module:Thing", "earthbench.metrics")]
     monkeypatch.setattr(registry, "entry_points", lambda group: eps)
@@ -123,12 +123,12 @@ def test_bad_plugin_files_get_clear_errors(tmp_path, text, words):
 
 def test_the_harness_and_a_case_process_import_a_plugin_file_under_one_name(tmp_path, forget):
     """``--plugin FILE.py`` is imported in the harness (:func:`load_plugin_file`) and again in each
-    case's process (:func:`earthbench.harness.child.load_planner_class`): one module name both
+    case's process (:func:`earthbench.running.harness.child.load_planner_class`): one module name both
     times, the same in another process, and two files of one name in two folders never share it."""
     import subprocess
     import sys
 
-    from earthbench.harness.child import load_planner_class
+    from earthbench.running.harness.child import load_planner_class
 
     body = ("from earthbench import Plan, Planner\n\n"
             "class Same(Planner):\n    name = 'same-name-{n}'\n    def plan(self, scenario):\n        return Plan(actions=())\n")

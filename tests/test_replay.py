@@ -12,7 +12,7 @@ import pytest
 
 from earthbench.plan import Plan
 from earthbench.referee import judge
-from earthbench.playback import QUANTUM, pick_runs, replay, replay_data, viewer_html
+from earthbench.running.playback import QUANTUM, pick_runs, replay, replay_data, viewer_html
 from earthbench.store import Store
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 from earthbench_planners.greedy.backhoe import GreedyPlanner

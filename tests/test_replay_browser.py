@@ -16,7 +16,7 @@ import pytest
 from chromium import chromium_page, needs_browser
 from earthbench.plan import Plan
 from earthbench.publishing.publish import publish
-from earthbench.playback import replay
+from earthbench.running.playback import replay
 from earthbench.store import Store
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 

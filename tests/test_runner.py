@@ -10,7 +10,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from earthbench.harness import LocalExecutor, build_cases, make_slots, run_case, run_cases
+from earthbench.running.harness import LocalExecutor, build_cases, make_slots, run_case, run_cases
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
 
@@ -157,7 +157,7 @@ def test_progress_line_counts_reasons_and_gives_an_eta():
     import io
 
     from earthbench.progress import Progress
-    from earthbench.harness import CaseResult
+    from earthbench.running.harness import CaseResult
 
     (case,), _ = build_cases(tiny_suite(), ["greedy"])
     out = io.StringIO()
@@ -174,7 +174,7 @@ def test_progress_line_counts_reasons_and_gives_an_eta():
 def test_concurrent_cases_in_one_process_get_disjoint_slots():
     import threading
 
-    from earthbench.harness import SlotPool
+    from earthbench.running.harness import SlotPool
 
     pool = SlotPool([(0, 1), (2, 3)])
     held, now, clashes, lock = [], set(), [], threading.Lock()

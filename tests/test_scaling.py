@@ -7,7 +7,7 @@ import pytest
 
 from earthbench.publishing.board.selection import published_runs
 from earthbench.publishing.publish import publish
-from earthbench.scaling import is_size_ladder, scale_summary
+from earthbench.running.scaling import is_size_ladder, scale_summary
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, suite_of
 
 

@@ -23,7 +23,7 @@ from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 from earthbench.cli import main
 from earthbench.errors import EarthbenchError
 from earthbench.generalisation import gap_table
-from earthbench.harness import build_cases, run_case
+from earthbench.running.harness import build_cases, run_case
 from earthbench.identity import variant_name
 from earthbench.publishing.merge import MergeError, merge
 from earthbench.registry import PLANNERS, load_plugin_file

@@ -8,7 +8,7 @@ import matplotlib.colors as mcolors
 import pytest
 
 from earthbench.cli import main
-from earthbench.figures import terrain_before_after, view_box
+from earthbench.running.figures import terrain_before_after, view_box
 from earthbench.plan import Plan
 from earthbench.referee import judge
 from earthbench_planners.greedy.backhoe import GreedyPlanner

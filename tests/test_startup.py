@@ -32,11 +32,11 @@ def test_importing_a_planner_loads_no_heavy_library(name, target):
 def test_a_case_process_loads_its_planner_without_the_registry_or_the_other_track(name, target):
     """The case bootstrap imports the planner's module only: not the entry-point machinery
     (importlib.metadata, ~0.1 s) and, for a backhoe planner, not the loader's rules (and back)."""
-    code = ("import json, sys; from earthbench.harness.child import load_planner_class; "
+    code = ("import json, sys; from earthbench.running.harness.child import load_planner_class; "
             f"load_planner_class({target!r}, {name!r})(); print(json.dumps(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(json.loads(out.stdout))
-    assert not loaded & {"importlib.metadata", "earthbench.registry", "earthbench.store", "earthbench.harness.sandbox"}
+    assert not loaded & {"importlib.metadata", "earthbench.registry", "earthbench.store", "earthbench.running.harness.sandbox"}
     other = "earthbench.referee.loader" if "loader" not in name else "earthbench.referee.backhoe"
     assert other not in loaded
 

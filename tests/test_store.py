@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 
 from earthbench.errors import StoreError
-from earthbench.harness import Case, CaseResult, PlannerRef
+from earthbench.running.harness import Case, CaseResult, PlannerRef
 from earthbench.store import MIGRATIONS, SCHEMA_VERSION, Store, load_runs
 from earthbench.suite import parse_suite
 

@@ -110,7 +110,7 @@ def test_seed_ranges():
 
 def test_quick_runs_every_builtin_planner_of_its_track():
     from earthbench.registry import PLANNERS
-    from earthbench.harness import build_cases
+    from earthbench.running.harness import build_cases
 
     quick = load_suite("quick")
     cases, _ = build_cases(quick)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.cli import COMMANDS, main
-from earthbench.harness import Case, PlannerRef, run_case
+from earthbench.running.harness import Case, PlannerRef, run_case
 from earthbench.store import load_runs
 from earthbench.suite import load_suite
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCRIPT_HEAD = '''
 import earthbench
 from earthbench import Plan, Planner
-from earthbench.harness import run_suite
+from earthbench.running.harness import run_suite
 from earthbench.store import Store
 from earthbench.suite import load_suite
 

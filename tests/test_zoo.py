@@ -12,7 +12,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from earthbench.harness import LocalExecutor, build_cases, run_cases
+from earthbench.running.harness import LocalExecutor, build_cases, run_cases
 from earthbench.registry import load_plugin_file
 from earthbench.store import Store, load_runs
 from earthbench.suite import parse_suite
@@ -117,7 +117,7 @@ def test_case_folders_of_a_killed_harness_are_cleared_by_the_next(tmp_path):
     mine.mkdir()
     script = (
         "import sys; sys.path.insert(0, sys.argv[1]); from helpers import case_processes, tiny_suite_toml\n"
-        "from earthbench.harness import build_cases, run_case\n"
+        "from earthbench.running.harness import build_cases, run_case\n"
         "from earthbench.registry import load_plugin_file\n"
         "from earthbench.suite import parse_suite\n"
         "load_plugin_file(sys.argv[2])\n"

@@ -1,7 +1,7 @@
 """The leaderboard page's own code as files: its style sheets and scripts, shipped as package data.
 
 ``page.css`` and ``page.js`` style the tables and sort and filter them (:mod:`earthbench.publishing.publish`);
-``replay.css`` and ``replay.js`` are the replay viewer's (:mod:`earthbench.playback`). Files rather
+``replay.css`` and ``replay.js`` are the replay viewer's (:mod:`earthbench.running.playback`). Files rather
 than Python strings, so an editor and a linter read them as CSS and JavaScript; the page inlines
 them and allows its one script by the SHA-256 of exactly the text read here.
 """

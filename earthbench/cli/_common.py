@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from ..errors import EarthbenchError, UnknownNameError, not_stored, printable
-from ..harness.probe import PlannerInfo, info_of_class, use_plugin_files
+from ..running.harness.probe import PlannerInfo, info_of_class, use_plugin_files
 from ..planner import Planner
 from ..registry import TERRAINS
 from ..world import Scenario
@@ -86,7 +86,7 @@ def check_params(name: str, gen: Any, params: dict[str, Any]) -> None:
 
 def parse_config(items: list[str], planner: PlannerInfo | type[Planner]) -> dict[str, Any]:
     """``--config KEY=VALUE`` items as overrides of the planner's ``Config``: known fields only, values of
-    the field's type (read from the planner's description, :mod:`earthbench.harness.probe`: no plugin code runs)."""
+    the field's type (read from the planner's description, :mod:`earthbench.running.harness.probe`: no plugin code runs)."""
     if isinstance(planner, type):
         planner = info_of_class(planner.name, planner)
     hints = planner.hints()

@@ -6,7 +6,7 @@ import argparse
 import inspect
 import json
 
-from ..harness.probe import PlannerInfo, catalogue
+from ..running.harness.probe import PlannerInfo, catalogue
 from ..registry import METRICS, PLANNERS, TERRAINS, Registry
 from ._common import add_plugin_arg, load_plugins
 

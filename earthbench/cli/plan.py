@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from ..harness.probe import info, resolve
-from ..harness.steps import run_closed_loop
+from ..running.harness.probe import info, resolve
+from ..running.harness.steps import run_closed_loop
 from ..plan import Plan
 from ..registry import PLANNERS
 from ..sensing import observe
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     planner = cls(**overrides)
     if cls.prepares():  # its preparation on this machine, if there is one (never run here: `earthbench prepare`)
         from ..records import PlannerRef
-        from ..harness.prepare import find
+        from ..running.harness.prepare import find
 
         found = find(PlannerRef.resolve(args.planner, overrides))
         planner.prepared = Path(found.path) if found is not None else None
@@ -69,8 +69,8 @@ def _fenced(args: argparse.Namespace) -> int:
     """A plugin's planner runs as a case does (its fences and the scenario's budget), its preparation found
     on this machine if there is one; the plan it returns is written as it is (invalid ones too)."""
     from ..errors import EarthbenchError
-    from ..harness.prepare import find
-    from ..harness.run import run_case
+    from ..running.harness.prepare import find
+    from ..running.harness.run import run_case
     from ..records import Case
 
     ref = resolve(args.planner, parse_config(args.config, info(args.planner)))

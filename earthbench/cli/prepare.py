@@ -38,8 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     load_plugins(args)
-    from ..harness.prepare import PrepareError, ensure, forget, prepare_key
-    from ..harness.probe import info, resolve
+    from ..running.harness.prepare import PrepareError, ensure, forget, prepare_key
+    from ..running.harness.probe import info, resolve
     from .preparing import PrepareDisplay
 
     overrides = parse_config(args.config, info(args.planner)) if args.config else {}

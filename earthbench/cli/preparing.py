@@ -11,7 +11,7 @@ import time
 from typing import TextIO
 
 from ..errors import printable
-from ..harness.prepare import PrepareStatus
+from ..running.harness.prepare import PrepareStatus
 
 #: Seconds between two progress lines in a log (not a terminal).
 LINE_EVERY_S = 10.0
@@ -38,7 +38,7 @@ def status_line(s: PrepareStatus) -> str:
 
 
 class PrepareDisplay:
-    """The ``log`` and ``on_progress`` of :func:`earthbench.harness.prepare.ensure` for a terminal or a log."""
+    """The ``log`` and ``on_progress`` of :func:`earthbench.running.harness.prepare.ensure` for a terminal or a log."""
 
     def __init__(self, stream: TextIO | None = None, live: bool | None = None):
         self.stream = stream or sys.stderr

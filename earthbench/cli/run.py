@@ -15,8 +15,8 @@ import sys
 from typing import Any
 
 from ..errors import EarthbenchError, SuiteError
-from ..harness import REASONS, LocalExecutor, build_cases, run_cases
-from ..harness.orchestrate import check_code
+from ..running.harness import REASONS, LocalExecutor, build_cases, run_cases
+from ..running.harness.orchestrate import check_code
 from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
 from ..suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     if args.config:
         if not args.planner:
             raise EarthbenchError("--config needs --planner NAME: the settings are checked against that planner's Config")
-        from ..harness.probe import info
+        from ..running.harness.probe import info
 
         for name in dict.fromkeys(args.planner):  # the command line's settings over the suite file's
             suite.config[name] = {**suite.config.get(name, {}), **parse_config(args.config, info(name))}
@@ -247,9 +247,9 @@ def any_stored(store: Store, cases: list[Any], *, succeeded: bool) -> bool:
 
 
 def make_executor(args: argparse.Namespace, suite: Any) -> Any:
-    """The local executor, or a :class:`~earthbench.harness.dask_executor.DaskExecutor` for ``--executor dask``."""
+    """The local executor, or a :class:`~earthbench.running.harness.dask_executor.DaskExecutor` for ``--executor dask``."""
     if (args.executor or ("dask" if args.scheduler else "local")) == "dask":
-        from ..harness.dask_executor import DaskExecutor
+        from ..running.harness.dask_executor import DaskExecutor
         from ..errors import EarthbenchError
 
         try:

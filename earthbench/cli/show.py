@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..figures import animate, animation_writer, terrain_before_after
+    from ..running.figures import animate, animation_writer, terrain_before_after
 
     for out in (args.out, args.animate):  # every output checked before any work
         if out and not Path(out).resolve().parent.is_dir():

@@ -24,7 +24,7 @@
   content-security policy hash, so no other script can run), tables that sort on a click,
   filter by family, planner and version (``data-*`` attributes of each row, :data:`FILTERS`)
   and wrap their headings to fit the window, links to the CSVs, the figures as ``data:`` URIs
-  and the replay viewer of :mod:`earthbench.playback`; no network resource. Every string from
+  and the replay viewer of :mod:`earthbench.running.playback`; no network resource. Every string from
   the store (and so from a plugin) is escaped with :func:`html.escape`;
 * ``figures/`` (PNG and SVG, matplotlib) per suite and track: ``*-volume-time`` (loaded volume
   against the plan's total execution time, one colour per planner, as the STL-TAMP paper's
@@ -68,7 +68,7 @@ from .board.tables import (mark_mixed_solve_columns, markdown_page, production_n
                            write_csv)
 from ..generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
 from ..labels import latest_spot_checks
-from ..scaling import SCALE_CAPTION, scale_section
+from ..running.scaling import SCALE_CAPTION, scale_section
 from ..store import Store, suite_members
 
 
@@ -103,7 +103,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
     ``best``: the folder of best known plans (:mod:`earthbench.publishing.best`): each run's ratio to its
     scenario's best known time per target m³ (a "× best known" column) and ``best.csv`` (the brackets).
     """
-    from ..playback import pick_runs, viewer_section
+    from ..running.playback import pick_runs, viewer_section
 
     out = Path(out)
     generated = generated or datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")

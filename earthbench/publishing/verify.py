@@ -34,7 +34,7 @@ from typing import Any
 from .. import compat, labels
 from ..errors import EarthbenchError, UnknownNameError
 from ..records import SpotCheck  # a record the store also reads; importable from here as before
-from ..harness.steps import step_metrics
+from ..running.harness.steps import step_metrics
 from ..store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
 from ..suite import suite_digest
 from ..plan import Plan
@@ -341,7 +341,7 @@ def audit(store: Store, rows: Sequence[Any] | None = None) -> Audit:
 
 def _ref_for(row: Any, config: dict[str, Any]):
     """The installed planner matching a stored run's name, version and configuration (or a clear error)."""
-    from ..harness.probe import resolve
+    from ..running.harness.probe import resolve
 
     try:
         ref = resolve(row["planner"], config)
@@ -363,9 +363,9 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     Every sampled planner must be installed at the stored version and configuration; the
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
-    from ..harness import LocalExecutor, isolation
+    from ..running.harness import LocalExecutor, isolation
     from ..records import Case
-    from ..harness.environment import environment  # the package attribute is the submodule once it is loaded
+    from ..running.harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:
         raise VerifyError("--sample must be at least 1")

@@ -74,7 +74,7 @@ def default_db() -> str:
 
 
 #: Metrics kept as real columns of ``runs`` (all metrics are also in the ``metrics`` JSON).
-#: The machine's load around a case (:mod:`earthbench.harness.load`), columns of ``runs`` since version 3.
+#: The machine's load around a case (:mod:`earthbench.running.harness.load`), columns of ``runs`` since version 3.
 LOAD_COLUMNS = ("load_before", "load_after", "steal_share")
 
 METRIC_COLUMNS = (

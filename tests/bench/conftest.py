@@ -27,7 +27,7 @@ def compiled_bytecode() -> None:
 def isolation(request, monkeypatch) -> Iterator[str]:
     """Each bench twice in one run, side by side: cases in their namespaces and cgroup ("on",
     skipped where the kernel does not allow it) and with per-process fences only ("off")."""
-    from earthbench.harness import isolation as iso
+    from earthbench.running.harness import isolation as iso
 
     if request.param == "off":
         monkeypatch.setenv(iso.SWITCH, "off")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from earthbench.harness import build_cases, run_case
+from earthbench.running.harness import build_cases, run_case
 from earthbench.records import PlannerRef
 from earthbench.registry import load_plugin_file
 from earthbench.suite import load_suite

@@ -16,7 +16,7 @@ from __future__ import annotations
 import pytest
 
 from earthbench.records import PlannerRef
-from earthbench.harness.prepare import find, forget, run
+from earthbench.running.harness.prepare import find, forget, run
 from earthbench.world import Budget
 from earthbench_planners.stl_tamp import model
 from earthbench_planners.stl_tamp.hierarchy import site_box

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.registry import load_plugin_file
-from earthbench.harness import build_cases, run_case
+from earthbench.running.harness import build_cases, run_case
 from earthbench.store import Store
 from earthbench.suite import load_suite
 

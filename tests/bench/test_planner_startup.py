@@ -23,7 +23,7 @@ BASELINES = [("interpreter", "pass"), ("earthbench core", "import earthbench")]
 
 def _code(target: str) -> str:
     """What a case's process runs before it says it is ready: the bootstrap loads the planner's class, which is made."""
-    return f"from earthbench.harness.child import load_planner_class; load_planner_class({target!r}, 'x')()"
+    return f"from earthbench.running.harness.child import load_planner_class; load_planner_class({target!r}, 'x')()"
 
 
 pytestmark = pytest.mark.usefixtures("compiled_bytecode")

@@ -109,7 +109,7 @@ def case_processes() -> list[int]:
     (inside a sandbox too: its processes are ours to see, not the other way round)."""
     import psutil
 
-    from earthbench.harness.sandbox import CASE_TAG, TAG_PREFIX
+    from earthbench.running.harness.sandbox import CASE_TAG, TAG_PREFIX
 
     mine = TAG_PREFIX
     out = []

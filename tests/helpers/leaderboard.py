@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from earthbench.plan import Plan
-from earthbench.harness import Case, CaseResult, PlannerRef
+from earthbench.running.harness import Case, CaseResult, PlannerRef
 # From its module: once any harness module has imported ``.environment``, the package attribute
 # ``environment`` is that submodule, not the function of the same name.
-from earthbench.harness.environment import environment
+from earthbench.running.harness.environment import environment
 from earthbench.scoring import score
 from earthbench.store import Store
 from earthbench.suite import Suite, parse_suite, load_suite

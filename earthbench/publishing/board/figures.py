@@ -16,7 +16,7 @@ import pandas as pd
 from ...aggregate import PRIMARY
 from ...plotting import mpl_text, planner_colours, pyplot
 from ...profiles import cost_matrix, profile
-from ...scaling import cost_growth_figure
+from ...running.scaling import cost_growth_figure
 from ...store import Store
 from .selection import sample_runs
 from .tables import slug
@@ -145,8 +145,8 @@ def history_figure(rows: pd.DataFrame, title: str):
 
 
 def terrain_figure(scenario_json: str, plan_json: str, title: str):
-    """Judge a stored plan again on its scenario and draw :func:`earthbench.figures.terrain_before_after`."""
-    from ...figures import terrain_before_after
+    """Judge a stored plan again on its scenario and draw :func:`earthbench.running.figures.terrain_before_after`."""
+    from ...running.figures import terrain_before_after
     from ...plan import Plan
     from ...referee import judge
     from ...world import Scenario

@@ -151,8 +151,8 @@ def replay_links(runs: list[dict[str, Any]]) -> str:
 
 
 def html_page(sections: list[dict[str, Any]], generated: str, viewer: str = "") -> str:
-    """The self-contained page; ``viewer`` is the replay section (:func:`earthbench.playback.viewer_section`)."""
-    from ...playback import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
+    """The self-contained page; ``viewer`` is the replay section (:func:`earthbench.running.playback.viewer_section`)."""
+    from ...running.playback import CSS as REPLAY_CSS, SCRIPT as REPLAY_SCRIPT
 
     e = html.escape
     script = f"\n{_JS}\n{REPLAY_SCRIPT}"  # the content-security-policy hash below is of exactly this text

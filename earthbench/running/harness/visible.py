@@ -19,8 +19,8 @@ import sys
 from collections.abc import Iterable, Sequence
 from importlib import metadata
 
-from ..planner import SharedFolder
-from ..records import PlannerRef
+from ...planner import SharedFolder
+from ...records import PlannerRef
 
 #: The most folders a planner may declare it reads.
 MAX_SHARED = 8

@@ -32,11 +32,11 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from ..errors import PluginError, UnknownNameError
-from ..planner import SharedFolder
-from ..registry import PLANNERS, class_digest, distribution_of, file_digest
-from ..records import PlannerRef
-from ..world import TRACKS, Budget, canonical_json
+from ...errors import PluginError, UnknownNameError
+from ...planner import SharedFolder
+from ...registry import PLANNERS, class_digest, distribution_of, file_digest
+from ...records import PlannerRef
+from ...world import TRACKS, Budget, canonical_json
 from .describe import Setting, overrides_key, settings_of
 from .environment import cache_folder
 from .visible import MAX_SHARED, check_shared

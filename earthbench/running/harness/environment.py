@@ -15,7 +15,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from .. import provenance
+from ... import provenance
 
 
 @functools.lru_cache(maxsize=1)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .plotting import mpl_text, planner_colours, pyplot
+from ..plotting import mpl_text, planner_colours, pyplot
 
 #: Consecutive targets of a size ladder differ by at least this factor.
 LADDER_STEP = 2.0

@@ -25,8 +25,8 @@ from typing import Any
 
 import psutil
 
-from ..planner import PrepareProgress
-from ..world import Budget
+from ...planner import PrepareProgress
+from ...world import Budget
 from .cgroups import CaseCgroup
 from .outcome import Outcome
 from .tree import TREE_SAMPLE_S, ProcessTree

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..records import REASONS, Case, CaseResult, PlannerRef, utc_now
+from ...records import REASONS, Case, CaseResult, PlannerRef, utc_now
 
 __all__ = ["REASONS", "Case", "CaseResult", "PlannerRef", "Prepared", "utc_now"]
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..lazy import lazy_getattr
+from ...lazy import lazy_getattr
 
 #: The public names, one list: imported on first use (:func:`earthbench.lazy.lazy_getattr`),
 #: so a case's process, which imports only :mod:`.child`, does not pay for the executors,

@@ -38,8 +38,8 @@ def overrides_key(overrides: Mapping[str, Any]) -> str:
 def answer(spec: Mapping[str, Any], payload: Mapping[str, Any]) -> dict[str, Any]:
     """Inside the probe's fences: import the plugin's code, describe its planners, resolve the
     configurations asked for. Runs plugin code; never called in the harness's process."""
-    from ..planner import Planner
-    from ..registry import plugin_module
+    from ...planner import Planner
+    from ...registry import plugin_module
 
     probe = spec.get("probe") or {}
     classes: dict[str, type[Planner]] = {}
@@ -80,7 +80,7 @@ def answer(spec: Mapping[str, Any], payload: Mapping[str, Any]) -> dict[str, Any
 
 
 def _config(klass: type, overrides: dict[str, Any]) -> dict[str, Any]:
-    from ..planner import Planner
+    from ...planner import Planner
 
     try:
         probe: Planner = object.__new__(klass)  # the base initialiser only, as PlannerRef.resolve
@@ -118,7 +118,7 @@ def settings_of(klass: type) -> list[Setting]:
     return out
 
 
-def _type_text(hint: Any, depth: int = 0) -> str:  # read back by earthbench.harness.probe
+def _type_text(hint: Any, depth: int = 0) -> str:  # read back by earthbench.running.harness.probe
     """A type hint as the probe's small type language (the harness converts ``--config`` values with it)."""
     if depth > 3:
         return "any"

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cut import path_window
-from ..plan import Plan
-from ..referee import Verdict, judge
-from ..world import Scenario
+from ...cut import path_window
+from ...plan import Plan
+from ...referee import Verdict, judge
+from ...world import Scenario
 
 from .geometry import bucket_path
 

@@ -14,8 +14,8 @@ import signal
 import traceback
 from typing import Any
 
-from ..records import Case, CaseResult, utc_now
-from ..scoring import score  # the one scoring rule, in the core
+from ...records import Case, CaseResult, utc_now
+from ...scoring import score  # the one scoring rule, in the core
 from .environment import environment
 from .steps import StepLoop, step_metrics
 from .outcome import Outcome

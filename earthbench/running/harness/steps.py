@@ -20,13 +20,13 @@ import statistics
 from collections.abc import Sequence
 from typing import Any
 
-from ..errors import PlanFormatError
-from ..motion import ABS_TOL
-from ..plan import Move, Plan, Prediction
-from ..planner import Observation, Planner
-from ..referee import Execution, Verdict
-from ..sensing import Stations, observe, scan_seconds
-from ..world import Scenario
+from ...errors import PlanFormatError
+from ...motion import ABS_TOL
+from ...plan import Move, Plan, Prediction
+from ...planner import Observation, Planner
+from ...referee import Execution, Verdict
+from ...sensing import Stations, observe, scan_seconds
+from ...world import Scenario
 from .protocol import StepHooks
 
 

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from ..cut import footprint
-from ..plan import Charge, Dig, Move, Plan
-from ..world import Scenario
+from ...cut import footprint
+from ...plan import Charge, Dig, Move, Plan
+from ...world import Scenario
 
 
 def machine_paths(scenario: Scenario, plan: Plan) -> dict[str, list[np.ndarray]]:

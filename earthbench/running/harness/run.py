@@ -21,8 +21,8 @@ import json
 import threading
 from collections.abc import Sequence
 
-from ..records import Case, CaseResult, utc_now
-from ..sensing import observe
+from ...records import Case, CaseResult, utc_now
+from ...sensing import observe
 from . import load
 from .cases import Prepared
 from .judge import judge

@@ -1,6 +1,6 @@
 """The inside of one case: a warden process and, under it, the planner's process.
 
-:func:`earthbench.harness.run_case` starts ``python -c BOOTSTRAP``, in a sandbox of its own
+:func:`earthbench.running.harness.run_case` starts ``python -c BOOTSTRAP``, in a sandbox of its own
 where the machine allows it (:mod:`.isolation`). The bootstrap is plain Python that imports
 nothing of earthbench, numpy or the plugin; it becomes the case's *warden*:
 
@@ -115,7 +115,7 @@ def main(fd: int) -> None:
 
     try:
         doc = json.loads(sys.stdin.buffer.readline())
-        if doc.get("job") == "probe":  # a planner probe, not a case (earthbench.harness.probe)
+        if doc.get("job") == "probe":  # a planner probe, not a case (earthbench.running.harness.probe)
             _probe(doc, given, send)
             out.close()
             return
@@ -125,7 +125,7 @@ def main(fd: int) -> None:
         cls = load_planner_class(doc["source"], doc["name"])
         overrides = doc.get("overrides", {})
         prepared = doc.get("prepared")
-        if doc.get("job") == "prepare":  # a preparation, not a case (earthbench.harness.prepare)
+        if doc.get("job") == "prepare":  # a preparation, not a case (earthbench.running.harness.prepare)
             del doc
             _prepare(cls, overrides, given, send)
             out.close()
@@ -232,8 +232,8 @@ def _progress_sender(send: Any) -> Any:
 
 def _probe(spec: dict[str, Any], given: dict[str, str], send: Any) -> None:
     """A probe job: say ready, read what to resolve, import the plugin and describe its planners
-    (:func:`earthbench.harness.describe.answer`), answer ``{"outcome": "probed", "summary": JSON text}``."""
-    from earthbench.harness.describe import answer
+    (:func:`earthbench.running.harness.describe.answer`), answer ``{"outcome": "probed", "summary": JSON text}``."""
+    from earthbench.running.harness.describe import answer
 
     send({"event": "ready"})
     try:
@@ -322,7 +322,7 @@ if planner == 0:
         resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
     if fsize > 0:  # a preparation: no file it writes may be larger than its disk budget
         resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-    from earthbench.harness.child import main
+    from earthbench.running.harness.child import main
     main(msg_fd)
     sys.exit(0)
 os.close(msg_fd)

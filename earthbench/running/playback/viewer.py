@@ -17,10 +17,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import assets
-from ..errors import PlanFormatError
-from ..plan import Plan
-from ..world import Scenario
+from ... import assets
+from ...errors import PlanFormatError
+from ...plan import Plan
+from ...world import Scenario
 
 from .frames import changes
 from .geometry import bucket_footprint, machine_paths
@@ -29,7 +29,7 @@ from .selection import pick_runs
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from ..store import Store
+    from ...store import Store
 
 
 #: Height quantum of the packed heightmaps (m); terrains are generated to 0.1 mm.

@@ -8,17 +8,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import PluginError, StoreError
-from ..records import Case
+from ...errors import PluginError, StoreError
+from ...records import Case
 from . import probe
 from .local import Executor, LocalExecutor
 from .sandbox import CASE_TAG
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..progress import Progress
+    from ...progress import Progress
     from .prepare import Prepared, PrepareStatus
-    from ..store import Store
-    from ..suite import Suite
+    from ...store import Store
+    from ...suite import Suite
 
 
 @dataclass

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from ..errors import printable
-from ..planner import PrepareProgress
+from ...errors import printable
+from ...planner import PrepareProgress
 
 #: The plan-size rule: the largest message (in practice, a plan's JSON) a case may send. A plan
 #: of about 350,000 actions fits; a larger one is refused as ``error`` with its own message, so
@@ -54,7 +54,7 @@ class StepHooks(Protocol):
 
 
 class ClosedLoop(Protocol):
-    """The closed loop as the sandbox drives it (:class:`earthbench.harness.steps.StepLoop`)."""
+    """The closed loop as the sandbox drives it (:class:`earthbench.running.harness.steps.StepLoop`)."""
 
     def step(self, plan_json: str, compute_s: float, hooks: StepHooks) -> str:
         """One step, whole; returns what is wrong with it ('' when it was executed)."""

@@ -3,7 +3,7 @@ measure it.
 
 :func:`run_fenced` starts the bootstrap (:mod:`.child`) in the fences (:mod:`.isolation`) and
 supervises it (:mod:`.supervisor`) until it ends; it returns a raw
-:class:`~.supervisor.Outcome` and judges nothing (:func:`earthbench.harness.run.run_case` hands a
+:class:`~.supervisor.Outcome` and judges nothing (:func:`earthbench.running.harness.run.run_case` hands a
 case's outcome to :mod:`.judge`; this module imports neither the referee nor the scoring rule).
 :func:`run_job` is the entry of a non-case job.
 
@@ -52,10 +52,10 @@ from typing import Any
 
 import psutil
 
-from .. import compat
-from ..errors import EarthbenchError
-from ..planner import PrepareProgress, SharedFolder
-from ..world import Budget
+from ... import compat
+from ...errors import EarthbenchError
+from ...planner import PrepareProgress, SharedFolder
+from ...world import Budget
 from . import isolation
 from .child import BOOTSTRAP
 from .protocol import ClosedLoop

@@ -22,10 +22,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-from .plan import Charge, Dig, Dump, Move, Plan
-from .referee import Verdict
+from ..plan import Charge, Dig, Dump, Move, Plan
+from ..referee import Verdict
 from .playback import bucket_footprint, machine_paths, pose_at, replay
-from .world import Scenario
+from ..world import Scenario
 
 _COLOURS = {"excavator": "tab:orange", "truck": "tab:blue", "loader": "tab:green"}
 _RED = "#d00000"
@@ -216,7 +216,7 @@ def animation_writer(out: str, fps: int = 8) -> Any:
     """The writer for an animation file ``out`` (``.gif``: Pillow; ``.mp4``: ffmpeg), or a clear error before any work."""
     from matplotlib import animation
 
-    from .errors import EarthbenchError
+    from ..errors import EarthbenchError
 
     ext = out.rsplit(".", 1)[-1].lower()
     if ext == "gif":

@@ -1,14 +1,14 @@
 """Run a suite's cases on a Dask distributed cluster (``earthbench run SUITE --executor dask``).
 
-:class:`DaskExecutor` implements the runner's :class:`~earthbench.harness.Executor` protocol.
-Each case is one Dask task that calls the very same :func:`~earthbench.harness.run_case` on a
+:class:`DaskExecutor` implements the runner's :class:`~earthbench.running.harness.Executor` protocol.
+Each case is one Dask task that calls the very same :func:`~earthbench.running.harness.run_case` on a
 worker, so a case there gets what it gets locally: a fresh process tree in its own session under its warden,
 CPU affinity on a slot of ``budget.cores`` cores, BLAS/OpenMP thread caps, ``RLIMIT_AS`` and
-the wall budget. The referee and the environment stamp (:func:`~earthbench.harness.environment`:
+the wall budget. The referee and the environment stamp (:func:`~earthbench.running.harness.environment`:
 hostname, CPU model, cores, OS, Python, packages, commits) are computed on the worker too, so
 each stored run records the machine that ran it. Results stream back as they finish
 (``distributed.as_completed``); only the client writes the store (in
-:func:`~earthbench.harness.run_cases`), so resume and ``--rerun`` work as with the local executor.
+:func:`~earthbench.running.harness.run_cases`), so resume and ``--rerun`` work as with the local executor.
 
 **Slots.** A worker machine with N cores runs floor(N / 2) cases at once. Two mechanisms
 enforce it:
@@ -20,7 +20,7 @@ enforce it:
   worker more cases than it has slots. A ``LocalCluster`` takes ``resources={"slots": K}``.
 * a host-wide slot pool that chooses the cores: before it starts the case subprocess, the
   task locks (``fcntl.flock``) one lock file per core of a free group of ``budget.cores``
-  cores from the worker's CPU affinity (the groups of :func:`~earthbench.harness.make_slots`).
+  cores from the worker's CPU affinity (the groups of :func:`~earthbench.running.harness.make_slots`).
   The lock files (``HOST-cpuN.lock``) live in ``$EARTHBENCH_SLOT_DIR`` (default
   ``<tmp>/earthbench-slots-<uid>``) and are shared by every worker process of the machine, so
   two workers on one host never pin cases to the same cores even if their ``slots`` add up to
@@ -58,8 +58,8 @@ import uuid
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from ..errors import EarthbenchError
-from ..records import Case, CaseResult
+from ...errors import EarthbenchError
+from ...records import Case, CaseResult
 from .prepare import run_prepared_case
 from .sandbox import STARTUP_S
 from .slots import make_slots

@@ -46,11 +46,11 @@ from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 
-from ..errors import EarthbenchError
-from ..planner import PrepareProgress
-from ..registry import OWN_DISTRIBUTION
-from ..world import Budget
-from ..records import Case, CaseResult, PlannerRef, utc_now
+from ...errors import EarthbenchError
+from ...planner import PrepareProgress
+from ...registry import OWN_DISTRIBUTION
+from ...world import Budget
+from ...records import Case, CaseResult, PlannerRef, utc_now
 from .cases import Prepared
 from .environment import cache_folder
 
