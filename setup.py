@@ -1,7 +1,7 @@
 """A build step that writes the commit the package is built from into it (``earthbench/build_info.py``).
 
 Everything else about the build is in pyproject.toml. The stamp of every run reads the module
-(:mod:`earthbench.provenance`), so a non-editable install names the code it holds, not whatever
+(:mod:`earthbench.results.provenance`), so a non-editable install names the code it holds, not whatever
 a checkout beside it says later (issue 35). Built outside a git checkout (an sdist), the commit is
 unknown and the module says so.
 """

@@ -43,10 +43,10 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     # machine classes (docs/machine-classes.md): a generator or script may fit a scenario to one
     "earthbench.classes": ("MachineClass", "fit", "machine_class", "machine_classes"),
     # metrics: a metric plugin is a callable (scenario, plan, verdict) -> dict; the scoring rule
-    "earthbench.scoring": ("evaluate", "is_success", "run_order", "target_share", "time_per_target", "time_to_target"),
+    "earthbench.results.scoring": ("evaluate", "is_success", "run_order", "target_share", "time_per_target", "time_to_target"),
     # scripts and notebooks: run suites, read results
-    "earthbench.suite": ("MAX_CELLS", "load_suite"),
-    "earthbench.store": ("Store", "load_runs"),
+    "earthbench.results.suite": ("MAX_CELLS", "load_suite"),
+    "earthbench.results.store": ("Store", "load_runs"),
     "earthbench.running.harness": ("LocalExecutor", "run_suite"),
     "earthbench.running.harness.dask_executor": ("DaskExecutor",),
 }

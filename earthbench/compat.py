@@ -36,6 +36,8 @@ MOVED_MODULES: dict[str, tuple[str, str]] = {
     "earthbench.dask_executor": ("earthbench.running.harness.dask_executor", "0.6.0"),  # moved in 0.2.0
     "earthbench.referee.replay": ("earthbench.referee.state", "0.6.0"),  # moved after 0.2.0
     # the folders show the layers (issue 52, docs/DESIGN.md §2)
+    **_into("results", "scoring records progress labels aggregate generalisation store suite suite_checks identity calibration "
+                       "provenance", "0.6.0"),
     **_into("running", "harness playback figures scaling", "0.6.0"),
     **_into("publishing", "verify merge best board publish compare", "0.6.0"),
 }
@@ -68,14 +70,15 @@ MOVED_NAMES: dict[str, dict[str, tuple[str, str]]] = {
     # a machine's samples over time belong to the motion model (issue 52)
     "earthbench.referee.state": _names("Timeline", "earthbench.motion", "0.6.0"),
     # the seal no longer imports the suite: drawing a sealed suite moved there after 0.2.0
-    "earthbench.seal": _names("new_key open_sealed", "earthbench.suite", "0.6.0"),
+    "earthbench.seal": _names("new_key open_sealed", "earthbench.results.suite", "0.6.0"),
     # publishing was split by job into earthbench.board in 0.3.0
     "earthbench.publish": _names(_BOARD_TABLES, "earthbench.publishing.board.tables", "0.6.0")
     | _names(_BOARD_PAGE, "earthbench.publishing.board.page", "0.6.0")
     | _names(_BOARD_FIGURES, "earthbench.publishing.board.figures", "0.6.0")
-    | _names(_BOARD_SELECTION, "earthbench.publishing.board.selection", "0.6.0") | _names("REASONS", "earthbench.aggregate", "0.6.0"),
+    | _names(_BOARD_SELECTION, "earthbench.publishing.board.selection", "0.6.0")
+    | _names("REASONS", "earthbench.results.aggregate", "0.6.0"),
     # what publishing and verify share moved beside the other labels (issue 52)
-    "earthbench.verify": _names("latest_spot_checks machine_label", "earthbench.labels", "0.6.0"),
+    "earthbench.verify": _names("latest_spot_checks machine_label", "earthbench.results.labels", "0.6.0"),
     # running a case (measure, then judge) left the sandbox, which only measures (issue 52)
     "earthbench.harness.sandbox": _names("run_case", "earthbench.running.harness.run", "0.6.0"),
 }

@@ -218,4 +218,4 @@ def _tidy(v: float) -> float:
     return round(float(v), 9) + 0.0
 
 
-__getattr__ = compat.forward(__name__)  # new_key, open_sealed: moved to earthbench.suite (earthbench.compat)
+__getattr__ = compat.forward(__name__)  # new_key, open_sealed: moved to earthbench.results.suite (earthbench.compat)

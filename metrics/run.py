@@ -89,8 +89,8 @@ from earthbench.motion import ABS_TOL, RATE_TOL
 from earthbench.plan import Plan
 from earthbench.referee import Verdict
 from earthbench.rules import loader_base_level
-from earthbench.scoring import time_per_target
-from earthbench.scoring import time_to_target as scoring_time_to_target
+from earthbench.results.scoring import time_per_target
+from earthbench.results.scoring import time_to_target as scoring_time_to_target
 from earthbench.world import Scenario
 
 

@@ -21,7 +21,7 @@ import shapely
 from earthbench.motion import wrap
 from earthbench.plan import Dig, Dump, Plan
 from earthbench.referee.state import Replay
-from earthbench.store import Store, decompress
+from earthbench.results.store import Store, decompress
 from earthbench.world import Scenario, rectangle
 
 

@@ -3,7 +3,7 @@ target m³ and steps per scenario, for comparing two versions of earthbench side
 
 Seeds 0 and 1 of every family at the suite's smallest target, through
 ``earthbench.running.harness.steps.run_closed_loop`` (the harness's own step loop, without the sandbox)
-and judged by ``earthbench.scoring.score``. To compare with an older earthbench, put its package
+and judged by ``earthbench.results.scoring.score``. To compare with an older earthbench, put its package
 first on the path (the planners stay the installed ones)::
 
     git archive OLD earthbench | tar -x -C /tmp/old
@@ -19,8 +19,8 @@ import statistics
 import earthbench
 from earthbench.running.harness.steps import run_closed_loop
 from earthbench.registry import PLANNERS
-from earthbench.scoring import score
-from earthbench.suite import load_suite
+from earthbench.results.scoring import score
+from earthbench.results.suite import load_suite
 
 
 def main() -> None:

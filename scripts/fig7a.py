@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 
 from earthbench.publishing.board.figures import volume_time_figure
-from earthbench.aggregate import version_key
-from earthbench.store import load_runs
+from earthbench.results.aggregate import version_key
+from earthbench.results.store import load_runs
 
 SUITES = ("paper-extensive", "paper-separate-sweep")
 
@@ -54,7 +54,7 @@ def collect(dbs: list[str]) -> pd.DataFrame:
 
 def latest_version_runs(runs: pd.DataFrame) -> pd.DataFrame:
     """Each planner's runs of its latest version over every suite given (the figure joins
-    several stores and suites; :func:`earthbench.aggregate.latest_versions` picks per suite)."""
+    several stores and suites; :func:`earthbench.results.aggregate.latest_versions` picks per suite)."""
     latest = runs.groupby("planner")["planner_version"].agg(lambda v: max(v.unique(), key=version_key))
     return runs[runs["planner_version"] == runs["planner"].map(latest)].copy()
 

@@ -23,9 +23,9 @@ WORKER = r'''
 import dataclasses, sys, time
 from pathlib import Path
 from earthbench.running.harness import build_cases, run_case
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.registry import load_plugin_file
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 (case, *_), _ = build_cases(load_suite("smoke"), ["greedy"])
 steps = str(Path("tests/plugins/step_planners.py").resolve())
 load_plugin_file(steps)

@@ -21,9 +21,9 @@ import time
 from pathlib import Path
 
 from earthbench.running.harness import build_cases, isolation, run_case
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.registry import load_plugin_file
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 
 STEPS = str(Path(__file__).resolve().parents[1] / "tests" / "plugins" / "step_planners.py")
 

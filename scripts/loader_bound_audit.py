@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from earthbench.rules import loader_base_level
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench.world import Scenario
 from earthbench_metrics import least_time, lower_bound_time_to_target
 

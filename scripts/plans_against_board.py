@@ -20,10 +20,10 @@ import sys
 import numpy as np
 import pandas as pd
 
-from earthbench.aggregate import latest_versions
+from earthbench.results.aggregate import latest_versions
 from earthbench.publishing.board.selection import shown_runs
-from earthbench.labels import config_labels
-from earthbench.store import load_runs
+from earthbench.results.labels import config_labels
+from earthbench.results.store import load_runs
 
 #: The referee's figures compared, and how close floats must be (both sides are the referee's output).
 FIGURES = ["valid", "reason", "digs", "dumps", "loaded_volume", "makespan_s"]

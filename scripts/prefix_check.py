@@ -17,8 +17,8 @@ from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 
 from earthbench.plan import Plan
-from earthbench.scoring import DEFAULT_SUCCESS_THRESHOLD
-from earthbench.store import Store, decompress
+from earthbench.results.scoring import DEFAULT_SUCCESS_THRESHOLD
+from earthbench.results.store import Store, decompress
 from earthbench.publishing.verify import prefix_violations
 from earthbench.world import Scenario
 

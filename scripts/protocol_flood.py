@@ -23,7 +23,7 @@ from helpers import tiny_suite_toml  # noqa: E402
 
 from earthbench.running.harness import build_cases, run_case  # noqa: E402
 from earthbench.registry import load_plugin_file  # noqa: E402
-from earthbench.suite import parse_suite  # noqa: E402
+from earthbench.results.suite import parse_suite  # noqa: E402
 
 
 def cpu() -> float:

@@ -26,11 +26,11 @@ from shapely import contains_xy
 from shapely.geometry import Polygon
 
 from earthbench.registry import PLANNERS, TERRAINS
-from earthbench.scoring import score
+from earthbench.results.scoring import score
 from earthbench.seal import SealKey, SiteTransform, public_name
 from earthbench.sensing import observe
-from earthbench.store import Store, load_runs
-from earthbench.suite import registered_suite
+from earthbench.results.store import Store, load_runs
+from earthbench.results.suite import registered_suite
 from earthbench.world import Scenario
 
 

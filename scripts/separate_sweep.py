@@ -15,10 +15,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from earthbench.progress import Progress
+from earthbench.results.progress import Progress
 from earthbench.running.harness import Case, LocalExecutor, PlannerRef, run_cases
-from earthbench.store import Store
-from earthbench.suite import load_suite, parse_seed_range
+from earthbench.results.store import Store
+from earthbench.results.suite import load_suite, parse_seed_range
 
 
 def divisions_arg(text: str) -> list[int]:

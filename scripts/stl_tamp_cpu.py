@@ -45,7 +45,7 @@ import numpy as np
 
 from earthbench.cli import parse_config
 from earthbench.referee import judge
-from earthbench.suite import load_suite, parse_seed_range
+from earthbench.results.suite import load_suite, parse_seed_range
 from earthbench_metrics.run import core_metrics
 from earthbench_planners.stl_tamp import StlTampPlanner, hierarchy
 

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from earthbench.suite import load_suite, parse_seed_range
+from earthbench.results.suite import load_suite, parse_seed_range
 from earthbench_planners.stl_tamp import StlTampPlanner, model
 from earthbench_planners.stl_tamp.problem import quantize
 

@@ -54,9 +54,9 @@ from earthbench.motion import swing_time, turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan
 from earthbench.referee import judge
 from earthbench.rules import arm_shadow, track_level_and_tilt, undermining_excess
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench.referee.state import Replay
-from earthbench.store import Store, decompress
+from earthbench.results.store import Store, decompress
 from earthbench.world import Pose, Scenario
 
 #: Area (m²) below which two shapes count as touching, not overlapping (a footprint edge on the dig area's edge).

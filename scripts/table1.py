@@ -18,8 +18,8 @@ import json
 
 import pandas as pd
 
-from earthbench.aggregate import version_key
-from earthbench.store import Store, load_runs
+from earthbench.results.aggregate import version_key
+from earthbench.results.store import Store, load_runs
 
 SUITE = "paper-extensive-realistic"
 #: The paper's Table I: target → (mean m³, mean / target %, SD m³).

@@ -23,13 +23,13 @@ import statistics
 import subprocess
 import sys
 
-from earthbench.suite import load_suite, parse_seed_range
+from earthbench.results.suite import load_suite, parse_seed_range
 
 #: What each process runs: only names every stl-tamp install since 0.9.0 has.
 ONE_PLAN = """
 import hashlib, json, sys, time
 from earthbench.referee import judge
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.stl_tamp import StlTampPlanner
 suite, scenario_id, prepared = sys.argv[1], sys.argv[2], sys.argv[3] or None
 sc = next(s for s in load_suite(suite).scenarios if s.id == scenario_id)

@@ -41,7 +41,7 @@ FORMATS = (".npy", ".npz", ".csv", ".tif", ".tiff")
 GEOTIFF = (".tif", ".tiff")
 #: Resampling methods a GeoTIFF may be read with (rasterio.enums.Resampling names).
 RESAMPLING = ("nearest", "bilinear", "cubic", "average")
-#: The cell cap of a suite's heightmap (earthbench.suite.MAX_CELLS), checked before a GeoTIFF is read.
+#: The cell cap of a suite's heightmap (earthbench.results.suite.MAX_CELLS), checked before a GeoTIFF is read.
 MAX_CELLS = 4_000_000
 _NPZ_KEYS = ("z", "elevation", "heights")
 

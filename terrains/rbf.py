@@ -27,7 +27,7 @@ from earthbench.world import Budget, Heightmap, Scenario
 
 from .common import backhoe_site, rectangle, round_heights
 
-#: Elements of the largest array the mounds are summed through: 4 × earthbench.suite.MAX_CELLS
+#: Elements of the largest array the mounds are summed through: 4 × earthbench.results.suite.MAX_CELLS
 #: (the scale suite's 96 × 48 m map with 1,920 mounds needs 5.5 million).
 BASIS_CAP = 16_000_000
 

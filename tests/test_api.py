@@ -72,7 +72,10 @@ def test_names_documented_in_0_1_still_import_with_a_warning(old, name, new):
                                             ("earthbench.publish", "earthbench.publishing.publish", "publish"),
                                             ("earthbench.compare", "earthbench.publishing.compare", "compare"),
                                             ("earthbench.harness", "earthbench.running.harness", "run_suite"),
-                                            ("earthbench.playback", "earthbench.running.playback", "replay_data")])
+                                            ("earthbench.playback", "earthbench.running.playback", "replay_data"),
+                                            ("earthbench.scoring", "earthbench.results.scoring", "time_to_target"),
+                                            ("earthbench.store", "earthbench.results.store", "Store"),
+                                            ("earthbench.suite", "earthbench.results.suite", "load_suite")])
 def test_moved_modules_still_import_with_a_warning(old, new, name):
     code = (f"import warnings; warnings.simplefilter('always')\nfrom {old} import {name} as got\n"
             f"import {new} as m\nassert got is m.{name}")

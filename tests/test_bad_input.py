@@ -15,8 +15,8 @@ import pytest
 from earthbench.cli import main
 from earthbench.errors import ScenarioError, SuiteError
 from earthbench.registry import TERRAINS
-from earthbench.store import Store, load_runs
-from earthbench.suite import load_suite, parse_suite
+from earthbench.results.store import Store, load_runs
+from earthbench.results.suite import load_suite, parse_suite
 from earthbench.world import Scenario
 
 from helpers import tiny_suite_toml

@@ -18,7 +18,7 @@ from earthbench.cli import main
 from earthbench.plan import Move, Plan
 from earthbench.publishing.publish import publish
 from earthbench.referee import RULES_VERSION
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 from helpers.leaderboard import Behaviour, fill_store, ref
 

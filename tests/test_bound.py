@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from earthbench import Budget, Dig, Dump, Heightmap, Machines, Move, Plan, Pose, Scenario, Site, Soil, Task, judge
 from earthbench.motion import swing_time, turn_drive_turn
-from earthbench.scoring import time_to_target
+from earthbench.results.scoring import time_to_target
 from earthbench_metrics import lower_bound_time_per_m3, lower_bound_time_to_target
 
 from helpers.bounds import assert_no_valid_plan_beats_the_bound
@@ -166,9 +166,9 @@ def test_rescore_fills_the_new_columns_and_the_tables_carry_their_median(tmp_pat
     import json
     import sqlite3
 
-    from earthbench.aggregate import aggregate
+    from earthbench.results.aggregate import aggregate
     from earthbench.cli import main
-    from earthbench.store import load_runs
+    from earthbench.results.store import load_runs
 
     db = str(tmp_path / "r.db")
     assert main(["run", "smoke", "--planner", "greedy", "--db", db, "--quiet"]) == 0

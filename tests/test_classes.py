@@ -8,13 +8,13 @@ import dataclasses
 
 import pytest
 
-from earthbench.calibration import backhoe_cycle, calibration
+from earthbench.results.calibration import backhoe_cycle, calibration
 from earthbench.classes import fit, machine_class, machine_classes, parse_class
 from earthbench.cli import main
 from earthbench.errors import ScenarioError, SuiteError, UnknownNameError
 from earthbench.machines import ExcavatorSpec, LoaderSpec, Machines, TruckSpec
 from earthbench.soil import draw, nominal
-from earthbench.suite import parse_suite
+from earthbench.results.suite import parse_suite
 from earthbench.world import Scenario
 from earthbench_terrains.rbf import rbf
 
@@ -94,7 +94,7 @@ def test_the_calibration_s_figures_are_the_referee_s_and_a_slower_machine_leaves
     mc = machine_class("20t")
     assert backhoe_cycle(mc, 180.0) > backhoe_cycle(mc, 90.0) > backhoe_cycle(mc, 45.0)
     slow = dataclasses.replace(mc, excavator=dataclasses.replace(mc.excavator, min_stroke_time=14.0))
-    monkeypatch.setattr("earthbench.calibration.machine_classes", lambda: {"20t": slow})
+    monkeypatch.setattr("earthbench.results.calibration.machine_classes", lambda: {"20t": slow})
     assert main(["calibration"]) == 1
 
 
@@ -110,7 +110,7 @@ def test_the_optimisation_planners_refuse_another_class_at_once(name):
 
 
 def test_production_is_bank_m3_an_hour_and_the_stamp_names_the_class_s_band():
-    from earthbench.aggregate import production
+    from earthbench.results.aggregate import production
     from earthbench.publishing.board.tables import production_note
 
     assert production(18.0) == pytest.approx(200.0) and production(float("inf")) == 0.0

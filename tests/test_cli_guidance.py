@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.cli import main
-from earthbench.store import load_runs
+from earthbench.results.store import load_runs
 from earthbench.world import Scenario
 
 from helpers import load_script, tiny_suite_toml
@@ -223,7 +223,7 @@ def test_a_ranking_on_partial_data_says_so(tmp_path, capsys, monkeypatch):
     assert main(["run", str(f), "--planner", "greedy", "--db", db, "--seeds", "0", "--quiet"]) == 0
     capsys.readouterr()
     from earthbench.cli.run import print_summary
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     from earthbench_planners.greedy.backhoe import GreedyPlanner
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from earthbench.cli import main
-from earthbench.store import load_runs
+from earthbench.results.store import load_runs
 
 from helpers import tiny_suite_toml
 

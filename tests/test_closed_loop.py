@@ -16,8 +16,8 @@ from earthbench.running.harness import LocalExecutor, build_cases, run_cases
 from earthbench.running.harness.steps import observation
 from earthbench.referee import judge
 from earthbench.registry import load_plugin_file
-from earthbench.store import Store, load_runs, stored_steps
-from earthbench.suite import parse_suite
+from earthbench.results.store import Store, load_runs, stored_steps
+from earthbench.results.suite import parse_suite
 from earthbench.publishing.verify import audit
 from helpers import tiny_suite_toml
 
@@ -119,7 +119,7 @@ def test_execution_step_by_step_is_judge_of_the_prefix(suite_name, planner):
     from earthbench.plan import Dump, Plan
     from earthbench.referee import Execution
     from earthbench.registry import PLANNERS
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
 
     sc = load_suite(suite_name).scenarios[0]
     cycles, cur = [], []
@@ -154,7 +154,7 @@ def test_stl_tamp_in_receding_horizon():
     """Each step solves the remaining areas again and executes one local area (planners/stl_tamp/receding.py)."""
     from earthbench.running.harness.steps import run_closed_loop
     from earthbench.registry import PLANNERS
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
 
     from earthbench_planners.stl_tamp.hierarchy import site_layout
 

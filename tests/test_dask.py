@@ -22,8 +22,8 @@ from earthbench.cli import main  # noqa: E402
 from earthbench.running.harness.dask_executor import DaskError, DaskExecutor, host_slot  # noqa: E402
 from earthbench.registry import load_plugin_file  # noqa: E402
 from earthbench.running.harness import LocalExecutor, build_cases, run_cases, run_suite  # noqa: E402
-from earthbench.store import Store  # noqa: E402
-from earthbench.suite import load_suite, parse_suite  # noqa: E402
+from earthbench.results.store import Store  # noqa: E402
+from earthbench.results.suite import load_suite, parse_suite  # noqa: E402
 
 from helpers import tiny_suite_toml  # noqa: E402
 

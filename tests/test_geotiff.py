@@ -17,7 +17,7 @@ from rasterio.transform import Affine  # noqa: E402
 
 from earthbench import ScenarioError, judge  # noqa: E402
 from earthbench.cli import main  # noqa: E402
-from earthbench.suite import load_suite  # noqa: E402
+from earthbench.results.suite import load_suite  # noqa: E402
 from earthbench_terrains.files import heightmap_file, load_heightmap  # noqa: E402
 
 WEST, SOUTH = 455_000.0, 5_330_000.0  # metres, UTM 33N

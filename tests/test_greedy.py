@@ -11,7 +11,7 @@ from earthbench import judge
 from earthbench.cut import apply_cut, path_cells
 from earthbench.motion import ABS_TOL
 from earthbench.rules import undermining_excess
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy
 from earthbench_terrains.rbf import rbf

@@ -14,7 +14,7 @@ ROOT = Path(__file__).parents[1] / "earthbench"
 #: The harness's modules (the running layer's folder).
 HARNESS = ROOT / "running" / "harness"
 #: The store's modules: every SQL statement of earthbench is in them.
-STORE = sorted((ROOT / "store").glob("*.py"))
+STORE = sorted((ROOT / "results" / "store").glob("*.py"))
 #: Import name of each plugin package → its folder in the repository (pyproject's package-dir).
 PLUGIN_PACKAGES = {"earthbench_planners": "planners", "earthbench_terrains": "terrains", "earthbench_metrics": "metrics"}
 FOLDER_PACKAGES = {folder: name for name, folder in PLUGIN_PACKAGES.items()}
@@ -34,23 +34,23 @@ def _imports(path: Path) -> list[tuple[str, str, bool]]:
 
 
 def test_no_private_name_crosses_a_harness_module():
-    for path in [*sorted((HARNESS).glob("*.py")), ROOT / "records.py", *STORE, ROOT / "progress.py"]:
+    for path in [*sorted(HARNESS.glob("*.py")), ROOT / "results" / "records.py", *STORE, ROOT / "results" / "progress.py"]:
         for module, name, _ in _imports(path):
             if module.startswith(".") or module.startswith("earthbench"):
                 assert not name.startswith("_"), f"{path.name} imports the private {module}.{name}"
 
 
 def test_the_store_and_progress_line_never_import_the_harness_and_the_harness_imports_them_only_for_types():
-    """The store keeps the run's records (:mod:`earthbench.records`) and knows nothing of how cases
+    """The store keeps the run's records (:mod:`earthbench.results.records`) and knows nothing of how cases
     run; the records sit below both, so neither a store nor a record reaches up into the harness,
     not even for type checking."""
-    for path in (*STORE, ROOT / "progress.py", ROOT / "records.py"):
+    for path in (*STORE, ROOT / "results" / "progress.py", ROOT / "results" / "records.py"):
         found = {m for m, _ in _all_imports(path, in_functions=True, type_checking=True) if m.startswith("earthbench.running.harness")}
         assert found == set(), f"{path.name} imports {found}"
-    up = {"earthbench.store", "earthbench.progress", "earthbench.publishing", "earthbench.cli"}
-    found = {m for m, _ in _all_imports(ROOT / "records.py", in_functions=True, type_checking=True) if m.startswith(tuple(up))}
+    up = {"earthbench.results.store", "earthbench.results.progress", "earthbench.publishing", "earthbench.cli"}
+    found = {m for m, _ in _all_imports(ROOT / "results" / "records.py", in_functions=True, type_checking=True) if m.startswith(tuple(up))}
     assert found == set()
-    for path in sorted((HARNESS).glob("*.py")):
+    for path in sorted(HARNESS.glob("*.py")):
         for module, name, guarded in _imports(path):
             if module.lstrip(".") in ("store", "progress", "suite"):
                 assert guarded, f"harness/{path.name} imports {module}.{name} at run time"
@@ -73,16 +73,17 @@ def test_the_sandbox_runs_and_measures_and_judges_nothing():
     graph = _core_graph(in_functions=True)
     for module in ("earthbench.running.harness.sandbox", "earthbench.running.harness.supervisor", "earthbench.running.harness.isolation"):
         reached = _reached(graph, module)
-        assert not {m for m in reached if m.startswith(("earthbench.referee", "earthbench.scoring", "earthbench.running.harness.steps",
-                                                         "earthbench.running.harness.judge"))}, module
-    assert "earthbench.scoring" in graph["earthbench.running.harness.judge"]
+        judging = ("earthbench.referee", "earthbench.results.scoring", "earthbench.running.harness.steps",
+                   "earthbench.running.harness.judge")
+        assert not {m for m in reached if m.startswith(judging)}, module
+    assert "earthbench.results.scoring" in graph["earthbench.running.harness.judge"]
     assert "earthbench.referee" in _reached(graph, "earthbench.running.harness.steps")
 
 
 def test_the_harness_names_no_planner():
     """A planner declares what its cases read (``Planner.reads``) as it declares its preparation:
     the harness knows no planner by name."""
-    found = [(p.name, n) for p in sorted((HARNESS).glob("*.py"))
+    found = [(p.name, n) for p in sorted(HARNESS.glob("*.py"))
              for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"stl|nlp", line, re.I)]
     assert found == []
 
@@ -104,7 +105,7 @@ HARNESS_MODULE_LINES = 600
 
 
 def test_no_harness_module_runs_over_600_lines():
-    long = {p.name: n for p in sorted((HARNESS).glob("*.py")) if (n := len(p.read_text().splitlines())) > HARNESS_MODULE_LINES}
+    long = {p.name: n for p in sorted(HARNESS.glob("*.py")) if (n := len(p.read_text().splitlines())) > HARNESS_MODULE_LINES}
     assert long == {}
 
 
@@ -169,19 +170,20 @@ def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 
 def test_the_graph_sees_every_kind_of_import():
-    assert ("earthbench.records", "Case") in _all_imports(ROOT / "store" / "database.py", in_functions=False, type_checking=True)
-    assert ("earthbench.records", "Case") not in _all_imports(ROOT / "store" / "database.py", in_functions=True)
+    database = ROOT / "results" / "store" / "database.py"
+    assert ("earthbench.results.records", "Case") in _all_imports(database, in_functions=False, type_checking=True)
+    assert ("earthbench.results.records", "Case") not in _all_imports(database, in_functions=True)
     graph = _core_graph(in_functions=True)
     judge = graph["earthbench.running.harness.judge"]
-    assert {"earthbench.running.harness.environment", "earthbench.scoring"} <= judge  # from .x, from ...x
-    assert "earthbench.scoring" not in _core_graph(in_functions=False)["earthbench.publishing.verify"]  # imported on first use
-    assert {"earthbench.scoring", "earthbench.running.harness.environment"} <= graph["earthbench.publishing.verify"]
+    assert {"earthbench.running.harness.environment", "earthbench.results.scoring"} <= judge  # from .x, from ...x
+    assert "earthbench.results.scoring" not in _core_graph(in_functions=False)["earthbench.publishing.verify"]  # imported on first use
+    assert {"earthbench.results.scoring", "earthbench.running.harness.environment"} <= graph["earthbench.publishing.verify"]
     assert _cycle({"a": {"b"}, "b": {"a"}}) is not None and _cycle({"a": {"b"}, "b": set()}) is None
 
 
 def test_publishing_reads_labels_not_verify():
     """What publishing and ``verify`` both show (machine labels, the latest spot checks) lives in
-    :mod:`earthbench.labels`; publishing never imports ``verify`` (issue 52)."""
+    :mod:`earthbench.results.labels`; publishing never imports ``verify`` (issue 52)."""
     graph = _core_graph(in_functions=True)
     publishing = [m for m in graph if m == "earthbench.publishing.publish" or m.startswith("earthbench.publishing.board")]
     assert len(publishing) > 3 and not {m for m in publishing if "earthbench.publishing.verify" in graph[m]}
@@ -203,8 +205,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "world": ("world", "machines", "classes", "plan"),
     "contract": ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal"),
     "judge": ("referee",),
-    "results": ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite", "suite_checks",
-                "identity", "calibration", "provenance"),
+    "results": ("results",),
     "running": ("running",),
     "publishing": ("publishing",),
     "commands": ("cli", "__main__"),
@@ -225,7 +226,7 @@ def _layer(module: str) -> int | None:
 def _runs_up(rank: int, module: str, imported: str | None) -> str | None:
     """The core module that ``from module import imported`` reaches, if it lies above layer
     ``rank``; the face counts as above every layer (it re-exports the judge) but for ``__version__``
-    and ``build_info`` (the module a build writes beside it, :mod:`earthbench.provenance`)."""
+    and ``build_info`` (the module a build writes beside it, :mod:`earthbench.results.provenance`)."""
     target = f"{module}.{imported}" if imported and f"{module}.{imported}" in CORE else module
     if target not in CORE:
         return None
@@ -241,7 +242,7 @@ def test_every_core_module_has_one_layer():
 
 
 def test_the_layer_rule_refuses_an_import_that_runs_back_up():
-    store, planners = _RANK["store"], list(LAYERS).index(PLUGIN_LAYERS["planners"])
+    store, planners = _RANK["results"], list(LAYERS).index(PLUGIN_LAYERS["planners"])
     assert _runs_up(store, "earthbench.running.harness", "Case") == "earthbench.running.harness"
     assert _runs_up(store, "earthbench.running.harness.cases", "Case") == "earthbench.running.harness.cases"
     assert _runs_up(planners, "earthbench.referee", "judge") == "earthbench.referee"
@@ -372,22 +373,22 @@ def test_the_sql_finder_sees_every_shape_of_statement():
 
 
 def test_no_sql_outside_the_store():
-    """Every SQL statement lives in the :mod:`earthbench.store` package, behind a named method or
+    """Every SQL statement lives in the :mod:`earthbench.results.store` package, behind a named method or
     reader (docs/DESIGN.md §2): the rest of the core, the plugins and the scripts read and write a
     store only through it."""
     files = [p for top in ("earthbench", *FOLDER_PACKAGES, "scripts") for p in sorted((ROOT.parent / top).rglob("*.py"))]
     found = {(str(p.relative_to(ROOT.parent)), *hit) for p in files if p not in STORE for hit in _sql_in(p.read_text())}
     assert found == set()
-    assert _sql_in((ROOT / "store" / "database.py").read_text())  # the finder reads the store's own statements
+    assert _sql_in((ROOT / "results" / "store" / "database.py").read_text())  # the finder reads the store's own statements
 
 
 def test_the_records_keep_their_old_import_paths():
     import earthbench.running.harness
-    import earthbench.records
+    import earthbench.results.records
     from earthbench.running.harness import cases
 
     for name in ("REASONS", "Case", "CaseResult", "PlannerRef"):
-        assert getattr(cases, name) is getattr(earthbench.records, name) is getattr(earthbench.running.harness, name)
+        assert getattr(cases, name) is getattr(earthbench.results.records, name) is getattr(earthbench.running.harness, name)
 
 
 # -- functions a reader can hold in mind -----------------------------------------------------------

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 from earthbench.errors import StoreError
-from earthbench.store import MAX_BLOB_BYTES, BlobTooLargeError, Store, decompress
+from earthbench.results.store import MAX_BLOB_BYTES, BlobTooLargeError, Store, decompress
 
 
 # -- decompression bombs -------------------------------------------------------------------------
@@ -255,7 +255,7 @@ def test_no_observation_feature_tells_a_sealed_draw_from_the_public_suite(genera
     from scipy.stats import mannwhitneyu
 
     from earthbench.seal import SealKey
-    from earthbench.suite import parse_suite
+    from earthbench.results.suite import parse_suite
 
     public = parse_suite(PROBE.format(g=generator, track=track, target=target, extra=extra))
     sealed = public.sealed(SealKey(public.name, public.digest, bytes(range(32))))  # a fixed key: the test is reproducible
@@ -326,7 +326,7 @@ def _rescan(moving: bool):
     import numpy as np
 
     from earthbench.running.harness.steps import run_closed_loop
-    from earthbench.suite import parse_suite
+    from earthbench.results.suite import parse_suite
 
     truth = parse_suite(RESCAN).scenarios[0]
     planner = _Rescanner(moving)
@@ -365,7 +365,7 @@ def test_a_step_that_starts_before_the_scan_ends_is_refused():
     from earthbench.errors import PlanFormatError
     from earthbench.running.harness.steps import run_closed_loop
     from earthbench.plan import Move, Plan
-    from earthbench.suite import parse_suite
+    from earthbench.results.suite import parse_suite
 
     class Impatient(_Rescanner):
         def step(self, observation):
@@ -400,7 +400,7 @@ def test_a_revealed_legacy_key_still_regenerates_its_draw_and_commitment():
     """The 0.2.0 draws moved their sites; sealed draws no longer do, yet a revealed key of
     theirs still opens: its schema says how its draw was made (earthbench.seal.LEGACY_SCHEMA)."""
     from earthbench.seal import SealKey
-    from earthbench.suite import load_suite, open_sealed
+    from earthbench.results.suite import load_suite, open_sealed
 
     key = SealKey.read(LEADERBOARD / "keys-0.2.0" / "standard-realistic-1.key")
     sealed = open_sealed(load_suite(key.suite), key)  # raises unless the regenerated draw gives the commitment
@@ -442,7 +442,7 @@ def test_a_sealed_draw_shares_its_worlds_across_targets_as_the_public_suite_does
     """A public seed serves every target of its family with one world; a sealed draw that gave
     each target its own would tell itself apart to a case that remembers what it saw."""
     from earthbench.seal import SealKey
-    from earthbench.suite import parse_suite
+    from earthbench.results.suite import parse_suite
 
     public = parse_suite(PROBE.format(g="rbf", track="backhoe", target="0.56, 1.12", extra="").replace('"0-15"', '"0-2"'))
     sealed = public.sealed(SealKey(public.name, public.digest, bytes(range(32))))

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from earthbench.aggregate import aggregate
+from earthbench.results.aggregate import aggregate
 from earthbench.stats import MEDIAN_CI_MIN_N, median_ci, min_separating_n, rate_ci, separation_note
 
 REPS = 4000

@@ -17,8 +17,8 @@ import pytest
 from earthbench.running.harness import LocalExecutor, build_cases, cgroups, isolation, run_cases
 from earthbench.publishing.board.tables import stamp
 from earthbench.registry import load_plugin_file
-from earthbench.store import Store, load_runs
-from earthbench.suite import parse_suite
+from earthbench.results.store import Store, load_runs
+from earthbench.results.suite import parse_suite
 
 from helpers import tiny_suite_toml
 
@@ -97,7 +97,7 @@ def test_the_cpu_budget_ends_a_case_that_uses_more(tmp_path):
 def test_without_isolation_a_run_says_so_and_is_stamped_none(tmp_path):
     import io
 
-    from earthbench.progress import Progress
+    from earthbench.results.progress import Progress
 
     suite = parse_suite(tiny_suite_toml("bare", seeds="0-1"))
     load_plugin_file(FAULTY)
@@ -249,7 +249,7 @@ sys.path.insert(0, sys.argv[1])
 from helpers import tiny_suite_toml
 from earthbench.running.harness import build_cases, isolation, run_case
 from earthbench.registry import load_plugin_file
-from earthbench.suite import parse_suite
+from earthbench.results.suite import parse_suite
 load_plugin_file(sys.argv[2])
 out = {"isolation": isolation.describe()}
 for name in ("h-forge-report", "h-tree-memory", "h-env-leak"):

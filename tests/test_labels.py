@@ -7,7 +7,7 @@ import pytest
 
 from earthbench.cli import main
 from earthbench.publishing.compare import CompareError, Selector
-from earthbench.labels import config_labels, label
+from earthbench.results.labels import config_labels, label
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 
@@ -32,7 +32,7 @@ def two_configs(tmp_path_factory):
 
 
 def test_an_ambiguous_selector_lists_the_candidates_by_label(two_configs):
-    from earthbench.store import load_runs
+    from earthbench.results.store import load_runs
 
     runs = load_runs(two_configs)
     with pytest.raises(CompareError) as err:
@@ -51,7 +51,7 @@ def test_runs_summary_and_compare_show_labels(two_configs, capsys):
     assert "A: greedy[closed_loop] 1.1" in out and "B: greedy[min_fill=0.5] 1.1" in out
     assert "with 4 scenario(s) no paired test can tell two planners apart at α = 0.05" in out
     from earthbench.cli.run import print_summary
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     with Store(two_configs) as store:
         print_summary(store, "pubtest")
@@ -62,7 +62,7 @@ def test_runs_summary_and_compare_show_labels(two_configs, capsys):
 
 def test_seeds_summary_counts_only_the_selection_and_an_empty_one_is_an_error(two_configs, capsys):
     from earthbench.cli.run import print_summary
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     with Store(two_configs) as store:
         print_summary(store, "pubtest", seeds=(0,))

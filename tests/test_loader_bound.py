@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from earthbench import Charge, Dump, Move, Plan, Pose, Scenario, judge
 from earthbench.cut import charge_along
-from earthbench.scoring import time_to_target
+from earthbench.results.scoring import time_to_target
 from earthbench_metrics import lower_bound_time_to_target
 from earthbench_planners.greedy.loader import GreedyLoader
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader

@@ -10,8 +10,8 @@ import pytest
 from earthbench import Charge, Scenario, judge
 from earthbench.errors import ScenarioError
 from earthbench.registry import PLANNERS, TERRAINS
-from earthbench.suite import load_suite
-from earthbench.scoring import evaluate
+from earthbench.results.suite import load_suite
+from earthbench.results.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.loader import GreedyLoader, nearest_candidates
 from earthbench_planners.loader_cycle import LoaderPlanConfig, CycleBuilder, zero_contour

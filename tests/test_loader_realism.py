@@ -9,7 +9,7 @@ import pytest
 
 from earthbench import judge
 from earthbench.running.harness.steps import run_closed_loop
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench.sensing import observe
 from earthbench.soil import draw
 from earthbench.world import Scenario, Sensing

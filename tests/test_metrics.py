@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from earthbench import Dig, Dump, Plan, Prediction, judge
 from earthbench.motion import swing_time
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 
 

@@ -33,8 +33,8 @@ SCRIPT = '''
 import earthbench
 from earthbench import Plan, Planner
 from earthbench.running.harness import run_suite
-from earthbench.store import Store
-from earthbench.suite import load_suite
+from earthbench.results.store import Store
+from earthbench.results.suite import load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 

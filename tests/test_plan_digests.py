@@ -23,7 +23,7 @@ import pytest
 
 from earthbench.plan import Plan
 from earthbench.registry import PLANNERS
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 
 GOLDEN = Path(__file__).parent / "golden" / "plan_digests.json"
 SUITES = ("smoke", "quick", "pile")

@@ -13,7 +13,7 @@ from earthbench.errors import PluginError
 from earthbench.running.harness import build_cases, isolation, run_case
 from earthbench.running.harness.visible import check_shared, shared_folders
 from earthbench.planner import SharedFolder
-from earthbench.suite import parse_suite
+from earthbench.results.suite import parse_suite
 
 from helpers import tiny_suite_toml
 

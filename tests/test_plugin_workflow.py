@@ -12,7 +12,7 @@ import pytest
 
 from earthbench.cli import main
 from earthbench.errors import EarthbenchError
-from earthbench.store import load_runs
+from earthbench.results.store import load_runs
 
 
 pytestmark = pytest.mark.usefixtures("forget_test_planners")

@@ -1,6 +1,6 @@
 """No prefix of a plan scores or ranks better than the plan: the scoring rule cannot be gamed by loading less.
 
-The rule (:mod:`earthbench.scoring`) is checked three ways: under hypothesis on load curves, on
+The rule (:mod:`earthbench.results.scoring`) is checked three ways: under hypothesis on load curves, on
 every prefix of real plans of the built-in planners (each prefix judged by the referee), and on
 the hostile wrapper of issue 35 (``tests/plugins/truncating_planners.py``) through the
 leaderboard's ranking and ``compare``.
@@ -17,14 +17,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from earthbench.aggregate import aggregate
+from earthbench.results.aggregate import aggregate
 from earthbench.cli import main
 from earthbench.running.harness.environment import environment
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS, load_plugin_file
-from earthbench.scoring import DEFAULT_SUCCESS_THRESHOLD, evaluate, is_success, run_order, time_per_target
-from earthbench.store import Store, load_runs, suite_members
-from earthbench.suite import load_suite
+from earthbench.results.scoring import DEFAULT_SUCCESS_THRESHOLD, evaluate, is_success, run_order, time_per_target
+from earthbench.results.store import Store, load_runs, suite_members
+from earthbench.results.suite import load_suite
 from earthbench.publishing.verify import prefix_violations
 from earthbench_metrics import lower_bound_time_per_m3
 from helpers.leaderboard import suite_of
@@ -96,7 +96,7 @@ def test_the_prefix_check_catches_the_old_rule(monkeypatch):
     """The check can fail: under 0.1.0's rule (time to target over the volume loaded, capped at the
     target) some prefix of greedy's plans on `paper-extensive` seeds 0-2 scores better (the
     truncation wrapper's gain), and the check names it."""
-    import earthbench.scoring as scoring
+    import earthbench.results.scoring as scoring
 
     def old_rule(scenario, plan, verdict, threshold=DEFAULT_SUCCESS_THRESHOLD):
         m = evaluate(scenario, plan, verdict, threshold)
@@ -135,7 +135,7 @@ def test_no_prefix_of_the_optimising_planners_ranks_better(planner):
 def wrapper_store(tmp_path_factory):
     """Greedy and the truncation wrapper on 10 scenarios, scored by the one rule and stored through the store's API."""
     from earthbench.running.harness import Case, CaseResult, PlannerRef
-    from earthbench.scoring import score
+    from earthbench.results.scoring import score
 
     load_plugin_file(PLUGIN)
     suite = suite_of(5, name="truncation", targets=(2.0, 3.0))
@@ -202,7 +202,7 @@ def test_a_store_written_under_the_old_rule_reads_under_the_new(wrapper_store, t
     runs = load_runs(old)
     assert np.isinf(runs.loc[runs.planner == "h-truncated-greedy", "time_per_target_m3"]).all()
     assert np.isfinite(runs.loc[runs.planner == "greedy", "time_per_target_m3"]).all()
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     with Store(old, read_only=True) as store:
         assert not audit(store).problems()

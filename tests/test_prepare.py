@@ -13,11 +13,11 @@ import pytest
 
 from earthbench.cli import main
 from earthbench.running.harness import LocalExecutor, build_cases, run_cases
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.running.harness.prepare import PrepareError, ensure, find, prepare_key
 from earthbench.registry import load_plugin_file
-from earthbench.store import SCHEMA_VERSION, Store, load_runs
-from earthbench.suite import parse_suite
+from earthbench.results.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.results.suite import parse_suite
 from earthbench.world import Budget
 
 from helpers import tiny_suite_toml
@@ -168,7 +168,7 @@ def test_a_board_shows_the_preparation_beside_the_solve_times(tmp_path):
 
 def test_a_suite_can_run_without_preparations(tmp_path):
     from earthbench.errors import SuiteError
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
 
     toml = tiny_suite_toml().replace('track = "backhoe"', 'track = "backhoe"\nprepare = false')
     suite = parse_suite(toml)

@@ -14,8 +14,8 @@ from earthbench.running.harness import build_cases, run_case
 from earthbench.running.harness.prepare import PrepareError, PrepareStatus, ensure, estimate, forget, last_recorded
 from earthbench.running.harness.protocol import PROGRESS_BURST, PROGRESS_RATE
 from earthbench.planner import PrepareProgress
-from earthbench.records import PlannerRef
-from earthbench.suite import parse_suite
+from earthbench.results.records import PlannerRef
+from earthbench.results.suite import parse_suite
 from earthbench.world import Budget
 
 from helpers import tiny_suite_toml

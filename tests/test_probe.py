@@ -21,12 +21,12 @@ from pathlib import Path
 
 import pytest
 
-import earthbench.scoring
+import earthbench.results.scoring
 from earthbench.cli import main
 from earthbench.errors import PluginError
 from earthbench.running.harness import probe
 from earthbench.running.harness.prepare import prepare_key
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.registry import plugin_module_name
 
 HOSTILE = '''
@@ -36,14 +36,14 @@ try:
         f.write(str(os.getpid()) + "\\n")
 except OSError:
     pass
-import earthbench.scoring
+import earthbench.results.scoring
 
 
 def _forged(*args, **kwargs):
     raise RuntimeError("forged scoring")
 
 
-earthbench.scoring.score = _forged
+earthbench.results.scoring.score = _forged
 from dataclasses import dataclass
 from earthbench import Plan, Planner
 
@@ -100,7 +100,7 @@ def runs(db: Path) -> list[tuple]:
 def test_a_hostile_plugin_file_never_runs_in_the_earthbench_process(caches, capsys):
     tmp = caches
     plugin, marker = hostile_file(tmp)
-    original = earthbench.scoring.score
+    original = earthbench.results.scoring.score
     db, p = tmp / "r.db", ["--plugin", str(plugin)]
     sc, plan = tmp / "sc.json", tmp / "plan.json"
     commands = [
@@ -127,7 +127,7 @@ def test_a_hostile_plugin_file_never_runs_in_the_earthbench_process(caches, caps
         out = capsys.readouterr()
         assert code in (0, 1), (argv, out.err)
         assert not imported_here(marker, os.getpid()), argv
-    assert earthbench.scoring.score is original
+    assert earthbench.results.scoring.score is original
     assert plugin_module_name(plugin) not in sys.modules  # (other tests load other hostile files in-process)
     stored = runs(db)
     assert len(stored) >= 4 and all(r[:3] == ("hostile", "ok", 0) for r in stored)  # the referee's figures
@@ -258,7 +258,7 @@ def test_a_probe_that_dies_is_a_clear_error_and_imports_nothing_here(caches, cap
 
 def test_a_given_plugin_file_that_fails_stops_a_suite_of_every_planner(caches):
     from earthbench.running.harness import build_cases
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
 
     plugin = caches / "broken.py"
     plugin.write_text("raise ImportError('no such thing')\n")

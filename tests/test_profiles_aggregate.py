@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from earthbench.aggregate import aggregate
+from earthbench.results.aggregate import aggregate
 from earthbench.profiles import cost_matrix, performance_ratios, profile
 
 INF = math.inf

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 import earthbench
-from earthbench.provenance import build_text, plugin
+from earthbench.results.provenance import build_text, plugin
 
 ROOT = Path(__file__).parents[1]
 

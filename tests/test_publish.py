@@ -18,7 +18,7 @@ from earthbench.publishing.merge import MergeError, merge
 from earthbench.publishing.board.selection import seed_list
 from earthbench.publishing.board.tables import md_escape
 from earthbench.publishing.publish import publish
-from earthbench.store import load_runs
+from earthbench.results.store import load_runs
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 
@@ -261,7 +261,7 @@ def test_merge_two_machines(tmp_path):
     both = pd.concat([_table(a), _table(b)]).sort_values(["scenario_digest", "planner"]).reset_index(drop=True)
     pd.testing.assert_frame_equal(merged, both)
     # plans survive, byte for byte
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     with Store(tmp_path / "out.db", create=False) as out, Store(a, create=False) as src:
         got = {(r["scenario_digest"], r["planner"]): out.plan_json(r["id"]) for r in out.query()}

@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 
 from earthbench import Plan, Scenario, judge
 from earthbench.errors import ScenarioError, SuiteError
-from earthbench.scoring import score
+from earthbench.results.scoring import score
 from earthbench.sensing import ANONYMOUS_ID, observe, visible_cells
 from earthbench.soil import MATERIALS, draw, nominal, reach_cells, slump, slump_cells
-from earthbench.suite import load_suite, parse_suite
+from earthbench.results.suite import load_suite, parse_suite
 from earthbench.world import Heightmap, Pose, Sensing, Soil
 from helpers import block_scenario, dig_dump_plan
 

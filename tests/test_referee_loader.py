@@ -21,7 +21,7 @@ from earthbench import Budget, Charge, Dig, Dump, Heightmap, Machines, Move, Pla
 from earthbench.errors import PlanFormatError
 from earthbench.cut import apply_cut, charge_cut
 from earthbench.world import LoaderSpec
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
 
 START = Pose(12.8, 5.0, 0.0)

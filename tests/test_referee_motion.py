@@ -14,7 +14,7 @@ from test_referee_loader import arc, loader_scenario
 
 from earthbench import Charge, Dig, Dump, Move, Plan, Pose, judge
 from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, poses_at
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader
 
 

@@ -13,7 +13,7 @@ import pytest
 from earthbench.plan import Plan
 from earthbench.referee import judge
 from earthbench.running.playback import QUANTUM, pick_runs, replay, replay_data, viewer_html
-from earthbench.store import Store
+from earthbench.results.store import Store
 from helpers.leaderboard import EVIL, Behaviour, fill_store, ref, standard_behaviours, suite_of
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
@@ -112,7 +112,7 @@ def _prefix_frames(sc, plan):
 
 
 def _loader_case():
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
     from earthbench_planners.singh_cannon.loader import SinghCannonLoader
 
     sc = load_suite("pile").scenarios[0]

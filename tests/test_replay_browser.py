@@ -17,7 +17,7 @@ from chromium import chromium_page, needs_browser
 from earthbench.plan import Plan
 from earthbench.publishing.publish import publish
 from earthbench.running.playback import replay
-from earthbench.store import Store
+from earthbench.results.store import Store
 from helpers.leaderboard import Behaviour, fill_store, ref, standard_behaviours, suite_of
 
 pytestmark = needs_browser

@@ -12,7 +12,7 @@ import pytest
 from earthbench.cli import main
 from earthbench.cli.rescore import Account
 from earthbench.referee import RULES_VERSION
-from earthbench.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.results.store import SCHEMA_VERSION, Store, load_runs
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ import psutil
 import pytest
 
 from earthbench.running.harness import LocalExecutor, build_cases, make_slots, run_case, run_cases
-from earthbench.store import Store, load_runs
-from earthbench.suite import parse_suite
+from earthbench.results.store import Store, load_runs
+from earthbench.results.suite import parse_suite
 
 from helpers import case_processes, tiny_suite_toml
 
@@ -156,7 +156,7 @@ def test_start_up_is_bounded_too(tmp_path):
 def test_progress_line_counts_reasons_and_gives_an_eta():
     import io
 
-    from earthbench.progress import Progress
+    from earthbench.results.progress import Progress
     from earthbench.running.harness import CaseResult
 
     (case,), _ = build_cases(tiny_suite(), ["greedy"])

@@ -11,12 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from earthbench.aggregate import aggregate
+from earthbench.results.aggregate import aggregate
 from earthbench.cli import main
 from earthbench.plan import Dump, Plan
 from earthbench.publishing.publish import publish
 from earthbench.referee import Verdict, judge
-from earthbench.scoring import evaluate, is_success
+from earthbench.results.scoring import evaluate, is_success
 from earthbench.world import Task
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 from earthbench_metrics import time_to_target
@@ -179,7 +179,7 @@ def test_golden_tables_on_a_fixture_store(tmp_path):
 def test_run_summary_uses_the_leaderboard_aggregates(tmp_path, capsys):
     db = fill_store(tmp_path / "r.db", suite_of(2), [Behaviour(ref("greedy"), solve_s=0.5), Behaviour(ref("half"), keep=0.5)])
     from earthbench.cli.run import print_summary
-    from earthbench.store import Store, load_runs
+    from earthbench.results.store import Store, load_runs
 
     with Store(db) as store:
         print_summary(store, "pubtest")

@@ -22,16 +22,16 @@ from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 from earthbench.cli import main
 from earthbench.errors import EarthbenchError
-from earthbench.generalisation import gap_table
+from earthbench.results.generalisation import gap_table
 from earthbench.running.harness import build_cases, run_case
-from earthbench.identity import variant_name
+from earthbench.results.identity import variant_name
 from earthbench.publishing.merge import MergeError, merge
 from earthbench.registry import PLANNERS, load_plugin_file
-from earthbench.scoring import score
+from earthbench.results.scoring import score
 from earthbench.seal import SealError, SealKey, SiteTransform, public_name
 from earthbench.sensing import ANONYMOUS_ID, observe
-from earthbench.store import SCHEMA_VERSION, Store, load_runs
-from earthbench.suite import load_suite, new_key, open_sealed
+from earthbench.results.store import SCHEMA_VERSION, Store, load_runs
+from earthbench.results.suite import load_suite, new_key, open_sealed
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 PLUGIN = str(Path(__file__).parent / "plugins" / "sealing_planners.py")
@@ -356,10 +356,10 @@ def test_the_gap_table_uses_the_boards_intervals_and_counts_a_run_short_of_the_t
 
 
 def test_new_key_and_open_sealed_still_import_from_the_seal_with_a_warning():
-    """They moved to earthbench.suite (they draw a suite; the seal no longer imports it)."""
+    """They moved to earthbench.results.suite (they draw a suite; the seal no longer imports it)."""
     import earthbench.seal
-    import earthbench.suite
+    import earthbench.results.suite
 
     for name in ("new_key", "open_sealed"):
         with pytest.warns(DeprecationWarning, match=rf"earthbench\.seal\.{name} moved to earthbench\.suite\.{name}"):
-            assert getattr(earthbench.seal, name) is getattr(earthbench.suite, name)
+            assert getattr(earthbench.seal, name) is getattr(earthbench.results.suite, name)

@@ -13,7 +13,7 @@ from earthbench import PLANNERS, judge
 from earthbench.plan import Move, Plan
 from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.world import Site
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
 from earthbench_planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
 from earthbench_terrains.bench import bench

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from earthbench import judge
 from earthbench.sensing import observe
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
 from earthbench_planners.stability import TILT_MARGIN, margins, noise_sigma

@@ -36,7 +36,7 @@ def test_a_case_process_loads_its_planner_without_the_registry_or_the_other_trac
             f"load_planner_class({target!r}, {name!r})(); print(json.dumps(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(json.loads(out.stdout))
-    assert not loaded & {"importlib.metadata", "earthbench.registry", "earthbench.store", "earthbench.running.harness.sandbox"}
+    assert not loaded & {"importlib.metadata", "earthbench.registry", "earthbench.results.store", "earthbench.running.harness.sandbox"}
     other = "earthbench.referee.loader" if "loader" not in name else "earthbench.referee.backhoe"
     assert other not in loaded
 

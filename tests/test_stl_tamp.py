@@ -314,7 +314,7 @@ def test_candidate_areas_do_not_depend_on_where_the_site_lies(turns, mirror, shi
     origin must tile into the same areas. Up to stl-tamp 0.10.0 a 12 m map measured 11.999999999999998 m
     there and lost a row of tiles (17 areas became 12 or 14), and a one-tile dig area lost its tile."""
     from earthbench.seal import SiteTransform
-    from earthbench.suite import load_suite
+    from earthbench.results.suite import load_suite
 
     sc = load_suite("smoke").scenarios[0]
     moved = SiteTransform(turns, mirror, shift).apply(sc)

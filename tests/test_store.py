@@ -10,8 +10,8 @@ import pytest
 
 from earthbench.errors import StoreError
 from earthbench.running.harness import Case, CaseResult, PlannerRef
-from earthbench.store import MIGRATIONS, SCHEMA_VERSION, Store, load_runs
-from earthbench.suite import parse_suite
+from earthbench.results.store import MIGRATIONS, SCHEMA_VERSION, Store, load_runs
+from earthbench.results.suite import parse_suite
 
 SUITE = """
 name = "st"
@@ -177,7 +177,7 @@ def test_a_spot_check_table_made_before_it_was_versioned_keeps_its_rows(tmp_path
     """``earthbench verify --sample`` created ``spot_checks`` itself before schema version 7, at
     first without ``context``: such a store catches up without losing a check, and its checks
     read back as they were written."""
-    from earthbench.labels import latest_spot_checks
+    from earthbench.results.labels import latest_spot_checks
 
     path = tmp_path / "v6.db"
     Store(path).close()

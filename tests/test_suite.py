@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from earthbench.errors import SuiteError, UnknownNameError
-from earthbench.suite import known_suites, load_suite, parse_seed_range, parse_suite
+from earthbench.results.suite import known_suites, load_suite, parse_seed_range, parse_suite
 
 GOOD = """
 name = "mini"

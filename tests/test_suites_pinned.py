@@ -12,7 +12,7 @@ import re
 import pytest
 
 from earthbench.errors import SuiteError
-from earthbench.suite import load_suite, parse_suite
+from earthbench.results.suite import load_suite, parse_suite
 from earthbench_terrains.common import dig_area_volume
 
 PINNED = {

@@ -14,8 +14,8 @@ import pytest
 
 from earthbench.cli import COMMANDS, main
 from earthbench.running.harness import Case, PlannerRef, run_case
-from earthbench.store import load_runs
-from earthbench.suite import load_suite
+from earthbench.results.store import load_runs
+from earthbench.results.suite import load_suite
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 pytestmark = pytest.mark.usefixtures("forget_test_planners")
@@ -25,8 +25,8 @@ SCRIPT_HEAD = '''
 import earthbench
 from earthbench import Plan, Planner
 from earthbench.running.harness import run_suite
-from earthbench.store import Store
-from earthbench.suite import load_suite
+from earthbench.results.store import Store
+from earthbench.results.suite import load_suite
 
 
 @earthbench.register_planner
@@ -293,7 +293,7 @@ def test_stored_scenarios_are_never_read_as_file_names(tmp_path):
     """A forged store's scenario document that names a file on the verifying machine is not read."""
     import zlib
 
-    from earthbench.store import Store
+    from earthbench.results.store import Store
 
     db = fill_store(tmp_path / "f.db", suite_of(1), [Behaviour(ref("greedy"))])
     target = tmp_path / "elsewhere.json"

@@ -12,7 +12,7 @@ import pytest
 from earthbench import PLANNERS, judge
 from earthbench.plan import Dig, Move
 from earthbench.rules import arm_shadow, overlap_area
-from earthbench.scoring import evaluate
+from earthbench.results.scoring import evaluate
 from earthbench_planners.truck_stands import TruckStands
 from earthbench_terrains.bench import bench
 

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from earthbench.cli import main
 from earthbench.publishing.merge import MergeError, merge
-from earthbench.store import Store, load_runs
+from earthbench.results.store import Store, load_runs
 from earthbench.registry import PLANNERS
 from earthbench.publishing.verify import Judgement, audit, differences, rejudge, same
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of

@@ -14,8 +14,8 @@ import pytest
 
 from earthbench.running.harness import LocalExecutor, build_cases, run_cases
 from earthbench.registry import load_plugin_file
-from earthbench.store import Store, load_runs
-from earthbench.suite import parse_suite
+from earthbench.results.store import Store, load_runs
+from earthbench.results.suite import parse_suite
 
 from helpers import case_processes, tiny_suite_toml
 
@@ -119,7 +119,7 @@ def test_case_folders_of_a_killed_harness_are_cleared_by_the_next(tmp_path):
         "import sys; sys.path.insert(0, sys.argv[1]); from helpers import case_processes, tiny_suite_toml\n"
         "from earthbench.running.harness import build_cases, run_case\n"
         "from earthbench.registry import load_plugin_file\n"
-        "from earthbench.suite import parse_suite\n"
+        "from earthbench.results.suite import parse_suite\n"
         "load_plugin_file(sys.argv[2])\n"
         "(case,), _ = build_cases(parse_suite(tiny_suite_toml('c')), ['t-fast'], plugins=[sys.argv[2]])\n"
         "print(run_case(case).reason)\n"

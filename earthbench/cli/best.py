@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 from ._common import plain
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..suite import Suite
+    from ..results.suite import Suite
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -46,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..publishing.best import BestError
-    from ..suite import load_suite
+    from ..results.suite import load_suite
 
     if args.action == "check":
         if args.db or args.plans:
@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _store_suites(db: str) -> list[str]:
-    from ..store import Store
-    from ..suite import known_suites
+    from ..results.store import Store
+    from ..results.suite import known_suites
 
     with Store(db, create=False, read_only=True) as store:
         return [s for s in store.run_suites() if s in known_suites()]
@@ -70,7 +70,7 @@ def _store_suites(db: str) -> list[str]:
 
 def _update(args: argparse.Namespace, suites: list[Suite]) -> int:
     from ..publishing.best import file_candidates, store_candidates, update
-    from ..store import Store
+    from ..results.store import Store
 
     refused_files = 0
     for suite in suites:

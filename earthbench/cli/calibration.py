@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..calibration import calibration
+from ..results.calibration import calibration
 from ..classes import machine_class
 
 
@@ -42,5 +42,5 @@ def run(args: argparse.Namespace) -> int:
     for name in uncal:
         print(f"\n{name}: uncalibrated, compared with {machine_class(name).compared_with}")
     print(f"\n{len(rows)} rows; {outside} outside their band. Figures: the referee's judgement of a constructed cycle plan "
-          "(earthbench.calibration); cycles in s, fills as loose m³ ÷ heaped capacity.")
+          "(earthbench.results.calibration); cycles in s, fills as loose m³ ÷ heaped capacity.")
     return 1 if outside else 0

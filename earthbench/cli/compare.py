@@ -20,7 +20,7 @@ import argparse
 import re
 import sys
 
-from ..store import Store, default_db
+from ..results.store import Store, default_db
 from ._common import check_filters, plain, refuse_unstored
 
 
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import UnknownNameError
     import pandas as pd
 
-    from ..store import check_one_rules, load_runs
+    from ..results.store import check_one_rules, load_runs
 
     metrics = tuple(args.metric) or DEFAULT_METRICS
     guard = tuple(m.strip() for m in args.fail_on_regression.split(",") if m.strip())

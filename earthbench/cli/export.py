@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import shlex
 
-from ..store import default_db
+from ..results.store import default_db
 from ._common import plain
 
 

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..store import default_db
+from ..results.store import default_db
 from ._common import check_filters, plain
 
 #: Where a board goes without ``--out``: never the clone's tracked ``leaderboard/``, which a plain run would overwrite.
@@ -61,9 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..publishing.publish import publish
-    from ..suite import parse_seed_range
+    from ..results.suite import parse_seed_range
 
-    from ..store import Store
+    from ..results.store import Store
 
     t0 = time.perf_counter()
     with Store(args.db, create=False) as store:
@@ -106,7 +106,7 @@ def _checked_keys(db: str, paths: list[str]) -> list[SealKey]:
     """Each key file read and checked against the store's sealed draw; a key that does not open
     its draw there is an error, and nothing is published."""
     from ..seal import SealError, SealKey
-    from ..store import Store
+    from ..results.store import Store
     from ..publishing.verify import check_seal
 
     keys = [SealKey.read(p) for p in paths]

@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     planner = cls(**overrides)
     if cls.prepares():  # its preparation on this machine, if there is one (never run here: `earthbench prepare`)
-        from ..records import PlannerRef
+        from ..results.records import PlannerRef
         from ..running.harness.prepare import find
 
         found = find(PlannerRef.resolve(args.planner, overrides))
@@ -71,7 +71,7 @@ def _fenced(args: argparse.Namespace) -> int:
     from ..errors import EarthbenchError
     from ..running.harness.prepare import find
     from ..running.harness.run import run_case
-    from ..records import Case
+    from ..results.records import Case
 
     ref = resolve(args.planner, parse_config(args.config, info(args.planner)))
     scenario = load_scenario(args)

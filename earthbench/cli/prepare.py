@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     overrides = parse_config(args.config, info(args.planner)) if args.config else {}
     if args.suite:
-        from ..suite import load_suite
+        from ..results.suite import load_suite
 
         suite = load_suite(args.suite)
         budget = suite.budget

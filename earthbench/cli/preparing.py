@@ -43,7 +43,7 @@ class PrepareDisplay:
     def __init__(self, stream: TextIO | None = None, live: bool | None = None):
         self.stream = stream or sys.stderr
         # the line's own controls (redraw in place) go to the terminal itself, its text through
-        # printable() (as the run's progress line, earthbench.progress)
+        # printable() (as the run's progress line, earthbench.results.progress)
         self.terminal: TextIO = getattr(self.stream, "raw", self.stream)
         self.live = self.stream.isatty() if live is None else live
         self.showing = False

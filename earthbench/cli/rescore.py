@@ -18,7 +18,7 @@ import argparse
 import sys
 from collections import Counter
 
-from ..store import Store, decompress, default_db, stored_steps
+from ..results.store import Store, decompress, default_db, stored_steps
 from ..publishing.verify import rejudge
 from ._common import check_filters, plain
 

@@ -17,8 +17,8 @@ from typing import Any
 from ..errors import EarthbenchError, SuiteError
 from ..running.harness import REASONS, LocalExecutor, build_cases, run_cases
 from ..running.harness.orchestrate import check_code
-from ..store import DEFAULT_DB, Store, default_db, load_runs, suite_members
-from ..suite import load_suite, parse_seed_range
+from ..results.store import DEFAULT_DB, Store, default_db, load_runs, suite_members
+from ..results.suite import load_suite, parse_seed_range
 from ._common import add_config_arg, add_plugin_arg, load_plugins, parse_config, plural
 from .preparing import PrepareDisplay
 from .runs import db_option, failure_filters
@@ -79,10 +79,10 @@ def print_summary(store: Store, suite: str, planners: list[str] | None = None, f
                   seeds: tuple[int, ...] | None = None) -> None:
     """A row per planner configuration of everything stored for ``suite`` (only the scenarios of
     ``seeds`` when given: runs and denominators alike): the leaderboard's aggregates
-    (:func:`earthbench.aggregate.aggregate`), its intervals in brackets and its wording."""
+    (:func:`earthbench.results.aggregate.aggregate`), its intervals in brackets and its wording."""
     import pandas as pd
 
-    from ..aggregate import RANK_ALPHA, aggregate, ci_text
+    from ..results.aggregate import RANK_ALPHA, aggregate, ci_text
     from ..stats import INTERVAL_NOTE, min_separating_n, separation_note
 
     runs = load_runs(store, suite=suite)
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
     if args.sealed:
         from ..seal import SealKey
-        from ..suite import open_sealed
+        from ..results.suite import open_sealed
 
         suite = open_sealed(suite, SealKey.read(args.sealed))
     if args.config:
@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
                   f"as each case gets {suite.budget.cores} cores of its own and this machine lets earthbench use "
                   f"{plural(len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1, 'core')}",
                   file=sys.stderr)
-        from ..progress import Progress
+        from ..results.progress import Progress
 
         progress = Progress(len(cases), quiet=args.quiet, run_id=lambda case: store.run_id(case.key),
                             runs_command=f"earthbench runs{db_option(args.db)}")

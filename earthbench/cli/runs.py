@@ -10,9 +10,9 @@ import shlex
 import sys
 from typing import Any
 
-from ..records import REASONS
-from ..scoring import is_success, restate
-from ..store import DEFAULT_DB, Store, default_db, suite_members
+from ..results.records import REASONS
+from ..results.scoring import is_success, restate
+from ..results.store import DEFAULT_DB, Store, default_db, suite_members
 from ._common import check_filters
 
 HELP = """List the runs stored in the results database, newest first, with filters; or, with --id N,
@@ -62,17 +62,17 @@ def _cell(v: object) -> str:
 
 
 def labels_of(store: Store) -> dict[tuple[str, str], str]:
-    """(planner, config hash) → the configuration's readable label (:mod:`earthbench.labels`), over the store's configurations."""
+    """(planner, config hash) → the configuration's readable label (:mod:`earthbench.results.labels`), over the store's configurations."""
     import pandas as pd
 
-    from ..labels import config_labels
+    from ..results.labels import config_labels
 
     return config_labels(pd.DataFrame(store.planner_configs(), columns=["planner", "config_hash", "config"]))
 
 
 def _values(r: Any, threshold: float | None, labels: dict[tuple[str, str], str] | None = None) -> dict[str, Any]:
     """A stored row's columns; metrics kept only in its JSON (``time_per_target_m3``) filled in, the configuration's
-    label, and with a suite named, success under that suite's threshold (:func:`earthbench.scoring.is_success`)."""
+    label, and with a suite named, success under that suite's threshold (:func:`earthbench.results.scoring.is_success`)."""
     metrics = restate(json.loads(r["metrics"])) if r["metrics"] else {}
     d = {c: r[c] if c in r.keys() else metrics.get(c) for c in COLUMNS}
     d["configuration"] = (labels or {}).get((r["planner"], r["config_hash"]), r["planner"])
@@ -127,7 +127,7 @@ def _rows(store: Store, args: argparse.Namespace) -> list[dict[str, Any]]:
 def _seed_digests(store: Store, args: argparse.Namespace) -> set[str]:
     """The scenario digests of ``--suite``'s scenarios of ``--seeds``."""
     from ..errors import EarthbenchError
-    from ..suite import parse_seed_range
+    from ..results.suite import parse_seed_range
 
     if not args.suite:
         raise EarthbenchError("--seeds needs --suite: seeds are counted within a suite")

@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..suite import load_suite, new_key
+    from ..results.suite import load_suite, new_key
 
     suite = load_suite(args.suite)
     key, sealed = new_key(suite)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..suite import known_suites, load_suite
+from ..results.suite import known_suites, load_suite
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..errors import PlanFormatError
 from ..plan import Plan
 from ..referee import judge
-from ..scoring import DEFAULT_SUCCESS_THRESHOLD
+from ..results.scoring import DEFAULT_SUCCESS_THRESHOLD
 from ..world import Scenario
 
 
@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..scoring import evaluate
+    from ..results.scoring import evaluate
 
     scenario = Scenario.from_json(Path(args.scenario))
     # the argument is only ever a file: its content is judged as a plan, never followed as a path

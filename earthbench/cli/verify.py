@@ -49,7 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..seal import SealKey
-    from ..store import Store
+    from ..results.store import Store
 
     load_plugins(args)
     keys = [SealKey.read(k) for k in args.key]

@@ -31,8 +31,8 @@ import numpy as np
 import pandas as pd
 
 from ..errors import EarthbenchError
-from ..store import Store
-from ..suite import Suite
+from ..results.store import Store
+from ..results.suite import Suite
 from .verify import rejudge, same
 from ..world import Scenario
 

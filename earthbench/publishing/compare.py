@@ -51,7 +51,7 @@ class CompareError(EarthbenchError):
 @dataclass(frozen=True)
 class Selector:
     """``PLANNER[@VERSION][#CONFIG_HASH_PREFIX]`` or ``LABEL[@VERSION]`` (e.g. ``greedy[closed_loop]@1.1``,
-    :mod:`earthbench.labels`); None parts match anything. A planner name that is also the label of one
+    :mod:`earthbench.results.labels`); None parts match anything. A planner name that is also the label of one
     of its configurations (the one at its defaults) names that configuration."""
 
     planner: str | None = None
@@ -68,7 +68,7 @@ class Selector:
 
     def pick(self, runs: pd.DataFrame, side: str) -> pd.DataFrame:
         """The runs of exactly one (planner, version, config); an error lists the choices otherwise."""
-        from ..labels import config_labels
+        from ..results.labels import config_labels
 
         names = config_labels(runs)
         label = pd.Series([names.get((str(p), str(c)), str(p)) for p, c in zip(runs["planner"], runs["config_hash"])],

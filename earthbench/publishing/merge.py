@@ -9,7 +9,7 @@ written; a new output is not even created) when:
 * a suite name has more than one digest across the output and the inputs (the suite file
   changed between machines), or a run is labelled with a suite digest that its store does
   not know — those rows would be published under the wrong suite;
-* a suite name is a registered suite's but its digest is not (:mod:`earthbench.identity`):
+* a suite name is a registered suite's but its digest is not (:mod:`earthbench.results.identity`):
   a different world under a known name (``as_variant`` stores it as ``NAME~variant-D``);
 * :func:`earthbench.publishing.verify.audit` finds a run that does not hold: its plan re-judged against
   its stored scenario document gives other referee figures (unless ``rescore``, which merges
@@ -39,10 +39,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .. import identity
+from ..results import identity
 from ..errors import StoreError, not_stored
-from ..records import Case, CaseResult, PlannerRef
-from ..store import LOAD_COLUMNS, Store, decompress, stored_steps
+from ..results.records import Case, CaseResult, PlannerRef
+from ..results.store import LOAD_COLUMNS, Store, decompress, stored_steps
 from .verify import Judgement, audit
 
 
@@ -273,7 +273,7 @@ def merge(out_path: str | Path, in_paths: Sequence[str | Path], *, rescore: bool
     Every incoming run is re-judged first; with ``rescore``, runs whose stored figures differ
     are merged with the re-judged ones (counted in ``rescored``) instead of refusing the merge.
     With ``as_variant``, an input's suite under a registered name with another digest is
-    stored as ``NAME~variant-D`` (:func:`earthbench.identity.variant_name`) instead of refused.
+    stored as ``NAME~variant-D`` (:func:`earthbench.results.identity.variant_name`) instead of refused.
     With ``skip_duplicates``, a run that is already in the output or an earlier input with the
     same plan and outcome (two machines' runs of a deterministic baseline) is left out, counted
     in ``duplicates``; a duplicate that differs still refuses the merge.

@@ -3,7 +3,7 @@
 :func:`publish` writes, for every suite in the store (or the ones asked for):
 
 * ``README.md`` — one table per suite and track, ranked by the rule stated above it
-  (:data:`earthbench.aggregate.RANKING_RULE`: the latest version of each planner, shared ranks
+  (:data:`earthbench.results.aggregate.RANKING_RULE`: the latest version of each planner, shared ranks
   where paired tests cannot separate neighbours), with a reproducibility stamp (project
   commits, suite digest, CPU models and cores, run dates, generation date), what each figure
   rests on (referee figures re-judgeable from the stored plans; solve times from the machine
@@ -12,11 +12,11 @@
   and per target, a history table of older versions, and the figures;
 * ``runs.csv`` — one row per run and suite it is published under (a run of ``paper-switch``
   also counts for ``standard``, which includes it), every column of
-  :func:`earthbench.store.load_runs`;
+  :func:`earthbench.results.store.load_runs`;
 * ``best.csv`` — with a folder of best known plans (``best``, :mod:`earthbench.publishing.best`): each kept
   scenario's bracket [target bound, best known time per target m³] and who produced the plan; the
   runs and tables then carry each run's ratio to its scenario's best known time (``× best known``);
-* ``summary.csv`` — :func:`earthbench.aggregate.aggregate` of those runs, every table (columns
+* ``summary.csv`` — :func:`earthbench.results.aggregate.aggregate` of those runs, every table (columns
   ``scope`` = suite | family | target and ``group``), medians and rates with their 95 % intervals
   (:data:`earthbench.stats.INTERVAL_NOTE`); a table with too few scenarios for any paired test to
   separate two planners has ``‡`` on its Rank heading and the stamp says so (:func:`earthbench.stats.separation_note`);
@@ -59,17 +59,17 @@ from typing import Any
 import pandas as pd
 
 from .. import compat
-from ..aggregate import SCOPES, aggregate, latest_versions
+from ..results.aggregate import SCOPES, aggregate, latest_versions
 from .best import bracket_lines, bracket_markdown, bracket_table, with_best_known
 from .board.figures import Renderer, figure_jobs
 from .board.page import html_page, replay_runs, run_rows
 from .board.selection import closed_configs, histories, limit_to_seeds, published_runs, shown_runs
 from .board.tables import (mark_mixed_solve_columns, markdown_page, production_note, slug, spreadsheet_safe, stamp, table_sections,
                            write_csv)
-from ..generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
-from ..labels import latest_spot_checks
+from ..results.generalisation import gap_table, markdown as gap_markdown, with_sealed_draws, write as write_gaps
+from ..results.labels import latest_spot_checks
 from ..running.scaling import SCALE_CAPTION, scale_section
-from ..store import Store, suite_members
+from ..results.store import Store, suite_members
 
 
 @dataclass
@@ -134,7 +134,7 @@ def publish(db: str | Path, out: str | Path = "leaderboard", suites: Sequence[st
         # the tables (intervals, paired tests) while the workers draw
         summary = aggregate(runs, members=members, scopes=SCOPES, all_versions=all_versions)
         result.runs, result.summary = runs, summary
-        gaps = gap_table(runs, members)  # sealed draws against the public suite (earthbench.generalisation)
+        gaps = gap_table(runs, members)  # sealed draws against the public suite (earthbench.results.generalisation)
         closed = closed_configs(runs)
         for sec in sections:
             ssum = summary[(summary["suite"] == sec["suite"]) & (summary["track"] == sec["track"])]

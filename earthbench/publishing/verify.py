@@ -31,12 +31,13 @@ from dataclasses import dataclass, field
 from datetime import datetime, UTC
 from typing import Any
 
-from .. import compat, labels
+from .. import compat
+from ..results import labels
 from ..errors import EarthbenchError, UnknownNameError
-from ..records import SpotCheck  # a record the store also reads; importable from here as before
+from ..results.records import SpotCheck  # a record the store also reads; importable from here as before
 from ..running.harness.steps import step_metrics
-from ..store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
-from ..suite import suite_digest
+from ..results.store import METRIC_COLUMNS, BlobTooLargeError, Store, decompress, stored_steps
+from ..results.suite import suite_digest
 from ..plan import Plan
 from ..world import Scenario
 
@@ -69,7 +70,7 @@ class Judgement:
 
 def _score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Any, dict[str, Any]]:
     """The core scoring entry point (referee verdict and every metric), called from this one place."""
-    from ..scoring import score
+    from ..results.scoring import score
 
     return score(scenario, plan_json, threshold)
 
@@ -104,11 +105,11 @@ def time_ordered_prefixes(plan: Plan) -> Iterator[Plan]:
 
 def prefix_violations(scenario: Scenario, plan: Plan, threshold: float) -> tuple[int, list[str]]:
     """Check docs/metrics.md's promise on one plan: no valid prefix of a valid plan has a lower time
-    per target m³, a success the plan lacks, or a better :func:`~earthbench.scoring.run_order`.
+    per target m³, a success the plan lacks, or a better :func:`~earthbench.results.scoring.run_order`.
     Returns how many valid prefixes were judged and one line per prefix that breaks it (an invalid
     prefix is never ranked, so it cannot rank better; an invalid plan's prefixes are only counted)."""
     from ..referee import judge
-    from ..scoring import evaluate, run_order
+    from ..results.scoring import evaluate, run_order
 
     m = evaluate(scenario, plan, judge(scenario, plan), threshold)
     full = run_order(m["success"], m["time_per_target_m3"], m["volume_ratio"])
@@ -167,7 +168,7 @@ def differences(row: Any, judged: Judgement) -> list[str]:
     except ValueError:
         stored = "unreadable"
     if isinstance(stored, dict):
-        from ..scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
+        from ..results.scoring import restate  # on first use, as the rest of the scoring (a case's start-up)
 
         restate(stored)  # a store written under the rule before issue 35 is not a tampered one
     fresh = judged.metrics
@@ -364,7 +365,7 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
     scenarios are the stored documents (their digests recomputed). Writes nothing.
     """
     from ..running.harness import LocalExecutor, isolation
-    from ..records import Case
+    from ..results.records import Case
     from ..running.harness.environment import environment  # the package attribute is the submodule once it is loaded
 
     if n < 1:
@@ -434,8 +435,8 @@ def spot_check(store: Store, n: int, *, seed: int = 0, suite: str | None = None,
 
 
 def suite_versions(store: Store) -> list[Any]:
-    """Every suite version ``store`` lists, as :mod:`earthbench.identity` reads it."""
-    from ..identity import Version
+    """Every suite version ``store`` lists, as :mod:`earthbench.results.identity` reads it."""
+    from ..results.identity import Version
 
     out = []
     for s in store.suite_versions():
@@ -446,8 +447,8 @@ def suite_versions(store: Store) -> list[Any]:
 
 
 def identity_problems(store: Store) -> list[str]:
-    """Every suite version of ``store`` stored under a name that is not its own (:mod:`earthbench.identity`)."""
-    from ..identity import problems
+    """Every suite version of ``store`` stored under a name that is not its own (:mod:`earthbench.results.identity`)."""
+    from ..results.identity import problems
 
     return problems(suite_versions(store))
 
@@ -470,7 +471,7 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     (on ``run_rows``); this is the cost sealing adds to verifying a store.
     """
     from ..seal import SealError
-    from ..suite import open_sealed, public_suite
+    from ..results.suite import open_sealed, public_suite
 
     out = SealCheck(key.name)
     try:
@@ -507,4 +508,4 @@ def check_seal(store: Store, key: Any) -> SealCheck:
     return out
 
 
-__getattr__ = compat.forward(__name__)  # machine_label, latest_spot_checks: moved to earthbench.labels (earthbench.compat)
+__getattr__ = compat.forward(__name__)  # machine_label, latest_spot_checks: moved to earthbench.results.labels (earthbench.compat)

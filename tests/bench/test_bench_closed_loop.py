@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 
 from earthbench.running.harness import build_cases, run_case
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.registry import load_plugin_file
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 
 PLUGIN = str(Path(__file__).parents[1] / "plugins" / "step_planners.py")
 

@@ -34,10 +34,10 @@ def store_2000(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("variant", ["with_intervals", "without_intervals"])
 def test_leaderboard_2000_runs(benchmark, store_2000, tmp_path, monkeypatch, variant):
     if variant == "without_intervals":
-        import earthbench.aggregate
+        import earthbench.results.aggregate
 
-        monkeypatch.setattr(earthbench.aggregate, "median_ci", lambda values: (float("nan"),) * 2)
-        monkeypatch.setattr(earthbench.aggregate, "rate_ci", lambda k, n: (float("nan"),) * 2)
+        monkeypatch.setattr(earthbench.results.aggregate, "median_ci", lambda values: (float("nan"),) * 2)
+        monkeypatch.setattr(earthbench.results.aggregate, "rate_ci", lambda k, n: (float("nan"),) * 2)
 
     def cpu() -> float:
         return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime

@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 from earthbench.publishing.merge import merge
-from earthbench.store import Store
+from earthbench.results.store import Store
 from earthbench.publishing.verify import audit
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.stl_tamp import StlTampPlanner, nlp_cache
 from earthbench_planners.stl_tamp.hierarchy import global_lattice, site_box
 from earthbench_planners.stl_tamp.model import PhaseNLP

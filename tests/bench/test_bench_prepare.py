@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pytest
 
-from earthbench.records import PlannerRef
+from earthbench.results.records import PlannerRef
 from earthbench.running.harness.prepare import find, forget, run
 from earthbench.world import Budget
 from earthbench_planners.stl_tamp import model

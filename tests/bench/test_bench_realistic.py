@@ -23,7 +23,7 @@ from earthbench import judge
 from earthbench.cut import cut_along, cut_level, path_cells
 from earthbench.sensing import observe
 from earthbench.soil import draw, slump, slump_box
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench.world import Sensing
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from earthbench import PLANNERS, judge
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 
 SIZES = ("rbf12x6", "rbf24x12", "rbf48x24", "rbf96x48")
 

@@ -12,7 +12,7 @@ Two measurements, each reported per run in ``extra_info``:
   ``EARTHBENCH_BENCH_SEALED_KEY``;
 * the sealed draw of ``standard`` regenerated from a key (its 110 scenarios, the dominant cost),
   divided by the 440 runs a board of four planners stores for it. The public suite is
-  generated beforehand, untimed: its digest is what :mod:`earthbench.identity` checks in every
+  generated beforehand, untimed: its digest is what :mod:`earthbench.results.identity` checks in every
   store that lists ``standard``, sealed or not, and ``verify`` generates it once for both.
 
 Run with ``pytest tests/bench/test_bench_seal.py --benchmark-only``.
@@ -34,8 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from helpers.leaderboard import Behaviour, fill_store, ref, suite_of
 
 from earthbench.seal import SealKey
-from earthbench.store import Store
-from earthbench.suite import load_suite, new_key, open_sealed
+from earthbench.results.store import Store
+from earthbench.results.suite import load_suite, new_key, open_sealed
 from earthbench.publishing.verify import check_seal
 
 #: Runs a board of every built-in backhoe planner stores for one sealed draw of ``standard``.
@@ -57,7 +57,7 @@ def test_check_a_sealed_store_beyond_rejudging(benchmark, sealed_store, monkeypa
     db, key = sealed_store
     if not key.path:  # a generated suite: let the check find it as `earthbench seal` would have recorded it
         suite = suite_of(12)
-        monkeypatch.setattr("earthbench.suite.public_suite", lambda k: suite)
+        monkeypatch.setattr("earthbench.results.suite.public_suite", lambda k: suite)
 
     cpu: list[float] = []
 

@@ -13,7 +13,7 @@ import pytest
 
 from earthbench.running.harness import build_cases, run_case
 from earthbench.registry import load_plugin_file
-from earthbench.suite import parse_suite
+from earthbench.results.suite import parse_suite
 
 from helpers import tiny_suite_toml
 

@@ -13,8 +13,8 @@ import pytest
 
 from earthbench.registry import load_plugin_file
 from earthbench.running.harness import build_cases, run_case
-from earthbench.store import Store
-from earthbench.suite import load_suite
+from earthbench.results.store import Store
+from earthbench.results.suite import load_suite
 
 PLUGIN = str(Path(__file__).parents[1] / "plugins" / "faulty_planners.py")
 

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import assume, event
 
 from earthbench import Plan, Scenario, judge
-from earthbench.scoring import evaluate, time_to_target
+from earthbench.results.scoring import evaluate, time_to_target
 from earthbench_metrics import lower_bound_time_to_target
 
 

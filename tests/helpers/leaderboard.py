@@ -1,8 +1,8 @@
 """Stores of real runs for the publishing tests, written through the store's own API.
 
 Plans come from the greedy planner run in this process (its call timed as the harness
-would), judged by the referee through :func:`earthbench.scoring.score`, and stored with
-:meth:`earthbench.store.Store.record`. Other "planners" reuse those plans cut short (so they
+would), judged by the referee through :func:`earthbench.results.scoring.score`, and stored with
+:meth:`earthbench.results.store.Store.record`. Other "planners" reuse those plans cut short (so they
 load less) or fail without a plan, to give the tables and profiles something to separate.
 """
 
@@ -21,9 +21,9 @@ from earthbench.running.harness import Case, CaseResult, PlannerRef
 # From its module: once any harness module has imported ``.environment``, the package attribute
 # ``environment`` is that submodule, not the function of the same name.
 from earthbench.running.harness.environment import environment
-from earthbench.scoring import score
-from earthbench.store import Store
-from earthbench.suite import Suite, parse_suite, load_suite
+from earthbench.results.scoring import score
+from earthbench.results.store import Store
+from earthbench.results.suite import Suite, parse_suite, load_suite
 from earthbench_planners.greedy.backhoe import GreedyPlanner
 
 EVIL = "<script>alert(1)</script>"

@@ -41,7 +41,7 @@ class Oracle(Planner):
 
     def plan(self, view):
         from earthbench.sensing import observe
-        from earthbench.suite import load_suite
+        from earthbench.results.suite import load_suite
 
         for suite in self.config.suites:
             for truth in load_suite(suite).scenarios:

@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...aggregate import PRIMARY
+from ...results.aggregate import PRIMARY
 from ...plotting import mpl_text, planner_colours, pyplot
 from ...profiles import cost_matrix, profile
 from ...running.scaling import cost_growth_figure
-from ...store import Store
+from ...results.store import Store
 from .selection import sample_runs
 from .tables import slug
 
@@ -119,7 +119,7 @@ def families_figure(runs: pd.DataFrame, title: str):
 
 def history_figure(rows: pd.DataFrame, title: str):
     """Success rate and median time per target m³ (95 % intervals) across one planner's versions."""
-    from ...aggregate import version_key
+    from ...results.aggregate import version_key
 
     plt = pyplot()
     rows = rows.assign(_k=rows["planner_version"].map(version_key)).sort_values(["_k", "config_hash"], kind="mergesort")

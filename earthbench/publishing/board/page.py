@@ -13,7 +13,7 @@ from typing import Any
 import pandas as pd
 
 from ... import assets
-from ...aggregate import RANKING_RULE
+from ...results.aggregate import RANKING_RULE
 from ...stats import INTERVAL_NOTE
 from .tables import BREAKDOWN_NOTE, FAILURE_COLUMNS, HISTORY_NOTE, UNSEPARABLE, number_text, slug
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import pandas as pd
 
-from ...store import Store, check_one_rules, load_runs
+from ...results.store import Store, check_one_rules, load_runs
 
 
 def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) -> pd.DataFrame:
@@ -19,7 +19,7 @@ def published_runs(db: str | Path | Store, suites: Sequence[str] | None = None) 
 
     Each suite's frame comes from ``load_runs(db, suite)``, so a suite counts every stored run
     of its scenarios, whichever suite ran them. Runs judged under different versions of the
-    referee's rules are refused (:func:`earthbench.store.check_one_rules`).
+    referee's rules are refused (:func:`earthbench.results.store.check_one_rules`).
     """
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
@@ -82,7 +82,7 @@ def limit_to_seeds(runs: pd.DataFrame, members: pd.DataFrame,
 
 def shown_runs(runs: pd.DataFrame, latest: set[tuple[str, str, str, str]], all_versions: bool = False) -> pd.DataFrame:
     """The runs a table's figures draw: each planner's latest version (``latest`` from
-    :func:`earthbench.aggregate.latest_versions`), every version with ``all_versions``."""
+    :func:`earthbench.results.aggregate.latest_versions`), every version with ``all_versions``."""
     if all_versions:
         return runs
     keep = [(s, t, p, str(v)) in latest for s, t, p, v in zip(runs["suite"], runs["track"], runs["planner"], runs["planner_version"])]

@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...aggregate import RANKING_RULE, RANK_ALPHA, ci_text
+from ...results.aggregate import RANKING_RULE, RANK_ALPHA, ci_text
 from ...classes import machine_classes
-from ...provenance import build_text
+from ...results.provenance import build_text
 from ...stats import INTERVAL_NOTE, min_separating_n, separation_note
-from ...store import rules_versions
-from ...labels import machine_label
+from ...results.store import rules_versions
+from ...results.labels import machine_label
 
 
 #: Termination reasons shown as columns of the tables (``ok`` is in the success rate).
@@ -52,7 +52,7 @@ def table_rows(summary: pd.DataFrame, closed: frozenset[str] = frozenset()) -> l
     """Display values (text) and sort keys (numbers) of one table's rows, in rank order.
 
     Medians and the success rate carry their 95 % interval in brackets (none where n is too small);
-    a configuration shows its label (:mod:`earthbench.labels`) and hash; one in ``closed`` (closed
+    a configuration shows its label (:mod:`earthbench.results.labels`) and hash; one in ``closed`` (closed
     loop, docs/DESIGN.md §6) is labelled so where the label does not say it already.
     A "Prepare s" column (the longest preparation a row's runs used) appears when a row has one.
     """
@@ -217,7 +217,7 @@ PROVENANCE = ("provenance: success, volume and time-per-m³ figures are the refe
 
 
 def _machine_of(runs: pd.DataFrame) -> pd.Series:
-    """Each run's machine, labelled as :func:`earthbench.labels.machine_label` does."""
+    """Each run's machine, labelled as :func:`earthbench.results.labels.machine_label` does."""
     cols = {"hostname": "hostname", "cpu_model": "cpu_model", "cores": "cpu_cores"}
     values = [runs[c].tolist() if c in runs else [None] * len(runs) for c in cols.values()]
     labels: dict[tuple[Any, ...], str] = {}  # a store holds a few machines: label each once

@@ -3,7 +3,7 @@
 Modules, each with one job:
 
 * :mod:`.cases` — :class:`~.cases.Prepared`, a planner's finished preparation; :class:`PlannerRef`, :class:`Case`,
-  :class:`CaseResult` and ``REASONS`` are :mod:`earthbench.records`'s, exported here too;
+  :class:`CaseResult` and ``REASONS`` are :mod:`earthbench.results.records`'s, exported here too;
 * :mod:`.run` — :func:`run_case`: one case, run and measured in the sandbox (:mod:`.sandbox`, :mod:`.supervisor`,
   :mod:`.tree`: a raw :class:`~.outcome.Outcome`; the pipe's messages checked by :mod:`.protocol`), then judged
   (:mod:`.judge`); a closed loop's steps owned by :mod:`.steps`;

@@ -1,7 +1,7 @@
 """The harness's record of a planner's preparation, and the old home of the run's records.
 
 :class:`Case`, :class:`CaseResult`, :class:`PlannerRef`, ``REASONS`` and ``utc_now`` live in
-:mod:`earthbench.records`, below both the harness and the store; they are exported here too, the
+:mod:`earthbench.results.records`, below both the harness and the store; they are exported here too, the
 same objects, for code that imports them from here.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from ...records import REASONS, Case, CaseResult, PlannerRef, utc_now
+from ...results.records import REASONS, Case, CaseResult, PlannerRef, utc_now
 
 __all__ = ["REASONS", "Case", "CaseResult", "PlannerRef", "Prepared", "utc_now"]
 

@@ -59,7 +59,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from ...errors import EarthbenchError
-from ...records import Case, CaseResult
+from ...results.records import Case, CaseResult
 from .prepare import run_prepared_case
 from .sandbox import STARTUP_S
 from .slots import make_slots

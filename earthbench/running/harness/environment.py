@@ -1,7 +1,7 @@
 """The environment stamp of a run: machine, software, and the builds of earthbench and the plugin.
 
 Computed where the case ran (on a Dask worker: there) and cached per process. Which code ran
-comes from :mod:`earthbench.provenance` (the commit written into the package at build time, the
+comes from :mod:`earthbench.results.provenance` (the commit written into the package at build time, the
 plugin's distribution), never from the git of a directory at run time.
 """
 
@@ -15,7 +15,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from ... import provenance
+from ...results import provenance
 
 
 @functools.lru_cache(maxsize=1)

@@ -5,7 +5,7 @@ The sandbox (:mod:`.sandbox`, :mod:`.supervisor`) runs and measures and returns 
 passed, the times and figures. :func:`judge` decides what that was: the termination reason
 (``ok``, ``invalid``, ``timeout``, ``memory``, ``error``, ``crashed``, or ``cancelled``, never
 stored) with its message and, for a plan, the referee's verdict and the metrics of
-:func:`earthbench.scoring.score`, run here in the harness's process (docs/DESIGN.md §6, §7).
+:func:`earthbench.results.scoring.score`, run here in the harness's process (docs/DESIGN.md §6, §7).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import signal
 import traceback
 from typing import Any
 
-from ...records import Case, CaseResult, utc_now
-from ...scoring import score  # the one scoring rule, in the core
+from ...results.records import Case, CaseResult, utc_now
+from ...results.scoring import score  # the one scoring rule, in the core
 from .environment import environment
 from .steps import StepLoop, step_metrics
 from .outcome import Outcome
@@ -35,7 +35,7 @@ def judge(case: Case, o: Outcome, loop: StepLoop | None, cores: tuple[int, ...],
           machine_load: dict[str, Any] | None = None) -> CaseResult:
     """The stored result of ``case`` from what the sandbox measured (``o``) and, for a closed
     loop, the steps it executed (``loop``): its termination reason and message, and for a plan
-    the referee's verdict and the metrics (:func:`earthbench.scoring.score`)."""
+    the referee's verdict and the metrics (:func:`earthbench.results.scoring.score`)."""
     budget = case.scenario.budget
     times: dict[str, Any] = dict(solve_time_s=o.solve_time_s, solve_cpu_s=o.solve_cpu_s)
     log_tail = o.log_tail

@@ -8,7 +8,7 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from typing import Protocol
 
-from ...records import Case, CaseResult
+from ...results.records import Case, CaseResult
 from .prepare import run_prepared_case
 from .sandbox import STARTUP_S, HarnessError
 from .slots import SlotPool, make_slots

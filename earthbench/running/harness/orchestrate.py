@@ -9,16 +9,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ...errors import PluginError, StoreError
-from ...records import Case
+from ...results.records import Case
 from . import probe
 from .local import Executor, LocalExecutor
 from .sandbox import CASE_TAG
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ...progress import Progress
+    from ...results.progress import Progress
     from .prepare import Prepared, PrepareStatus
-    from ...store import Store
-    from ...suite import Suite
+    from ...results.store import Store
+    from ...results.suite import Suite
 
 
 @dataclass

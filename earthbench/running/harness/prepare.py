@@ -50,7 +50,7 @@ from ...errors import EarthbenchError
 from ...planner import PrepareProgress
 from ...registry import OWN_DISTRIBUTION
 from ...world import Budget
-from ...records import Case, CaseResult, PlannerRef, utc_now
+from ...results.records import Case, CaseResult, PlannerRef, utc_now
 from .cases import Prepared
 from .environment import cache_folder
 

@@ -12,7 +12,7 @@ earthbench's, in a folder only the harness writes (``$EARTHBENCH_PROBES``, defau
 points) and planners a script registered in its own process are read from their classes.
 
 :func:`resolve` is the one way the commands turn a planner name and settings into a
-:class:`~earthbench.records.PlannerRef`; :func:`catalogue` lists every planner.
+:class:`~earthbench.results.records.PlannerRef`; :func:`catalogue` lists every planner.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 from ...errors import PluginError, UnknownNameError
 from ...planner import SharedFolder
 from ...registry import PLANNERS, class_digest, distribution_of, file_digest
-from ...records import PlannerRef
+from ...results.records import PlannerRef
 from ...world import TRACKS, Budget, canonical_json
 from .describe import Setting, overrides_key, settings_of
 from .environment import cache_folder

@@ -21,7 +21,7 @@ import json
 import threading
 from collections.abc import Sequence
 
-from ...records import Case, CaseResult, utc_now
+from ...results.records import Case, CaseResult, utc_now
 from ...sensing import observe
 from . import load
 from .cases import Prepared

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Sequence
 from importlib import metadata
 
 from ...planner import SharedFolder
-from ...records import PlannerRef
+from ...results.records import PlannerRef
 
 #: The most folders a planner may declare it reads.
 MAX_SHARED = 8

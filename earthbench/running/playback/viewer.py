@@ -29,7 +29,7 @@ from .selection import pick_runs
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
 
-    from ...store import Store
+    from ...results.store import Store
 
 
 #: Height quantum of the packed heightmaps (m); terrains are generated to 0.1 mm.

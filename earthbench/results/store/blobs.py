@@ -6,7 +6,7 @@ from __future__ import annotations
 import zlib
 from typing import overload
 
-from ..errors import StoreError
+from ...errors import StoreError
 
 
 #: The most a stored plan or scenario document may inflate to: twice the plan-size rule (64 MB

@@ -72,13 +72,13 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-from .errors import EarthbenchError, SuiteError, UnknownNameError
+from ..errors import EarthbenchError, SuiteError, UnknownNameError
 from .suite_checks import check_params, refuse_unknown
 from .scoring import DEFAULT_SUCCESS_THRESHOLD
-from .seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
-from .classes import DEFAULT_CLASS, fit, machine_class
-from .soil import draw
-from .world import TRACKS, Budget, Scenario, Sensing
+from ..seal import KEY_BYTES, LEGACY_SCHEMA, TRANSFORMS, SealError, SealKey, SiteTransform, commitment, sealed_name
+from ..classes import DEFAULT_CLASS, fit, machine_class
+from ..soil import draw
+from ..world import TRACKS, Budget, Scenario, Sensing
 
 SUITE_GROUP = "earthbench.suites"
 DEFAULT_THRESHOLD = DEFAULT_SUCCESS_THRESHOLD  # the scoring rule's default
@@ -174,7 +174,7 @@ class Suite:
         and scan drawn from its key (:mod:`earthbench.seal`); its scenarios keep the public seed
         in ``meta["seed"]`` so ``--seeds`` selects the same draws.
         """
-        from .registry import TERRAINS
+        from ..registry import TERRAINS
 
         out: list[Scenario] = []
         seen: set[str] = set()
@@ -315,7 +315,7 @@ def known_suites() -> dict[str, Path]:
 @cache
 def registered_suite(name: str) -> Suite:
     """The registered suite ``name``, loaded and generated once per process (for the checks that
-    compare stored suites with it: :mod:`earthbench.identity`, ``verify --key``). Not for
+    compare stored suites with it: :mod:`earthbench.results.identity`, ``verify --key``). Not for
     running: a run may change its copy's planner settings."""
     return load_suite(name)
 
@@ -466,7 +466,7 @@ def _budget(budget_doc: Any, where: str) -> Budget:
 
 def _family(fd: Any, n: int, where: str, path: str) -> Family:
     """The ``n``-th ``[[family]]`` table (from 0), checked against its generator's parameters."""
-    from .registry import TERRAINS
+    from ..registry import TERRAINS
 
     fwhere = f"{where} [[family]] #{n + 1}"
     refuse_unknown(fd, _FAMILY_KEYS, fwhere)

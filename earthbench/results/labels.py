@@ -46,8 +46,8 @@ def label(planner: str, config: Mapping[str, Any], defaults: Mapping[str, Any] |
 
 def planner_defaults(planner: str) -> dict[str, Any] | None:
     """The installed planner's default configuration as JSON data, or None when it is not installed."""
-    from .errors import EarthbenchError
-    from .registry import PLANNERS
+    from ..errors import EarthbenchError
+    from ..registry import PLANNERS
 
     try:
         return PLANNERS.get(planner)().config_dict

@@ -1,7 +1,7 @@
 """Stored runs read for analysis: :func:`load_runs` (one row per run, metrics as flat columns),
 :func:`suite_members` (every aggregate's denominators) and the checks a ranking makes on them
 (:func:`check_one_rules`). A run's stored figures are read as they are; whether it succeeded
-under another suite's threshold is the scoring rule's to say (:func:`earthbench.scoring.relabel`)."""
+under another suite's threshold is the scoring rule's to say (:func:`earthbench.results.scoring.relabel`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import StoreError
+from ...errors import StoreError
 from ..scoring import relabel, restate
 from .database import DEFAULT_DB, LOAD_COLUMNS, Store
 from .schema import columns
@@ -64,7 +64,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     Without ``suite``: every run, labelled with the suite it ran under. With ``suite``: the
     runs of that suite's scenarios (its most recently run version), whichever suite ran them,
     relabelled with the suite's name, digest, scenario ids and threshold, and ``success`` as the
-    scoring rule says under that threshold (:func:`earthbench.scoring.relabel`).
+    scoring rule says under that threshold (:func:`earthbench.results.scoring.relabel`).
 
     Columns: ``id``, ``suite``, ``suite_digest``, ``scenario_id``, ``scenario_digest``,
     ``family``, ``seed``, ``track``, ``target_volume``, ``planner``, ``planner_version``,
@@ -72,7 +72,7 @@ def load_runs(db: str | Path | Store = DEFAULT_DB, suite: str | None = None) -> 
     error | crashed), ``success`` (bool), ``threshold``, ``solve_time_s``, ``solve_cpu_s``,
     ``startup_s``, ``peak_rss_mb``, ``prepare_s`` and ``prepare_cpu_s`` (the planner's preparation
     the run used, NaN without one), ``rules`` (the version of the referee's rules that judged it:
-    1 for a run stored before versions were recorded), then every metric of :func:`earthbench.scoring.evaluate` — ``valid``,
+    1 for a run stored before versions were recorded), then every metric of :func:`earthbench.results.scoring.evaluate` — ``valid``,
     ``n_violations`` (the metric ``violations``, renamed), ``loaded_volume``,
     ``volume_ratio``, ``makespan_s``, ``time_per_m3``, ``time_per_m3_lower_bound``,
     ``time_per_m3_ratio``, ``digs``, ``dumps``, ``mean_bucket_fill``, ``travel_m``,
@@ -147,7 +147,7 @@ def check_one_rules(runs: pd.DataFrame, *stores: str | Path | Store) -> None:
     re-judges ``stores`` under this earthbench's rules."""
     versions = rules_versions(runs)
     if len(versions) > 1:
-        from ..referee import RULES_VERSION
+        from ...referee import RULES_VERSION
 
         counts = runs["rules"].value_counts()
         judged = ", ".join(f"{int(counts[v])} under rules {v}" for v in versions)

@@ -17,10 +17,10 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from .errors import PluginError
-from .planner import Planner, SharedFolder
-from .registry import PLANNERS, class_digest
-from .world import Scenario
+from ..errors import PluginError
+from ..planner import Planner, SharedFolder
+from ..registry import PLANNERS, class_digest
+from ..world import Scenario
 
 #: Termination reasons of a stored case (``cancelled`` results are never stored).
 REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")

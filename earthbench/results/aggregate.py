@@ -1,6 +1,6 @@
 """Aggregates over the runs of a suite: every number of every table, defined once.
 
-Input: the DataFrame of :func:`earthbench.store.load_runs` (one row per run). One row per
+Input: the DataFrame of :func:`earthbench.results.store.load_runs` (one row per run). One row per
 (suite, track, scope, group, planner, version, config): ``scope`` is ``suite`` (the whole suite,
 ``group`` empty), ``family`` (``group`` = the family) or ``target`` (``group`` = the target
 volume, e.g. ``4 m³``). Definitions, used by ``earthbench run``'s summary, the leaderboard and
@@ -10,13 +10,13 @@ its CSVs alike:
   ``of``: the group's scenario count in the suite (``members``, else ``sizes`` for a whole
   suite), never fewer than ``scenarios``.
 * ``success_rate`` (with its exact 95 % interval ``_lo``/``_hi``, :func:`earthbench.stats.rate_ci`):
-  successes (:func:`earthbench.scoring.is_success`) over ``of``: runs that failed in any way and
+  successes (:func:`earthbench.results.scoring.is_success`) over ``of``: runs that failed in any way and
   scenarios the planner has no run for count as failures, so a planner run on part of a
   suite is never ranked on that part alone.
 * over *valid* runs (reason ``ok``; an invalid plan is reported, never ranked):
   ``volume_ratio_mean`` / ``_sd`` (sample SD, NaN for one run), ``overshoot_m3_mean``, the
   medians with distribution-free intervals (:func:`earthbench.stats.median_ci`; none below 6
-  runs) of ``time_per_target_m3`` (the primary time metric, :func:`earthbench.scoring.time_per_target`:
+  runs) of ``time_per_target_m3`` (the primary time metric, :func:`earthbench.results.scoring.time_per_target`:
   infinite for a run short of the target, counted in ``short_of_target``; with ``_q1`` / ``_q3``)
   and ``time_per_target_m3_ratio`` (to the scenario's lower bound per m³) and
   ``time_per_target_m3_bound_ratio`` (to its lower bound per target m³, which counts whole
@@ -26,14 +26,14 @@ its CSVs alike:
   folder), and over runs that loaded
   something (the others are counted in ``loaded_nothing``) ``time_per_m3``.
 * ``target_share_mean``: the mean over valid runs of the share of the target loaded, capped at 1
-  (:func:`earthbench.scoring.target_share`): the tie-break among runs short of the target.
+  (:func:`earthbench.results.scoring.target_share`): the tie-break among runs short of the target.
 * ``solve_cpu_median`` (the ranked solve-time figure: CPU seconds of the case's process tree, with
   interval) and ``solve_time_median`` (wall, with interval) / ``_p90``: over every run with a
   measured time, failures included (a timeout's solve time is the time it was given).
 * ``load_min`` / ``load_max``: the machine's 1-minute load average around the runs' cases
   (before and after each), ``steal_max``: the largest share of CPU time stolen by a hypervisor
   during one (NaN for runs stored before these were recorded).
-* ``config_label``: the configuration's readable name (:mod:`earthbench.labels`); ``separable``:
+* ``config_label``: the configuration's readable name (:mod:`earthbench.results.labels`); ``separable``:
   whether the table has enough scenarios (:func:`earthbench.stats.min_separating_n`) for any paired
   test to tell two planners apart at :data:`RANK_ALPHA`.
 * ``prepare_max``: the longest preparation (wall s) the runs used, NaN for a planner without one
@@ -56,7 +56,7 @@ import numpy as np
 import pandas as pd
 
 from .scoring import target_share
-from .stats import ALPHA, mcnemar_p, median_ci, min_separating_n, paired_differences, rate_ci, wilcoxon_p
+from ..stats import ALPHA, mcnemar_p, median_ci, min_separating_n, paired_differences, rate_ci, wilcoxon_p
 
 REASONS = ("ok", "invalid", "timeout", "memory", "error", "crashed")
 GROUP = ["suite", "track", "planner", "planner_version", "config_hash"]

@@ -25,8 +25,8 @@ import functools
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .errors import EarthbenchError
-from .seal import public_name, sealed_name
+from ..errors import EarthbenchError
+from ..seal import public_name, sealed_name
 
 VARIANT_MARK = "~variant-"
 

@@ -20,13 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .classes import MachineClass, machine_classes
-from .errors import EarthbenchError
-from .motion import min_dig_time, min_dump_time
-from .plan import Charge, Dig, Dump, Move, Plan
-from .referee import Verdict, judge
-from .soil import nominal
-from .world import Heightmap, LoaderSpec, Machines, Pose, Scenario, Site, Soil, Task, TruckSpec
+from ..classes import MachineClass, machine_classes
+from ..errors import EarthbenchError
+from ..motion import min_dig_time, min_dump_time
+from ..plan import Charge, Dig, Dump, Move, Plan
+from ..referee import Verdict, judge
+from ..soil import nominal
+from ..world import Heightmap, LoaderSpec, Machines, Pose, Scenario, Site, Soil, Task, TruckSpec
 
 EPS = 1e-6
 #: The angles a band of swing angles is judged at: its ends and its middle.

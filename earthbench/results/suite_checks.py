@@ -11,7 +11,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from .errors import SuiteError
+from ..errors import SuiteError
 
 
 def refuse_unknown(keys: Iterable[str], allowed: Iterable[str], where: str) -> None:
@@ -28,7 +28,7 @@ def check_params(gen: Any, params: dict[str, Any], where: str, path: str, max_ce
     """Check a family's parameters against the generator's signature, before anything is generated.
 
     Unknown names, values of the wrong type (by the parameter's annotation) and a grid of more
-    than ``max_cells`` cells (:data:`earthbench.suite.MAX_CELLS`) (``size`` / ``resolution``) are refused; a relative ``path``
+    than ``max_cells`` cells (:data:`earthbench.results.suite.MAX_CELLS`) (``size`` / ``resolution``) are refused; a relative ``path``
     resolves against the suite file's folder. Returns the parameters to generate with.
     """
     params = dict(params)

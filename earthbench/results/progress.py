@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .errors import printable
+from ..errors import printable
 from .records import REASONS, Case, CaseResult
 
 

@@ -23,7 +23,7 @@ carry a chance flag about every other time.
 
 Metrics (each as the leaderboard computes it): ``success_rate`` (per scenario, a scenario
 without a run counts as failed), ``time_per_target_m3`` (median over valid runs, a run short of
-the target counting as ∞, as it ranks: :mod:`earthbench.scoring`) and ``volume_ratio`` (mean
+the target counting as ∞, as it ranks: :mod:`earthbench.results.scoring`) and ``volume_ratio`` (mean
 over valid runs).
 """
 
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .seal import public_name
-from .stats import CONFIDENCE, N_RESAMPLES, SEED, STATISTICS, bootstrap_ci, median_ci, rate_ci
+from ..seal import public_name
+from ..stats import CONFIDENCE, N_RESAMPLES, SEED, STATISTICS, bootstrap_ci, median_ci, rate_ci
 
 KEY = ["planner", "planner_version", "config_hash"]
 #: metric → (statistic, what the sample is)
@@ -130,8 +130,8 @@ def p_value(public: np.ndarray, sealed: np.ndarray, metric: str) -> float:
 def gap_table(runs: pd.DataFrame, members: pd.DataFrame) -> pd.DataFrame:
     """One row per (public suite, planner configuration, metric) with runs on the suite and a sealed draw of it.
 
-    ``runs``: :func:`earthbench.store.load_runs` rows of the public suites and their sealed
-    draws; ``members``: :func:`earthbench.store.suite_members` of the same suites (the
+    ``runs``: :func:`earthbench.results.store.load_runs` rows of the public suites and their sealed
+    draws; ``members``: :func:`earthbench.results.store.suite_members` of the same suites (the
     denominators of the success rate).
     """
     if runs.empty:

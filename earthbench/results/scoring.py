@@ -7,7 +7,7 @@ prefix of a valid plan is a success where the plan is not, reaches the target ea
 first in :func:`run_order` (docs/metrics.md, "Why loading less never pays").
 
 Every place that needs to know whether a run succeeded — the harness, ``rescore``, ``validate``,
-:func:`relabel` for runs read under another suite's threshold (:func:`earthbench.store.load_runs`
+:func:`relabel` for runs read under another suite's threshold (:func:`earthbench.results.store.load_runs`
 with a suite) — calls :func:`is_success`; every metric comes from the ``earthbench.metrics`` registry (the built-in
 ones are the ``core`` plugin), so the core never imports a metrics package.
 """
@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pragma: no cover - imported when used: the suite loader needs only the threshold
     import pandas as pd
 
-    from .plan import Plan
-    from .referee import Verdict
-    from .world import Scenario
+    from ..plan import Plan
+    from ..referee import Verdict
+    from ..world import Scenario
 
 #: A suite's success threshold when its file names none: volume ratio ≥ 0.9 with a valid plan.
 DEFAULT_SUCCESS_THRESHOLD = 0.9
@@ -88,7 +88,7 @@ def run_order(success: bool, time_per_target_m3: float, volume_ratio: float = ma
     """Sort key of one run (lower first): success, time per target m³, the share of the target loaded
     (:func:`target_share`, higher first: among runs short of the target, more is better), solve CPU time.
 
-    The per-run form of :data:`earthbench.aggregate.RANKING_RULE` (tables rank on the same keys'
+    The per-run form of :data:`earthbench.results.aggregate.RANKING_RULE` (tables rank on the same keys'
     rates, medians and means). Every key before the solve time is prefix-monotone; NaN sorts last.
     """
     def last(v: float) -> float:
@@ -107,7 +107,7 @@ def is_success(valid: Any, volume_ratio: Any, threshold: float) -> bool:
 
 
 def relabel(runs: pd.DataFrame) -> pd.DataFrame:
-    """Stored runs read under another suite (a :func:`earthbench.store.load_runs` frame whose
+    """Stored runs read under another suite (a :func:`earthbench.results.store.load_runs` frame whose
     ``threshold`` is that suite's): ``success`` decided anew by :func:`is_success` from each run's
     stored ``valid`` and ``volume_ratio`` (a run without a plan has neither and never succeeds)."""
     valid = runs["valid"] if "valid" in runs else [None] * len(runs)
@@ -123,7 +123,7 @@ def evaluate(scenario: Scenario, plan: Plan, verdict: Verdict,
     ``solve_time_s`` and ``solve_cpu_s`` are left as None: only the harness can measure them.
     Success is decided from the verdict itself, so it holds whichever metric plugins are installed.
     """
-    from .registry import METRICS
+    from ..registry import METRICS
 
     out: dict[str, Any] = {"solve_time_s": None, "solve_cpu_s": None}
     for name in sorted(METRICS.names(), key=lambda n: (n != "core", n)):  # the core metrics first
@@ -135,8 +135,8 @@ def evaluate(scenario: Scenario, plan: Plan, verdict: Verdict,
 
 def score(scenario: Scenario, plan_json: str, threshold: float) -> tuple[Verdict, dict[str, Any]]:
     """Judge a plan document and :func:`evaluate` it: the harness's, ``rescore``'s and ``merge``'s one call."""
-    from .plan import Plan
-    from .referee import judge
+    from ..plan import Plan
+    from ..referee import judge
 
     verdict = judge(scenario, plan_json)
     try:

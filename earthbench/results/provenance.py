@@ -23,7 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from . import __version__
+from .. import __version__
 
 
 def _direct_url(dist: str) -> dict[str, Any]:
@@ -50,7 +50,7 @@ def _checkout_commit(directory: Path) -> tuple[str | None, bool | None]:
 def build() -> dict[str, Any]:
     """``version``, ``commit`` (None: unknown), ``dirty`` and ``how`` (``built``, ``editable`` or ``source``)."""
     try:
-        from . import build_info  # type: ignore[attr-defined]  # generated at build time, absent in a checkout
+        from .. import build_info  # type: ignore[attr-defined]  # generated at build time, absent in a checkout
     except ImportError:
         build_info = None
     if build_info is not None:

@@ -1,6 +1,6 @@
 """The results store: one SQLite file (WAL mode), one row per run, one transaction per case
 (docs/DESIGN.md §8). :class:`Store` opens, creates and migrates a store and reads and writes it
-through named methods; the tables are those of :mod:`earthbench.store.schema`.
+through named methods; the tables are those of :mod:`earthbench.results.store.schema`.
 
 Why SQLite: embedded, a single file to copy or merge, safe against a killed writer (a run
 killed mid-case loses only that case: its transaction never commits), and readable by
@@ -21,16 +21,16 @@ pandas. Tables:
   while running another suite with the same scenarios (``standard`` includes ``paper-switch``).
 * ``planner_configs`` — (name, version, config hash) → the full configuration as JSON.
 * ``environments`` — CPU model, cores, OS, Python and package versions, the build of earthbench
-  (version and the commit it was built from, :mod:`earthbench.provenance`) and of the planner's
+  (version and the commit it was built from, :mod:`earthbench.results.provenance`) and of the planner's
   plugin (its distribution and source commit, or a plugin file's SHA-256), hostname;
   deduplicated by a hash of their content.
 * ``scenarios`` — each scenario's JSON (compressed) by digest, so re-scoring needs no generator.
 * ``spot_checks`` — each re-timing of ``earthbench verify --sample`` (:mod:`earthbench.publishing.verify`), so a
   leaderboard's stamp can say how its solve times held up on another machine.
 
-Every SQL statement of earthbench is in this package (:mod:`earthbench.store`): the rest reads
+Every SQL statement of earthbench is in this package (:mod:`earthbench.results.store`): the rest reads
 and writes a store through :class:`Store`'s named methods and the readers of
-:mod:`earthbench.store.frames`.
+:mod:`earthbench.results.store.frames`.
 
 Sealed draws (:mod:`earthbench.seal`): a sealed suite version's row names the public suite it
 was drawn from (``sealed_from``), that suite's digest (``public_digest``) and the draw's
@@ -39,7 +39,7 @@ was drawn from (``sealed_from``), that suite's digest (``public_digest``) and th
 The schema version is ``PRAGMA user_version`` and the file is tagged with
 ``PRAGMA application_id``; a database from a newer schema is refused, never altered. A store
 from an older schema opened for writing is brought up to date by the named steps of
-:data:`~earthbench.store.schema.MIGRATIONS`; read-only, it is read as it is, a column its
+:data:`~earthbench.results.store.schema.MIGRATIONS`; read-only, it is read as it is, a column its
 version lacks read as its default (docs/DESIGN.md §8, "Schema versions").
 """
 
@@ -56,8 +56,8 @@ from pathlib import Path
 from urllib.parse import quote
 from typing import TYPE_CHECKING, Any, Protocol
 
-from ..errors import StoreError
-from ..world import Scenario
+from ...errors import StoreError
+from ...world import Scenario
 from .blobs import compress, decompress
 from .schema import APPLICATION_ID, SCHEMA_VERSION, columns, migrate, write_schema
 
@@ -85,13 +85,13 @@ METRIC_COLUMNS = (
 
 def _rules_version() -> int:
     """The version of the rules this earthbench's referee judges by (loaded with the first run written)."""
-    from ..referee import RULES_VERSION
+    from ...referee import RULES_VERSION
 
     return RULES_VERSION
 
 
 class SuiteRecord(Protocol):
-    """What :meth:`Store.register_suite` reads of a suite: a loaded :class:`~earthbench.suite.Suite`,
+    """What :meth:`Store.register_suite` reads of a suite: a loaded :class:`~earthbench.results.suite.Suite`,
     or a suite version read back from another store (:mod:`earthbench.publishing.merge`)."""
 
     @property
@@ -587,7 +587,7 @@ class Store:
 def sealed_origin(suite: Any) -> tuple[str | None, str | None, str | None]:
     """(public suite name, its digest, commitment) of a sealed suite version; Nones for a public one.
 
-    Reads a loaded :class:`~earthbench.suite.Suite` (its ``sealing`` key) or a stored version
+    Reads a loaded :class:`~earthbench.results.suite.Suite` (its ``sealing`` key) or a stored version
     (:mod:`earthbench.publishing.merge`'s records: ``sealed_from``, ``public_digest``, ``commitment``)."""
     key = getattr(suite, "sealing", None)
     if key is not None:
