@@ -197,23 +197,34 @@ def test_no_import_cycle_among_the_core_modules_counting_imports_made_on_first_u
     assert _cycle(_core_graph(in_functions=True)) is None
 
 
-#: The core's layers, bottom first (docs/DESIGN.md §2), by the module's or package's name under
-#: ``earthbench``. A module imports from its own layer or the ones below, never from above (not
-#: even for type checking, nor in a function body); within a layer, no cycle.
-LAYERS: dict[str, tuple[str, ...]] = {
-    "base": ("errors", "lazy", "compat", "stats", "plotting", "profiles", "assets", "api"),
-    "world": ("world", "machines", "classes", "plan"),
-    "contract": ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal"),
-    "judge": ("referee",),
-    "results": ("results",),
-    "running": ("running",),
-    "publishing": ("publishing",),
-    "commands": ("cli", "__main__"),
+#: The core's layers, bottom first (docs/DESIGN.md §2): each layer's folder under ``earthbench/``
+#: ("" for the package's face, the top) and the modules and packages in it. A module imports from
+#: its own layer or the ones below, never from above (not even for type checking, nor in a function
+#: body); within a layer, no cycle. The folders are the map: a module's folder is its layer.
+LAYERS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "base": ("", ("errors", "lazy", "compat", "stats", "plotting", "profiles", "assets", "api")),
+    "world": ("", ("world", "machines", "classes", "plan")),
+    "contract": ("", ("cut", "motion", "soil", "sensing", "rules", "planner", "registry", "seal")),
+    "judge": ("referee", ("state", "loop", "paths", "clearance", "backhoe", "loader", "truck", "site", "ground")),
+    "results": ("results", ("scoring", "records", "progress", "labels", "aggregate", "generalisation", "store", "suite",
+                            "suite_checks", "identity", "calibration", "provenance")),
+    "running": ("running", ("harness", "playback", "figures", "scaling")),
+    "publishing": ("publishing", ("verify", "merge", "best", "board", "publish", "compare")),
+    "commands": ("cli", ("run", "runs", "plan", "show", "leaderboard", "compare", "merge", "verify", "best", "export",
+                         "rescore", "prepare", "preparing", "seal", "suites", "list_", "validate", "calibration",
+                         "new_planner", "_common")),
 }
+#: ``python -m earthbench`` runs ``earthbench/__main__.py``: the one module that sits outside its
+#: layer's folder, where Python looks for it.
+MAIN = ("__main__", "commands")
 #: The layers a plugin may import at run time: a planner or a terrain builds on the contract
 #: (never the judge, the harness or the store); a metric reads the judge's verdict and the scoring.
 PLUGIN_LAYERS = {"planners": "contract", "terrains": "contract", "metrics": "results"}
-_RANK = {part: n for n, parts in enumerate(LAYERS.values()) for part in parts}
+#: The top layer of the package's face: what every planner and terrain imports by its short path.
+FACE = list(LAYERS).index(PLUGIN_LAYERS["planners"])
+#: A name directly under ``earthbench/`` (a face module, a layer's folder, ``__main__``) → its layer's rank.
+_RANK = {name: n for n, (folder, modules) in enumerate(LAYERS.values()) for name in (modules if not folder else (folder,))} \
+    | {MAIN[0]: list(LAYERS).index(MAIN[1])}
 
 
 def _layer(module: str) -> int | None:
@@ -238,11 +249,23 @@ def _runs_up(rank: int, module: str, imported: str | None) -> str | None:
 
 def test_every_core_module_has_one_layer():
     assert {m.split(".")[1] for m in CORE if "." in m} == set(_RANK)
-    assert len(_RANK) == sum(len(parts) for parts in LAYERS.values())
+    names = [name for folder, modules in LAYERS.values() for name in (modules if not folder else (folder,))]
+    assert len(names) == len(set(names)) == len(_RANK) - 1
+
+
+def test_the_folders_show_the_layers():
+    """The rule that decides which layers are folders: the layers a planner or terrain imports
+    (base, world, contract) are the package's face, flat under ``earthbench/`` (the documented
+    plugin API keeps its short paths, ``earthbench.plan``, ``earthbench.cut``, …); each layer above
+    is one folder of its own, named for the layer, but for the judge's ``referee/`` (``earthbench.judge``
+    is the face's function) and the commands' ``cli/`` (the console script's module)."""
+    assert [n for n, (folder, _) in enumerate(LAYERS.values()) if not folder] == list(range(FACE + 1))
+    assert {layer: folder for layer, (folder, _) in LAYERS.items() if folder and folder != layer} == {"judge": "referee",
+                                                                                                    "commands": "cli"}
 
 
 def test_the_layer_rule_refuses_an_import_that_runs_back_up():
-    store, planners = _RANK["results"], list(LAYERS).index(PLUGIN_LAYERS["planners"])
+    store, planners = _RANK["results"], FACE
     assert _runs_up(store, "earthbench.running.harness", "Case") == "earthbench.running.harness"
     assert _runs_up(store, "earthbench.running.harness.cases", "Case") == "earthbench.running.harness.cases"
     assert _runs_up(planners, "earthbench.referee", "judge") == "earthbench.referee"
@@ -250,6 +273,8 @@ def test_the_layer_rule_refuses_an_import_that_runs_back_up():
     assert _runs_up(planners, "earthbench", "judge") == "earthbench.judge"
     assert _runs_up(planners, "earthbench.rules", "bodies_touch") is None
     assert _runs_up(store, "earthbench", "__version__") is None and _runs_up(store, "numpy", None) is None
+    # a module put in the results' folder is a results module: it may not import publishing
+    assert _runs_up(_layer("earthbench.results.merge"), "earthbench.publishing.verify", "audit") == "earthbench.publishing.verify"
 
 
 def test_no_import_runs_back_up_the_layers():
@@ -417,21 +442,18 @@ def test_no_module_runs_over_600_lines():
     assert found == set(), f"split these: {sorted(found)}"
 
 
-def _design_layers() -> tuple[dict[str, tuple[str, ...]], dict[str, set[str]]]:
-    """docs/DESIGN.md §2's table of layers: each layer's modules, and the modules a package's
-    entry names in parentheses (``referee`` (``state``: …; ``loop``: …))."""
+def _design_layers() -> dict[str, tuple[str, tuple[str, ...]]]:
+    """docs/DESIGN.md §2's table of layers: each layer's folder ("" for ``earthbench/`` itself) and modules."""
     text = (ROOT.parent / "docs" / "DESIGN.md").read_text().split("## 2. Data flow and layers", 1)[1].split("\n## ", 1)[0]
-    layers: dict[str, tuple[str, ...]] = {}
-    parts: dict[str, set[str]] = {}
+    layers: dict[str, tuple[str, tuple[str, ...]]] = {}
     for row in text.splitlines():
         cells = [c.strip() for c in row.strip().strip("|").split("|")]
-        if len(cells) < 2 or cells[0] in ("layer", "") or set(cells[0]) <= {"-"}:
+        if len(cells) < 3 or cells[0] in ("layer", "") or set(cells[0]) <= {"-"}:
             continue
-        top = re.sub(r"\([^)]*\)", "", cells[1])
-        layers[cells[0]] = tuple(re.findall(r"`([\w.]+)`", top))
-        for package, inner in re.findall(r"`(\w+)`\s*\(([^)]*)\)", cells[1]):
-            parts[package] = set(re.findall(r"`(\w+)`", inner))
-    return layers, parts
+        folder = re.match(r"`earthbench/(\w*)/?`", cells[1])
+        assert folder, f"DESIGN §2, layer {cells[0]}: its folder, `earthbench/…/`, first in the second column"
+        layers[cells[0]] = (folder.group(1), tuple(re.findall(r"`([\w.]+)`", cells[2])))
+    return layers
 
 
 def _entries(folder: Path) -> set[str]:
@@ -440,12 +462,28 @@ def _entries(folder: Path) -> set[str]:
             if (p.suffix == ".py" and p.name != "__init__.py") or (p / "__init__.py").exists()}
 
 
+def _on_disk() -> dict[str, set[str]]:
+    """``earthbench/`` ("") and each layer's folder → the modules and packages in it."""
+    return {"": _entries(ROOT)} | {folder: _entries(ROOT / folder) for folder, _ in LAYERS.values() if folder}
+
+
+def _misplaced(disk: dict[str, set[str]]) -> set[tuple[str, str]]:
+    """(folder, name) for each module or package in a folder that ``LAYERS`` does not put there,
+    and each that ``LAYERS`` puts in a folder where it is not."""
+    expected = {"": set(_RANK)} | {folder: set(modules) for folder, modules in LAYERS.values() if folder}
+    return {(folder, name) for folder in expected.keys() | disk.keys() for name in expected.get(folder, set()) ^ disk.get(folder, set())}
+
+
+def test_a_module_in_the_wrong_layers_folder_is_found():
+    disk = _on_disk()
+    disk["results"] = disk["results"] | {"verify"}
+    disk["publishing"] = disk["publishing"] - {"verify"}
+    assert _misplaced(disk) == {("results", "verify"), ("publishing", "verify")}
+    assert _misplaced(_on_disk() | {"": _entries(ROOT) | {"scoring"}}) == {("", "scoring")}
+
+
 def test_design_the_layers_table_and_the_folders_are_one_map():
-    """DESIGN §2's table is ``LAYERS``, layer by layer in order, and names every module and package
-    of ``earthbench/`` (test_every_core_module_has_one_layer); a package it lists part by part
-    (the referee) names exactly the package's modules."""
-    layers, parts = _design_layers()
-    assert layers == LAYERS
-    assert _entries(ROOT) == set(_RANK)
-    for package, named in parts.items():
-        assert named == _entries(ROOT / package), package
+    """DESIGN §2's table is ``LAYERS``, layer by layer in order: each layer's folder and its modules;
+    and the folders hold exactly those modules, each in its layer's folder (the face's at the top)."""
+    assert _design_layers() == LAYERS
+    assert _misplaced(_on_disk()) == set()
