@@ -361,5 +361,5 @@ def test_new_key_and_open_sealed_still_import_from_the_seal_with_a_warning():
     import earthbench.results.suite
 
     for name in ("new_key", "open_sealed"):
-        with pytest.warns(DeprecationWarning, match=rf"earthbench\.seal\.{name} moved to earthbench\.suite\.{name}"):
+        with pytest.warns(DeprecationWarning, match=rf"earthbench\.seal\.{name} moved to earthbench\.results\.suite\.{name}"):
             assert getattr(earthbench.seal, name) is getattr(earthbench.results.suite, name)
