@@ -79,6 +79,7 @@ class SimState:
     actions: list[Any] = field(default_factory=list)
     digs: int = 0
     dig_area: Any = None
+    truck_ready: float = 0.0  # when the truck's last move ends (a dump waits for it)
 
     @classmethod
     def start(cls, scenario: Scenario) -> SimState:
@@ -168,8 +169,10 @@ class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
     def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
-                 clearance_margin: float = 0.01, retime: bool = True):
+                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = True):
         self.retime = retime  # moves as fast as the limits allow (fastest_steps), else at the NLP's pace
+        self.follow_face = follow_face  # the truck slides along its heading during a dig (:meth:`follow`)
+        self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
@@ -234,10 +237,17 @@ class Converter:
         st.exc = Pose(*nodes[-1])
         return True
 
-    def move_both(self, st: SimState, ve: np.ndarray, we: np.ndarray, vt: np.ndarray, wt: np.ndarray, dts: np.ndarray) -> str:
-        """Phase 0: both machines move at once; falls back to one after the other. Returns how."""
+    def move_both(self, st: SimState, ve: np.ndarray, we: np.ndarray, vt: np.ndarray, wt: np.ndarray, dts: np.ndarray,
+                  truck_stand: Pose | None = None) -> str:
+        """Phase 0: both machines move at once; falls back to one after the other. Returns how.
+        With ``truck_stand`` (the planner's, ``.stand``) the truck drives there instead of
+        along the NLP's path (which ends within a few cm of it)."""
         es = self.exc_spec
         ts = self.truck_spec
+        if truck_stand is not None:
+            how = self.to_stand(st, ve, we, dts, truck_stand)
+            if how is not None:
+                return how
         ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
         nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
         e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
@@ -299,6 +309,42 @@ class Converter:
             return "excavator-first"
         return self._blocked()
 
+    def to_stand(self, st: SimState, ve: np.ndarray, we: np.ndarray, dts: np.ndarray, stand: Pose) -> str | None:
+        """The excavator along the NLP's controls and the truck straight to ``stand`` (turn, drive,
+        turn), together when they keep the clearance, else one after the other; None (nothing
+        emitted) when the truck's way breaks its ground limits or no order keeps the clearance."""
+        es, ts = self.exc_spec, self.truck_spec
+        ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
+        if self.retime:
+            dts = fastest_steps(ne, np.asarray(dts, float), es.travel_speed, es.yaw_rate)
+        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
+        still = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) < 1e-6 and abs(ne[-1, 2] - ne[0, 2]) < 1e-6
+        pe = _samples(ne, times)
+        pt = turn_drive_turn(st.truck, (stand.x, stand.y), st.t, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
+        if len(pt) < 2:  # the truck stands there already
+            return "excavator" if self.move_excavator(st, ve, we, np.diff(times)) else None
+        if not self.stands(st).path_ok(pt):
+            return None
+        span_e, span_t = float(times[-1] - times[0]), pt[-1][0] - pt[0][0]
+        shift = lambda path, dt: [(t + dt, x, y, w) for t, x, y, w in path]  # noqa: E731
+        orders = [("together", pe, pt)] if not still else []
+        orders += [("truck-first", shift(pe, span_t), pt), ("excavator-first", pe, shift(pt, span_e))]
+        for how, e_path, t_path in orders:
+            e_end, t_end = Pose(*e_path[-1][1:]), Pose(*t_path[-1][1:])
+            if how == "together":
+                ok = self.clear(e_path, t_path) and self.clear(e_end, t_path) and self.clear(e_path, t_end)
+            else:  # one machine waits where it is while the other moves
+                e0, t0 = (st.exc, t_end) if how == "truck-first" else (e_end, st.truck)
+                ok = self.clear(e0, t_path) and (still or self.clear(e_path, t0))
+            if ok:
+                if not still:
+                    st.actions.append(Move("excavator", tuple(e_path)))
+                st.actions.append(Move("truck", tuple(t_path)))
+                st.exc, st.truck = e_end, t_end
+                st.t = max(float(e_path[-1][0]), float(t_path[-1][0]))
+                return "truck" if still else how
+        return None
+
     def stands(self, st: SimState) -> TruckStands:
         """The truck's stands on the grid as it now is (``planners/truck_stands.py``)."""
         return TruckStands(self.sc, self.exc_spec, st.z)
@@ -333,6 +379,27 @@ class Converter:
                     st.truck, st.t = Pose(*path[-1][1:]), max(st.t, float(path[-1][0]))
                     return True
         return False
+
+    def follow(self, st: SimState, contact: tuple[float, float], heading: float, drag: float, dig_t: float) -> None:
+        """The truck follows the dig face: during the dig it slides along its heading to the
+        stand of ``planners/truck_stands.py`` whose dump after the dig ends soonest (less swing
+        against the truck's drive), clear of this dig's arm shadow, off the dig area, on kept
+        ground and in dump reach; it stays where it is when that is best or nothing is clear."""
+        key = (st.truck, st.exc)
+        if self._line is None or self._line[0] != key:
+            self._line = (key, self.stands(st).line(st.truck, st.exc))
+        stands = self._line[1]
+        best = self.stands(st).best_for_dig(st.exc, st.truck, stands, contact, heading, drag, st.t, st.t + dig_t,
+                                            free_at=st.truck_ready)
+        if best is None or math.hypot(best[0].x - st.truck.x, best[0].y - st.truck.y) < 1e-6:
+            return
+        ts = self.truck_spec
+        path = turn_drive_turn(st.truck, (best[0].x, best[0].y), max(st.t, st.truck_ready), ts.travel_speed, ts.yaw_rate)
+        if not self.clear(st.exc, path):
+            return
+        st.actions.append(Move("truck", tuple(path)))
+        st.truck, st.truck_ready = Pose(*path[-1][1:]), float(path[-1][0])
+        self._skip("truck_followed")
 
     def _blocked(self) -> str:
         self._skip("move_blocked")
@@ -510,11 +577,13 @@ class Converter:
         if self.undermines(st, contact, heading, depth, drag):
             return self._skip("undermining")
         dig_t = min_dig_time(st.exc, st.turn, contact, es) + EPS_T
+        if self.follow_face:
+            self.follow(st, contact, heading, drag, dig_t)
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)
         st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
                               float(depth), float(drag)))
-        st.t += dig_t
+        st.t = max(st.t + dig_t, st.truck_ready)  # the dump waits for the truck
         st.turn = math.atan2(contact[1] - st.exc.y, contact[0] - st.exc.x) - st.exc.yaw
         dump_t = min_dump_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + EPS_T
         st.actions.append(Dump("excavator", st.t, st.t + dump_t))

@@ -41,6 +41,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
+from .stand import truck_stand
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -162,6 +163,10 @@ class Config(LocalNLPConfig):
     # plan.info["solvers"]) — measured slower here, so not the default (NOTES.md, "issue 50").
     # Left out of the configuration's hash at its default (as closed_loop is: earthbench.planner).
     solver: str = field(default="ipopt", metadata={"omit_default": True})
+    # 0.11.0 (issue 48): the truck's stand per area chosen off the arm's reach (.stand), the truck
+    # following the dig face during digs (convert.Converter.follow); off: 0.10.5's plans
+    place_truck: bool = field(default=True, metadata={"omit_default": True})
+    follow_face: bool = field(default=True, metadata={"omit_default": True})
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -171,18 +176,9 @@ class Config(LocalNLPConfig):
 class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
 
-    0.10.0: the planner declares a preparation (:meth:`prepare`, docs/DESIGN.md §6): its NLPs'
-    derivatives and helpers compiled to C once per machine (:mod:`.compiled`), loaded by each
-    case instead of evaluated on CasADi's virtual machine. The compiled code computes the same
-    values to the bit, so the plans are 0.9.0's (plan digests and the reproducibility test are
-    unchanged); the version moves because the code path and the solve times do. 0.10.1: the
-    large functions (the global Hessians above all) compiled in pieces at ``-O1`` instead of whole
-    at ``-O0``; the same values to the bit, so the same plans, in less CPU.
-
-    0.10.2: the candidate areas' tiling tolerates rounding (:data:`.hierarchy.TILE_TOL`): on a
-    site far from the origin (a sealed draw's shifted site) a dig area exactly k tiles wide lost
-    a row of tiles, and paper-switch's one-tile dig area its only tile (an empty plan). The
-    public suites' areas, hence their plans, are unchanged.
+    0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the
+    same values to the bit, so the same plans, in less CPU), and an area tiling that tolerates
+    rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of tiles).
 
     0.10.3: closed loop only (:mod:`.receding`): the areas face the first step's sides for the
     whole run (read again from the truck's new stand, they turned to another side of the site and
@@ -191,9 +187,8 @@ class StlTampPlanner(Planner):
     ``volume_tol`` left runs a sliver short, which has no time to the target), and never more
     than the truck surely takes. Open-loop plans are 0.10.2's.
 
-    0.10.4: an NLP's key leaves out the truck's capacity, which no constraint reads
-    (:func:`.model.nlp_truck`): the ``scale`` ladder's larger trucks had solved every NLP
-    uncompiled. The same plans (the same NLPs), in less CPU on such sites.
+    0.10.4: an NLP's key leaves out the truck's capacity (:func:`.model.nlp_truck`): the same
+    plans, the prepared NLPs now serving the ``scale`` ladder's larger trucks.
 
     0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
     model. A dig whose arm's shadow would touch the truck is repaired or skipped like any other
@@ -207,7 +202,11 @@ class StlTampPlanner(Planner):
     problem with its phase variables carried as states) and solves it by FATROP, IPOPT on the
     classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``).
     Measured slower than IPOPT on these NLPs, so an option (planners/stl_tamp/NOTES.md).
-    """
+
+    0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off
+    every dig's arm shadow of the area, and the local NLP is bound to it; during each dig the
+    truck slides along its heading to the stand nearest the dig's bearing
+    (``Converter.follow``). The NLPs' code is unchanged (a bound, not a new NLP)."""
 
     name = "stl-tamp"
     version = "0.10.5"
@@ -318,7 +317,7 @@ class StlTampPlanner(Planner):
         box = site_box(scenario)
         side = self.area_side(scenario)
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                         retime=c.retime_moves)
+                         retime=c.retime_moves, follow_face=c.follow_face)
 
         areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
@@ -486,14 +485,16 @@ class StlTampPlanner(Planner):
         nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        # phase 0 places the truck for this area (it drives while the excavator relocates): the
-        # guess takes it to the area's stand, the NLP moves it under clearance and dump reach
-        truck = area.truck
+        # phase 0 places the truck for this area (it drives while the excavator relocates) at
+        # the stand chosen for it (.stand; the area's nominal one when none keeps the rules)
+        k_buckets = v_local / (exc.bucket_capacity * c.fill_estimate)
+        stand = truck_stand(conv, st, area, k_buckets) if c.place_truck else None
+        truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
         seeds = settle_contacts(nlp, s0, seeds, floor, params)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
-        sol, n_iter, t_solve, retry = self._solve_local(lp, exc, area, truck, box, w0)
+        sol, n_iter, t_solve, retry = self._solve_local(lp, exc, area, truck, box, w0, stand is not None)
         trace.add_build(nlp)
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
@@ -522,14 +523,15 @@ class StlTampPlanner(Planner):
         if c.as_planned:  # the NLP's own depth: its contact height less max(floor, that − d_dig)
             pz = nlp.evaluate(sol.info["w"], params)["contact_heights"]
             depths = np.clip(pz - np.maximum(floor, pz - shape.unit_depth), 0.0, shape.unit_depth)
-        got = self._emit(st, conv, nlp, sol, remaining, depths)
+        got = self._emit(st, conv, nlp, sol, remaining, depths, stand)
         rec["loaded"] = got
         rec["wall_s"] = time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
 
     def _solve_local(self, lp: LocalProblem, exc: ExcavatorSpec, area: Area, truck: tuple[float, float],
-                     box: tuple[float, float, float, float], w0: np.ndarray) -> tuple[Solution, int, float, str | None]:
+                     box: tuple[float, float, float, float], w0: np.ndarray,
+                     truck_fixed: bool = False) -> tuple[Solution, int, float, str | None]:
         """The local NLP solved from ``w0`` with its contacts kept near the area and its stand near
         the area's level stand: retried once if it fails (``retry``), restarted once out of the
         disjunction trap if it succeeds (``reseed``). Returns the solution kept, the iterations
@@ -539,10 +541,11 @@ class StlTampPlanner(Planner):
         half = math.hypot(cx - area.px, cy - area.py) + 0.5
         cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
         stand = (area.base[0], area.base[1], c.stand_tol)
+        at = (truck[0], truck[1], c.stand_tol) if truck_fixed else None  # the truck's stand (.stand)
 
         def solve(w: np.ndarray) -> Solution:
             return nlp.solve(params, w, cbox, max_iter=c.max_iter, accept_feasible=c.accept_feasible,
-                             options=self._ipopt_options(), stand=stand, solver=c.solver)
+                             options=self._ipopt_options(), stand=stand, solver=c.solver, truck_stand=at)
 
         sol = solve(w0)
         n_iter, t_solve = sol.iterations, sol.solve_time_s
@@ -571,14 +574,14 @@ class StlTampPlanner(Planner):
         return sol, n_iter, t_solve, retry
 
     def _emit(self, st: SimState, conv: Converter, nlp, sol: Solution, remaining: float,
-              depths: np.ndarray | None = None) -> float:
+              depths: np.ndarray | None = None, stand=None) -> float:
         """Turn the phases of a local solution into actions (see :mod:`.convert`); with
         ``depths`` (the as-planned mode) each dig is the NLP's own at that depth."""
         n, kc = nlp.n, nlp.kc
         dts = np.diff(sol.times)
         U = sol.U
         loaded = 0.0
-        conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
+        conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n], stand)
         for i in range(1, nlp.m1):
             k0 = i * n
             if kc[i] > 0:

@@ -104,7 +104,7 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     side = planner.area_side(sc)
     box = site_box(sc)
     conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                     retime=c.retime_moves)
+                     retime=c.retime_moves, follow_face=c.follow_face)
     if h.layout is None:
         h.layout = site_layout(sc)
     areas = [a for a in candidate_areas(sc, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset,

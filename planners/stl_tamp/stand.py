@@ -1,0 +1,71 @@
+"""Where the truck stands while the excavator digs an area: the planner's choice, not the NLP's.
+
+The local NLP models neither the arm's ground shadow nor the truck's ground (rules version 2,
+docs/referee.md): left free, its truck drives onto the dig area beside the arm, where no dig
+may pass over it. So the stand is a decision of the layer that chooses the areas (issue 48),
+made when an area comes up, on the grid as dug so far: among the stands
+``planners/truck_stands.py`` offers for the area's base (off the dig area, on ground within the
+truck's limits, in dump reach), cheapest first in the truck's drive plus the swing its dumps
+cost, the first one clear of every dig the area can hold (the hull of the base and the area,
+which holds each dig's arm shadow) that the truck can drive to on kept ground without touching
+the excavator where it will stand. The local NLP is then bound to it (``PhaseNLP.bounds``'s
+``truck_stand``), so its swings are priced against where the truck will really stand, and the
+conversion drives the truck there (``Converter.move_both``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPoint, Polygon
+
+from earthbench.motion import turn_drive_turn
+from earthbench.world import Pose
+
+from ..truck_stands import GAP
+from .convert import Converter, SimState
+from .hierarchy import Area
+
+#: Stands looked at, cheapest first, before the truck is left to the conversion's own choice.
+TRIES = 300
+
+
+def area_shadow(area: Area, bucket_width: float) -> Polygon:
+    """What every dig of ``area`` may shade: the hull of its base and its square (its contacts'
+    bucket footprints stay inside the square, :func:`.hierarchy.candidate_areas`), widened by
+    half a bucket."""
+    cx, cy = area.centre
+    half = math.hypot(cx - area.px, cy - area.py)
+    ux, uy = math.cos(area.psi), math.sin(area.psi)
+    corners = [(cx + a * half * ux - b * half * uy, cy + a * half * uy + b * half * ux) for a in (-1, 1) for b in (-1, 1)]
+    return MultiPoint([*corners, area.base]).convex_hull.buffer(bucket_width / 2)
+
+
+def base_pose(area: Area) -> Pose:
+    """The excavator at the area's base, facing it (as the local NLP leaves it, near enough)."""
+    return Pose(area.base[0], area.base[1], math.atan2(area.centre[1] - area.base[1], area.centre[0] - area.base[0]))
+
+
+def truck_stand(conv: Converter, st: SimState, area: Area, buckets: float) -> Pose | None:
+    """The truck's stand for ``area`` (module docstring): the first of the stands cheapest in
+    the truck's drive plus ``buckets`` dumps' swing (:meth:`TruckStands.parking`) that keeps
+    every rule; None when none of the first :data:`TRIES` does (the NLP and the conversion then
+    place the truck as 0.10.5 did)."""
+    stands = conv.stands(st)
+    base = base_pose(area)
+    shadow = area_shadow(area, conv.exc_spec.bucket_width)
+    shapely.prepare(shadow)
+    ts = conv.truck_spec
+    bearing = math.atan2(area.centre[1] - base.y, area.centre[0] - base.x)
+    for tried, stand in enumerate(stands.parking(base, st.truck, bearing, buckets)):
+        if tried >= TRIES:
+            break
+        body = shapely.polygons(np.asarray(ts.body(stand.x, stand.y, stand.yaw)[0]))
+        if shapely.distance(shadow, body) <= GAP:
+            continue
+        path = turn_drive_turn(st.truck, (stand.x, stand.y), st.t, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
+        if conv.clear(base, stand) and stands.path_ok(path) and conv.clear(base, path):
+            return stand
+    return None
