@@ -32,6 +32,7 @@ from .hierarchy import (
     greedy_tour,
     in_box,
     level_stand,
+    Layout,
     LocalProblem,
     local_problem,
     local_seeds,
@@ -41,7 +42,12 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
-from .stand import truck_stand
+from .stand import kept_base, truck_stand
+
+
+#: Metres between the truck's centre and the dig area's edge (half its width, the area's
+#: shadow and the gap) and under its dump reach, for an area to face away from the truck.
+FACE_AWAY_MARGIN = 1.3
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -167,6 +173,8 @@ class Config(LocalNLPConfig):
     # following the dig face during digs (convert.Converter.follow); off: 0.10.5's plans
     place_truck: bool = field(default=True, metadata={"omit_default": True})
     follow_face: bool = field(default=True, metadata={"omit_default": True})
+    keep_base: bool = field(default=True, metadata={"omit_default": True})  # .stand.kept_base
+    face_away: bool = field(default=True, metadata={"omit_default": True})  # StlTampPlanner.areas
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -233,6 +241,15 @@ class StlTampPlanner(Planner):
         local area: the contact box is the dig area itself, see :meth:`_local`)."""
         e = scenario.machines.excavator
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
+
+    def areas(self, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
+        """The candidate areas (:func:`.hierarchy.candidate_areas`); with ``face_away``, those
+        whose base beyond them from the truck leaves the truck a stand on their far side, off
+        the dig area and in dump reach (the dig area's row on the truck's side), face that way."""
+        c, m = self.config, scenario.machines
+        away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
+        return candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
+                               layout, away)
 
     def _global_shape(self, exc: ExcavatorSpec, m_g: int, side: float, lattice: tuple[int, int], spacing: float,
                       sigma: float) -> Shape:
@@ -319,7 +336,7 @@ class StlTampPlanner(Planner):
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
                          retime=c.retime_moves, follow_face=c.follow_face)
 
-        areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
+        areas = self.areas(scenario, st.z, side)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
         # V_max per area is the global layer's unit; a dig area that is one local area (Fig. 6's
         # set-up) has nothing to split the target over: its local problem takes up to m_l buckets
@@ -356,8 +373,7 @@ class StlTampPlanner(Planner):
             if not left and remaining > c.volume_tol and trace.regenerated < 3:
                 # every area visited once: tile the lowered grid anew
                 trace.regenerated += 1
-                left = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset,
-                                       c.truck_angle)
+                left = self.areas(scenario, st.z, side)
         if len(trace.global_["blocks"]) == 1:  # one window: the record as before
             trace.global_ = dict(trace.global_["blocks"][0])
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
@@ -485,10 +501,12 @@ class StlTampPlanner(Planner):
         nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        # phase 0 places the truck for this area (it drives while the excavator relocates) at
-        # the stand chosen for it (.stand; the area's nominal one when none keeps the rules)
-        k_buckets = v_local / (exc.bucket_capacity * c.fill_estimate)
-        stand = truck_stand(conv, st, area, k_buckets) if c.place_truck else None
+        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand)
+        stand = None
+        for tile in (area, area.toward):  # facing away from the truck only where the truck has a stand
+            if tile is not None and stand is None:
+                area = kept_base(conv, st, tile) if c.keep_base else tile
+                stand = truck_stand(conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate)) if c.place_truck else None
         truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)

@@ -15,6 +15,7 @@ conversion drives the truck there (``Converter.move_both``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -25,7 +26,7 @@ from earthbench.motion import turn_drive_turn
 from earthbench.world import Pose
 
 from ..truck_stands import GAP
-from .convert import Converter, SimState
+from .convert import TILT_MARGIN, Converter, SimState
 from .hierarchy import Area
 
 #: Stands looked at, cheapest first, before the truck is left to the conversion's own choice.
@@ -69,3 +70,29 @@ def truck_stand(conv: Converter, st: SimState, area: Area, buckets: float) -> Po
         if conv.clear(base, stand) and stands.path_ok(path) and conv.clear(base, path):
             return stand
     return None
+
+
+#: Metres every corner of an area keeps inside the reach annulus for the excavator to dig it
+#: from where it stands (:func:`kept_base`), and its tracks keep from the area.
+REACH_MARGIN, TRACK_GAP = 0.25, 0.3
+
+
+def kept_base(conv: Converter, st: SimState, area: Area) -> Area:
+    """``area`` with the excavator's present stand as its base when the whole area is in reach
+    from there, its tracks clear of it and the stand level enough (area sequencing: no
+    relocation between neighbouring areas one stand serves, as the swing it saves is the
+    driving's and the truck's too); else ``area`` as it is."""
+    es = conv.exc_spec
+    cx, cy = area.centre
+    half = math.hypot(cx - area.px, cy - area.py)
+    ux, uy = math.cos(area.psi), math.sin(area.psi)
+    square = Polygon([(cx + a * half * ux - b * half * uy, cy + a * half * uy + b * half * ux)
+                      for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    d = [math.hypot(x - st.exc.x, y - st.exc.y) for x, y in square.exterior.coords]
+    if max(d) > es.reach_max - REACH_MARGIN or min(d) < es.reach_min + REACH_MARGIN:
+        return area
+    if Polygon(es.body(st.exc.x, st.exc.y, st.exc.yaw)[0]).distance(square) < TRACK_GAP:
+        return area
+    if conv.station(st)[1] > es.max_tilt - TILT_MARGIN or math.dist(area.base, (st.exc.x, st.exc.y)) < 1e-9:
+        return area
+    return dataclasses.replace(area, base=(st.exc.x, st.exc.y))
