@@ -23,7 +23,6 @@ from .hierarchy import (
     Area,
     StlTampSolveError,
     Trace,
-    candidate_areas,
     diggable_volume,
     fitting_side,
     get_nlp,
@@ -42,12 +41,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
-from .stand import kept_base, truck_stand
-
-
-#: Metres between the truck's centre and the dig area's edge (half its width, the area's
-#: shadow and the gap) and under its dump reach, for an area to face away from the truck.
-FACE_AWAY_MARGIN = 1.3
+from .stand import candidate_areas_for, place
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -85,6 +79,9 @@ def refuse_other_classes(scenario: Scenario, name: str) -> None:
     if cls != "compact":
         raise EarthbenchError(f"{name} plans for the compact machine class only (its NLPs and its sizes in metres are the "
                               f"STL-TAMP paper's machine's); this scenario's class is {cls!r} (docs/machine-classes.md)")
+
+
+_OMIT = {"omit_default": True}  # a setting left out of the configuration's hash at its default
 
 
 @dataclass(frozen=True)
@@ -168,13 +165,12 @@ class Config(LocalNLPConfig):
     # stage, solved by FATROP (.staged), IPOPT from the same start when it fails (counted in
     # plan.info["solvers"]) — measured slower here, so not the default (NOTES.md, "issue 50").
     # Left out of the configuration's hash at its default (as closed_loop is: earthbench.planner).
-    solver: str = field(default="ipopt", metadata={"omit_default": True})
-    # 0.11.0 (issue 48): the truck's stand per area chosen off the arm's reach (.stand), the truck
-    # following the dig face during digs (convert.Converter.follow); off: 0.10.5's plans
-    place_truck: bool = field(default=True, metadata={"omit_default": True})
-    follow_face: bool = field(default=True, metadata={"omit_default": True})
-    keep_base: bool = field(default=True, metadata={"omit_default": True})  # .stand.kept_base
-    face_away: bool = field(default=True, metadata={"omit_default": True})  # StlTampPlanner.areas
+    solver: str = field(default="ipopt", metadata=_OMIT)
+    # 0.11.0 (issues 48, 49; .stand): the truck's stand, the face followed, the base kept, areas facing away
+    place_truck: bool = field(default=True, metadata=_OMIT)
+    follow_face: bool = field(default=True, metadata=_OMIT)
+    keep_base: bool = field(default=True, metadata=_OMIT)
+    face_away: bool = field(default=True, metadata=_OMIT)
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -188,22 +184,14 @@ class StlTampPlanner(Planner):
     same values to the bit, so the same plans, in less CPU), and an area tiling that tolerates
     rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of tiles).
 
-    0.10.3: closed loop only (:mod:`.receding`): the areas face the first step's sides for the
-    whole run (read again from the truck's new stand, they turned to another side of the site and
-    the excavator drove around it), and each step asks for the missing volume corrected by the
-    yield the truck has reported so far, until the truck holds the target (the open loop's
-    ``volume_tol`` left runs a sliver short, which has no time to the target), and never more
-    than the truck surely takes. Open-loop plans are 0.10.2's.
+    0.10.3: closed loop (:mod:`.receding`) keeps the first step's sides and asks for the missing
+    volume over the yield the truck has reported. Open-loop plans are 0.10.2's.
 
     0.10.4: an NLP's key leaves out the truck's capacity (:func:`.model.nlp_truck`): the same
     plans, the prepared NLPs now serving the ``scale`` ladder's larger trucks.
 
     0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
-    model. A dig whose arm's shadow would touch the truck is repaired or skipped like any other
-    the referee would reject; a phase-0 truck move whose way crosses ground beyond the truck's
-    grade, cross-slope or step limits is replaced by a drive to a stand of
-    ``planners/truck_stands.py`` (off the dig area, near the bearing of the NLP's stand),
-    alongside the excavator's move when they keep the clearance. The NLPs are unchanged.
+    model (digs under the arm skipped or repaired, truck moves over rough ground replaced).
 
     Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash
     the same): ``solver="fatrop"`` writes every NLP stage by stage too (:mod:`.staged`, the same
@@ -212,9 +200,9 @@ class StlTampPlanner(Planner):
     Measured slower than IPOPT on these NLPs, so an option (planners/stl_tamp/NOTES.md).
 
     0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off
-    every dig's arm shadow of the area, and the local NLP is bound to it; during each dig the
-    truck slides along its heading to the stand nearest the dig's bearing
-    (``Converter.follow``). The NLPs' code is unchanged (a bound, not a new NLP)."""
+    the arm's reach, and the local NLP is bound to it; areas on the truck's side face away from it,
+    an area in reach keeps the base, and the truck follows the dig face (``Converter.follow``).
+    The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too."""
 
     name = "stl-tamp"
     version = "0.10.5"
@@ -243,13 +231,8 @@ class StlTampPlanner(Planner):
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
 
     def areas(self, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
-        """The candidate areas (:func:`.hierarchy.candidate_areas`); with ``face_away``, those
-        whose base beyond them from the truck leaves the truck a stand on their far side, off
-        the dig area and in dump reach (the dig area's row on the truck's side), face that way."""
-        c, m = self.config, scenario.machines
-        away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
-        return candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
-                               layout, away)
+        """The candidate areas, some facing away from the truck (:func:`.stand.candidate_areas_for`)."""
+        return candidate_areas_for(self.config, scenario, z, side, layout)
 
     def _global_shape(self, exc: ExcavatorSpec, m_g: int, side: float, lattice: tuple[int, int], spacing: float,
                       sigma: float) -> Shape:
@@ -502,11 +485,7 @@ class StlTampPlanner(Planner):
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
         # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand)
-        stand = None
-        for tile in (area, area.toward):  # facing away from the truck only where the truck has a stand
-            if tile is not None and stand is None:
-                area = kept_base(conv, st, tile) if c.keep_base else tile
-                stand = truck_stand(conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate)) if c.place_truck else None
+        area, stand = place(c, conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate))
         truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)

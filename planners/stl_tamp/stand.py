@@ -17,18 +17,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import shapely
 from shapely.geometry import MultiPoint, Polygon
 
 from earthbench.motion import turn_drive_turn
-from earthbench.world import Pose
+from earthbench.world import Pose, Scenario
 
 from ..truck_stands import GAP
 from .convert import TILT_MARGIN, Converter, SimState
-from .hierarchy import Area
+from .hierarchy import Area, Layout, candidate_areas
 
+#: Metres between the truck's centre and the dig area's edge (half its width, the area's
+#: shadow and the gap) and under its dump reach, for an area to face away from the truck.
+FACE_AWAY_MARGIN = 1.3
 #: Stands looked at, cheapest first, before the truck is left to the conversion's own choice.
 TRIES = 300
 
@@ -96,3 +100,27 @@ def kept_base(conv: Converter, st: SimState, area: Area) -> Area:
     if conv.station(st)[1] > es.max_tilt - TILT_MARGIN or math.dist(area.base, (st.exc.x, st.exc.y)) < 1e-9:
         return area
     return dataclasses.replace(area, base=(st.exc.x, st.exc.y))
+
+
+def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
+    """The candidate areas of the planner's configuration ``c`` (:func:`.hierarchy.candidate_areas`);
+    with ``c.face_away``, those whose base beyond them from the truck leaves the truck a stand on
+    their far side, off the dig area and in dump reach (the dig area's row on the truck's side),
+    face that way, the tile facing the truck kept as ``Area.toward``."""
+    m = scenario.machines
+    away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
+    return candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
+                           layout, away)
+
+
+def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> tuple[Area, Pose | None]:
+    """The area as the local problem digs it (its base kept when the excavator reaches it from
+    where it stands, ``c.keep_base``) and the truck's stand (``c.place_truck``; None: the NLP
+    places the truck). An area facing away from the truck falls back to its tile facing the
+    truck (``Area.toward``) when the truck has no stand beyond it."""
+    stand = None
+    for tile in (area, area.toward):
+        if tile is not None and stand is None:
+            area = kept_base(conv, st, tile) if c.keep_base else tile
+            stand = truck_stand(conv, st, area, buckets) if c.place_truck else None
+    return area, stand
