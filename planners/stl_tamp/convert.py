@@ -169,7 +169,7 @@ class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
     def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
-                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = True):
+                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = False):
         self.retime = retime  # moves as fast as the limits allow (fastest_steps), else at the NLP's pace
         self.follow_face = follow_face  # the truck slides along its heading during a dig (:meth:`follow`)
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None

@@ -205,7 +205,7 @@ class StlTampPlanner(Planner):
     The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too."""
 
     name = "stl-tamp"
-    version = "0.10.5"
+    version = "0.11.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
