@@ -50,6 +50,9 @@ from earthbench.rules import arm_shadow, bodies_touch, reach_of, track_level_and
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
+from earthbench.soil import slump
+
+from ..stability import margins
 from ..truck_stands import TruckStands
 
 EPS_T = 1e-6
@@ -169,10 +172,12 @@ class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
     def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
-                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = False):
+                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = False, keep_soil: bool = False):
         self.retime = retime  # moves as fast as the limits allow (fastest_steps), else at the NLP's pace
         self.follow_face = follow_face  # the truck slides along its heading during a dig (:meth:`follow`)
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
+        # the scan's undermining margin and the soil's slump on the realistic track (stl-tamp 0.11.0)
+        self.keep_soil, self.under_margin = keep_soil, margins(scenario).undermining if keep_soil else 0.0
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
@@ -191,18 +196,20 @@ class Converter:
         return self._station[1], self._station[2]
 
     def undermines(self, st: SimState, contact: tuple[float, float], heading: float, depth: float, drag: float) -> bool:
-        """Whether this dig breaks the referee's undermining rule (a trial cut on the footprint's window)."""
+        """Whether this dig breaks the referee's undermining rule (a trial cut on the footprint's
+        window), with the scan's margin on the realistic track (``planners/stability.py``, as
+        greedy keeps it; 0 on exact ground)."""
         track_level = self.station(st)[0]
         terrain, z = self._window(st, contact, heading, drag)
         level = cut_level(terrain, z, contact, depth)
-        if level >= track_level:
+        if level >= track_level + self.under_margin:
             return False  # nothing is cut below the tracks' ground
         es = self.exc_spec
         jj, ii, _ = path_cells(terrain, z.shape, contact, heading, es.bucket_width, drag)
         before = z[jj, ii].copy()
         apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
         cut = z[jj, ii] < before
-        return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -1e-4
+        return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -max(1e-4, self.under_margin)
 
     def clear(self, exc: Path | Pose, truck: Path | Pose) -> bool:
         """Whether the excavator and the truck keep the referee's clearance rule along both paths:
@@ -237,17 +244,10 @@ class Converter:
         st.exc = Pose(*nodes[-1])
         return True
 
-    def move_both(self, st: SimState, ve: np.ndarray, we: np.ndarray, vt: np.ndarray, wt: np.ndarray, dts: np.ndarray,
-                  truck_stand: Pose | None = None) -> str:
-        """Phase 0: both machines move at once; falls back to one after the other. Returns how.
-        With ``truck_stand`` (the planner's, ``.stand``) the truck drives there instead of
-        along the NLP's path (which ends within a few cm of it)."""
+    def move_both(self, st: SimState, ve: np.ndarray, we: np.ndarray, vt: np.ndarray, wt: np.ndarray, dts: np.ndarray) -> str:
+        """Phase 0: both machines move at once; falls back to one after the other. Returns how."""
         es = self.exc_spec
         ts = self.truck_spec
-        if truck_stand is not None:
-            how = self.to_stand(st, ve, we, dts, truck_stand)
-            if how is not None:
-                return how
         ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
         nt = integrate(st.truck, vt, wt, dts, ts.travel_speed, ts.yaw_rate)
         e_moves = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) > 1e-6 or abs(ne[-1, 2] - ne[0, 2]) > 1e-6
@@ -308,42 +308,6 @@ class Converter:
             st.t = float(pt2[-1][0])
             return "excavator-first"
         return self._blocked()
-
-    def to_stand(self, st: SimState, ve: np.ndarray, we: np.ndarray, dts: np.ndarray, stand: Pose) -> str | None:
-        """The excavator along the NLP's controls and the truck straight to ``stand`` (turn, drive,
-        turn), together when they keep the clearance, else one after the other; None (nothing
-        emitted) when the truck's way breaks its ground limits or no order keeps the clearance."""
-        es, ts = self.exc_spec, self.truck_spec
-        ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
-        if self.retime:
-            dts = fastest_steps(ne, np.asarray(dts, float), es.travel_speed, es.yaw_rate)
-        times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
-        still = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) < 1e-6 and abs(ne[-1, 2] - ne[0, 2]) < 1e-6
-        pe = _samples(ne, times)
-        pt = turn_drive_turn(st.truck, (stand.x, stand.y), st.t, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
-        if len(pt) < 2:  # the truck stands there already
-            return "excavator" if self.move_excavator(st, ve, we, np.diff(times)) else None
-        if not self.stands(st).path_ok(pt):
-            return None
-        span_e, span_t = float(times[-1] - times[0]), pt[-1][0] - pt[0][0]
-        shift = lambda path, dt: [(t + dt, x, y, w) for t, x, y, w in path]  # noqa: E731
-        orders = [("together", pe, pt)] if not still else []
-        orders += [("truck-first", shift(pe, span_t), pt), ("excavator-first", pe, shift(pt, span_e))]
-        for how, e_path, t_path in orders:
-            e_end, t_end = Pose(*e_path[-1][1:]), Pose(*t_path[-1][1:])
-            if how == "together":
-                ok = self.clear(e_path, t_path) and self.clear(e_end, t_path) and self.clear(e_path, t_end)
-            else:  # one machine waits where it is while the other moves
-                e0, t0 = (st.exc, t_end) if how == "truck-first" else (e_end, st.truck)
-                ok = self.clear(e0, t_path) and (still or self.clear(e_path, t0))
-            if ok:
-                if not still:
-                    st.actions.append(Move("excavator", tuple(e_path)))
-                st.actions.append(Move("truck", tuple(t_path)))
-                st.exc, st.truck = e_end, t_end
-                st.t = max(float(e_path[-1][0]), float(t_path[-1][0]))
-                return "truck" if still else how
-        return None
 
     def stands(self, st: SimState) -> TruckStands:
         """The truck's stands on the grid as it now is (``planners/truck_stands.py``)."""
@@ -442,12 +406,13 @@ class Converter:
         level = cut_level(terrain, z, contact, depth)
         return apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
 
-    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float) -> tuple[Heightmap, np.ndarray]:
+    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float,
+                pad: float = 0.0) -> tuple[Heightmap, np.ndarray]:
         t = self.sc.terrain
         r, (x0, y0) = t.resolution, t.origin
         ny, nx = st.z.shape
         ex, ey = contact[0] + math.cos(heading) * drag, contact[1] + math.sin(heading) * drag
-        pad = self.exc_spec.bucket_width + 3 * r
+        pad = pad + self.exc_spec.bucket_width + 3 * r
         i0 = max(int(math.floor((min(contact[0], ex) - pad - x0) / r)), 0)
         i1 = min(int(math.ceil((max(contact[0], ex) + pad - x0) / r)) + 1, nx)
         j0 = max(int(math.floor((min(contact[1], ey) - pad - y0) / r)), 0)
@@ -580,7 +545,16 @@ class Converter:
         if self.follow_face:
             self.follow(st, contact, heading, drag, dig_t)
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
+        soil = self.sc.soil if self.keep_soil else None  # the faces the cut leaves slump, as the referee's soil does
+        if soil is not None:
+            run = (2 * es.max_cut_depth + drag) / math.tan(math.radians(soil.repose_deg))
+            t, z0 = self._window(st, contact, heading, drag, pad=run)
+            (x0, y0), r = t.origin, t.resolution
+            i0, j0 = int(round((x0 - self.sc.terrain.origin[0]) / r)), int(round((y0 - self.sc.terrain.origin[1]) / r))
+            box = (j0, j0 + z0.shape[0], i0, i0 + z0.shape[1])
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)
+        if soil is not None:
+            slump(st.z, self.sc.terrain.resolution, soil.repose_deg, z0, box)
         st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
                               float(depth), float(drag)))
         st.t = max(st.t + dig_t, st.truck_ready)  # the dump waits for the truck

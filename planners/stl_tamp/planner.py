@@ -41,7 +41,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
-from .stand import candidate_areas_for, place
+from .stand import candidate_areas_for, place, to_stand
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -317,7 +317,7 @@ class StlTampPlanner(Planner):
         box = site_box(scenario)
         side = self.area_side(scenario)
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                         retime=c.retime_moves, follow_face=c.follow_face)
+                         retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
 
         areas = self.areas(scenario, st.z, side)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
@@ -578,7 +578,8 @@ class StlTampPlanner(Planner):
         dts = np.diff(sol.times)
         U = sol.U
         loaded = 0.0
-        conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n], stand)
+        if stand is None or to_stand(conv, st, U[:n, 0], U[:n, 1], dts[:n], stand) is None:
+            conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
         for i in range(1, nlp.m1):
             k0 = i * n
             if kc[i] > 0:

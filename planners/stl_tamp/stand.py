@@ -24,10 +24,11 @@ import shapely
 from shapely.geometry import MultiPoint, Polygon
 
 from earthbench.motion import turn_drive_turn
+from earthbench.plan import Move
 from earthbench.world import Pose, Scenario
 
 from ..truck_stands import GAP
-from .convert import TILT_MARGIN, Converter, SimState
+from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
 from .hierarchy import Area, Layout, candidate_areas
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
@@ -124,3 +125,41 @@ def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> 
             area = kept_base(conv, st, tile) if c.keep_base else tile
             stand = truck_stand(conv, st, area, buckets) if c.place_truck else None
     return area, stand
+
+
+def to_stand(conv: Converter, st: SimState, ve: np.ndarray, we: np.ndarray, dts: np.ndarray, stand: Pose) -> str | None:
+    """Phase 0 with the truck's stand chosen: the excavator along the NLP's controls and the
+    truck straight to ``stand`` (turn, drive, turn; the NLP's truck ends within ``stand_tol``
+    of it), together when they keep the clearance, else one after the other; None (nothing
+    emitted) when the truck's way breaks its ground limits or no order keeps the clearance."""
+    es, ts = conv.exc_spec, conv.truck_spec
+    ne = integrate(st.exc, ve, we, dts, es.travel_speed, es.yaw_rate)
+    if conv.retime:
+        dts = fastest_steps(ne, np.asarray(dts, float), es.travel_speed, es.yaw_rate)
+    times = st.t + np.concatenate([[0.0], np.cumsum(dts)])
+    still = np.max(np.hypot(ne[:, 0] - ne[0, 0], ne[:, 1] - ne[0, 1])) < 1e-6 and abs(ne[-1, 2] - ne[0, 2]) < 1e-6
+    pe = [(float(t), float(x), float(y), float(w)) for t, (x, y, w) in zip(times, ne)]
+    pt = turn_drive_turn(st.truck, (stand.x, stand.y), st.t, ts.travel_speed, ts.yaw_rate, final_yaw=stand.yaw)
+    if len(pt) < 2:  # the truck stands there already
+        return "excavator" if conv.move_excavator(st, ve, we, np.diff(times)) else None
+    if not conv.stands(st).path_ok(pt):
+        return None
+    span_e, span_t = float(times[-1] - times[0]), pt[-1][0] - pt[0][0]
+    shift = lambda path, dt: [(t + dt, x, y, w) for t, x, y, w in path]  # noqa: E731
+    orders = [("together", pe, pt)] if not still else []
+    orders += [("truck-first", shift(pe, span_t), pt), ("excavator-first", pe, shift(pt, span_e))]
+    for how, e_path, t_path in orders:
+        e_end, t_end = Pose(*e_path[-1][1:]), Pose(*t_path[-1][1:])
+        if how == "together":
+            ok = conv.clear(e_path, t_path) and conv.clear(e_end, t_path) and conv.clear(e_path, t_end)
+        else:  # one machine waits where it is while the other moves
+            e0, t0 = (st.exc, t_end) if how == "truck-first" else (e_end, st.truck)
+            ok = conv.clear(e0, t_path) and (still or conv.clear(e_path, t0))
+        if ok:
+            if not still:
+                st.actions.append(Move("excavator", tuple(e_path)))
+            st.actions.append(Move("truck", tuple(t_path)))
+            st.exc, st.truck = e_end, t_end
+            st.t = max(float(e_path[-1][0]), float(t_path[-1][0]))
+            return "truck" if still else how
+    return None
