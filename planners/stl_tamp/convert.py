@@ -50,6 +50,9 @@ from earthbench.rules import arm_shadow, bodies_touch, reach_of, track_level_and
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
 from earthbench.world import Heightmap, Pose, Scenario
 
+from earthbench.soil import slump
+
+from ..stability import margins
 from ..truck_stands import TruckStands
 
 EPS_T = 1e-6
@@ -79,6 +82,7 @@ class SimState:
     actions: list[Any] = field(default_factory=list)
     digs: int = 0
     dig_area: Any = None
+    truck_ready: float = 0.0  # when the truck's last move ends (a dump waits for it)
 
     @classmethod
     def start(cls, scenario: Scenario) -> SimState:
@@ -168,8 +172,12 @@ class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
     def __init__(self, scenario: Scenario, *, eta_on: float, min_dig_volume: float, depth: float, repair: float = 0.5,
-                 clearance_margin: float = 0.01, retime: bool = True):
+                 clearance_margin: float = 0.01, retime: bool = True, follow_face: bool = False, keep_soil: bool = False):
         self.retime = retime  # moves as fast as the limits allow (fastest_steps), else at the NLP's pace
+        self.follow_face = follow_face  # the truck slides along its heading during a dig (:meth:`follow`)
+        self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
+        # the scan's undermining margin and the soil's slump on the realistic track (stl-tamp 0.11.0)
+        self.keep_soil, self.under_margin = keep_soil, margins(scenario).undermining if keep_soil else 0.0
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
@@ -188,18 +196,20 @@ class Converter:
         return self._station[1], self._station[2]
 
     def undermines(self, st: SimState, contact: tuple[float, float], heading: float, depth: float, drag: float) -> bool:
-        """Whether this dig breaks the referee's undermining rule (a trial cut on the footprint's window)."""
+        """Whether this dig breaks the referee's undermining rule (a trial cut on the footprint's
+        window), with the scan's margin on the realistic track (``planners/stability.py``, as
+        greedy keeps it; 0 on exact ground)."""
         track_level = self.station(st)[0]
         terrain, z = self._window(st, contact, heading, drag)
         level = cut_level(terrain, z, contact, depth)
-        if level >= track_level:
+        if level >= track_level + self.under_margin:
             return False  # nothing is cut below the tracks' ground
         es = self.exc_spec
         jj, ii, _ = path_cells(terrain, z.shape, contact, heading, es.bucket_width, drag)
         before = z[jj, ii].copy()
         apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
         cut = z[jj, ii] < before
-        return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -1e-4
+        return undermining_excess(terrain, z, es, st.exc, track_level, jj[cut], ii[cut]) > -max(1e-4, self.under_margin)
 
     def clear(self, exc: Path | Pose, truck: Path | Pose) -> bool:
         """Whether the excavator and the truck keep the referee's clearance rule along both paths:
@@ -334,6 +344,27 @@ class Converter:
                     return True
         return False
 
+    def follow(self, st: SimState, contact: tuple[float, float], heading: float, drag: float, dig_t: float) -> None:
+        """The truck follows the dig face: during the dig it slides along its heading to the
+        stand of ``planners/truck_stands.py`` whose dump after the dig ends soonest (less swing
+        against the truck's drive), clear of this dig's arm shadow, off the dig area, on kept
+        ground and in dump reach; it stays where it is when that is best or nothing is clear."""
+        key = (st.truck, st.exc)
+        if self._line is None or self._line[0] != key:
+            self._line = (key, self.stands(st).line(st.truck, st.exc))
+        stands = self._line[1]
+        best = self.stands(st).best_for_dig(st.exc, st.truck, stands, contact, heading, drag, st.t, st.t + dig_t,
+                                            free_at=st.truck_ready)
+        if best is None or math.hypot(best[0].x - st.truck.x, best[0].y - st.truck.y) < 1e-6:
+            return
+        ts = self.truck_spec
+        path = turn_drive_turn(st.truck, (best[0].x, best[0].y), max(st.t, st.truck_ready), ts.travel_speed, ts.yaw_rate)
+        if not self.clear(st.exc, path):
+            return
+        st.actions.append(Move("truck", tuple(path)))
+        st.truck, st.truck_ready = Pose(*path[-1][1:]), float(path[-1][0])
+        self._skip("truck_followed")
+
     def _blocked(self) -> str:
         self._skip("move_blocked")
         return "blocked"
@@ -375,12 +406,13 @@ class Converter:
         level = cut_level(terrain, z, contact, depth)
         return apply_cut(terrain, z, contact, heading, es.bucket_width, drag, level, es.bucket_capacity)
 
-    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float) -> tuple[Heightmap, np.ndarray]:
+    def _window(self, st: SimState, contact: tuple[float, float], heading: float, drag: float,
+                pad: float = 0.0) -> tuple[Heightmap, np.ndarray]:
         t = self.sc.terrain
         r, (x0, y0) = t.resolution, t.origin
         ny, nx = st.z.shape
         ex, ey = contact[0] + math.cos(heading) * drag, contact[1] + math.sin(heading) * drag
-        pad = self.exc_spec.bucket_width + 3 * r
+        pad = pad + self.exc_spec.bucket_width + 3 * r
         i0 = max(int(math.floor((min(contact[0], ex) - pad - x0) / r)), 0)
         i1 = min(int(math.ceil((max(contact[0], ex) + pad - x0) / r)) + 1, nx)
         j0 = max(int(math.floor((min(contact[1], ey) - pad - y0) / r)), 0)
@@ -510,11 +542,22 @@ class Converter:
         if self.undermines(st, contact, heading, depth, drag):
             return self._skip("undermining")
         dig_t = min_dig_time(st.exc, st.turn, contact, es) + EPS_T
+        if self.follow_face:
+            self.follow(st, contact, heading, drag, dig_t)
         z_level = cut_level(self.sc.terrain, st.z, contact, depth)
+        soil = self.sc.soil if self.keep_soil else None  # the faces the cut leaves slump, as the referee's soil does
+        if soil is not None:
+            run = (2 * es.max_cut_depth + drag) / math.tan(math.radians(soil.repose_deg))
+            t, z0 = self._window(st, contact, heading, drag, pad=run)
+            (x0, y0), r = t.origin, t.resolution
+            i0, j0 = int(round((x0 - self.sc.terrain.origin[0]) / r)), int(round((y0 - self.sc.terrain.origin[1]) / r))
+            box = (j0, j0 + z0.shape[0], i0, i0 + z0.shape[1])
         got = apply_cut(self.sc.terrain, st.z, contact, heading, es.bucket_width, drag, z_level, es.bucket_capacity)
+        if soil is not None:
+            slump(st.z, self.sc.terrain.resolution, soil.repose_deg, z0, box)
         st.actions.append(Dig("excavator", st.t, st.t + dig_t, (float(contact[0]), float(contact[1])), float(heading),
                               float(depth), float(drag)))
-        st.t += dig_t
+        st.t = max(st.t + dig_t, st.truck_ready)  # the dump waits for the truck
         st.turn = math.atan2(contact[1] - st.exc.y, contact[0] - st.exc.x) - st.exc.yaw
         dump_t = min_dump_time(st.exc, st.turn, (st.truck.x, st.truck.y), es) + EPS_T
         st.actions.append(Dump("excavator", st.t, st.t + dump_t))

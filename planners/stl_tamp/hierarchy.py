@@ -103,6 +103,7 @@ class Area:
     estimate: float
     centre: tuple[float, float]
     source: str = "tour"
+    toward: Area | None = None  # facing away from the truck: the same tile facing it (the fallback)
 
 
 @dataclass
@@ -241,7 +242,8 @@ TILE_TOL = 1e-9
 
 
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
-                    truck_offset: float, truck_angle: float = 0.0, layout: Layout | None = None) -> list[Area]:
+                    truck_offset: float, truck_angle: float = 0.0, layout: Layout | None = None,
+                    facing_away: float | None = None) -> list[Area]:
     """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
 
     The base sits ``base_offset`` beyond the area's centre toward the truck's side; the truck
@@ -264,7 +266,8 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
     ox = xmin + 0.5 * ((xmax - xmin) - nxa * side)
     oy = ymin + 0.5 * ((ymax - ymin) - nya * side)
     out = []
-    psi = math.atan2(uy, ux)  # drag toward the base, i.e. toward the loading side
+    # the dig area's edge on the truck's side, along the loading axis
+    edge = max(x * ux + y * uy for x, y in scenario.site.dig_area)
     dx_t = math.cos(truck_angle) * ux + math.sin(truck_angle) * tx
     dy_t = math.cos(truck_angle) * uy + math.sin(truck_angle) * ty
     for a in range(nxa):
@@ -280,12 +283,21 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
             est = min(est, vmax)
             if est < 0.05:
                 continue
-            base = level_stand(scenario, z, (cx, cy), (ux, uy), base_offset, side)
-            if base is None:
-                continue  # no stand in reach of this area is level enough for the referee's tilt rule
-            truck = (base[0] + dx_t * truck_offset, base[1] + dy_t * truck_offset)
-            px, py = cx - ux * side / 2, cy - uy * side / 2
-            out.append(Area(px, py, psi, base, truck, est, (cx, cy)))
+            area = None
+            sides = [(ux, uy)]
+            if facing_away is not None and (edge - (cx * ux + cy * uy)) + base_offset <= facing_away:
+                sides.append((-ux, -uy))  # the base beyond the area from the truck: the truck may stand on the dig's bearing
+            for sx, sy in sides:
+                base = level_stand(scenario, z, (cx, cy), (sx, sy), base_offset, side)
+                if base is None:
+                    continue  # no stand in reach of this area is level enough for the referee's tilt rule
+                truck = (base[0] + dx_t * truck_offset, base[1] + dy_t * truck_offset)
+                px, py = cx - sx * side / 2, cy - sy * side / 2
+                area = Area(px, py, math.atan2(sy, sx), base, truck, est, (cx, cy), toward=area)
+            if area is not None:
+                out.append(area)
+    if len(out) == 1 and out[0].toward is not None:
+        out = [out[0].toward]  # a dig area that is one local area (Fig. 6's set-up) keeps the paper's layout
     return out
 
 

@@ -394,9 +394,11 @@ class PhaseNLP:
     # -- bounds --------------------------------------------------------------------------------------
     def bounds(self, box: tuple[float, float, float, float], fixed_tasks: dict[str, np.ndarray] | None = None,
                max_dig_phases: int | None = None,
-               stand: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+               stand: tuple[float, float, float] | None = None,
+               truck_stand: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Variable bounds. ``stand = (x, y, tol)``: the base ends phase 0 within ``tol`` of
-        (x, y) (with ``Shape.hold_base`` it then stands there for the whole horizon)."""
+        (x, y) (``Shape.hold_base``: it stands there for the whole horizon); ``truck_stand``: the
+        same for the truck, at the stand the planner chose (``planners/stl_tamp/stand.py``)."""
         sh, exc, tr = self.shape, self.exc, self.truck
         m1, n, N = self.m1, self.n, self.N
         mg = 0.999
@@ -409,6 +411,8 @@ class PhaseNLP:
         if stand is not None:  # node n is column n - 1 (node 0 is the parameter s0)
             lbx[n - 1, :2] = (stand[0] - stand[2], stand[1] - stand[2])
             ubx[n - 1, :2] = (stand[0] + stand[2], stand[1] + stand[2])
+        if truck_stand is not None:
+            lbx[n - 1, 6:8], ubx[n - 1, 6:8] = np.subtract(truck_stand[:2], truck_stand[2]), np.add(truck_stand[:2], truck_stand[2])
         lbu = np.tile(-ulim, (N, 1))
         ubu = np.tile(ulim, (N, 1))
         for i in range(m1):
@@ -467,6 +471,7 @@ class PhaseNLP:
               max_iter: int = 300, options: dict[str, Any] | None = None,
               accept_feasible: float = 0.0, casadi_options: dict[str, Any] | None = None,
               stand: tuple[float, float, float] | None = None, solver: str = "ipopt",
+              truck_stand: tuple[float, float, float] | None = None,
               fatrop_options: dict[str, Any] | None = None) -> Solution:
         """Solve from ``w0``. ``success`` is IPOPT's own success, or an acceptable-level stop with
         violation < 1e-4, or — when ``accept_feasible`` > 0 — an iteration cap whose last
@@ -474,7 +479,7 @@ class PhaseNLP:
         ``solver="fatrop"``: FATROP on the stage-by-stage NLP (:mod:`.staged`; ``options``' μ₀
         and tolerance, ``fatrop_options`` on top), IPOPT from the same start when it fails
         (``info["fallback"]``); every solve is counted (:meth:`take_solver_counts`)."""
-        lb, ub = self.bounds(box, fixed_tasks, max_dig_phases, stand)
+        lb, ub = self.bounds(box, fixed_tasks, max_dig_phases, stand, truck_stand)
         params, w0 = quantize(params), np.clip(quantize(w0), lb, ub)
         first: dict[str, Any] = {}
         if solver == "fatrop" and self.staged() is not None:

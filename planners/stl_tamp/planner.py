@@ -23,7 +23,6 @@ from .hierarchy import (
     Area,
     StlTampSolveError,
     Trace,
-    candidate_areas,
     diggable_volume,
     fitting_side,
     get_nlp,
@@ -32,6 +31,7 @@ from .hierarchy import (
     greedy_tour,
     in_box,
     level_stand,
+    Layout,
     LocalProblem,
     local_problem,
     local_seeds,
@@ -41,6 +41,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
+from .stand import candidate_areas_for, place, to_stand
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -78,6 +79,9 @@ def refuse_other_classes(scenario: Scenario, name: str) -> None:
     if cls != "compact":
         raise EarthbenchError(f"{name} plans for the compact machine class only (its NLPs and its sizes in metres are the "
                               f"STL-TAMP paper's machine's); this scenario's class is {cls!r} (docs/machine-classes.md)")
+
+
+_OMIT = {"omit_default": True}  # a setting left out of the configuration's hash at its default
 
 
 @dataclass(frozen=True)
@@ -161,7 +165,12 @@ class Config(LocalNLPConfig):
     # stage, solved by FATROP (.staged), IPOPT from the same start when it fails (counted in
     # plan.info["solvers"]) — measured slower here, so not the default (NOTES.md, "issue 50").
     # Left out of the configuration's hash at its default (as closed_loop is: earthbench.planner).
-    solver: str = field(default="ipopt", metadata={"omit_default": True})
+    solver: str = field(default="ipopt", metadata=_OMIT)
+    # 0.11.0 (issues 48, 49; .stand): the truck's stand, the face followed, the base kept, areas facing away
+    place_truck: bool = field(default=True, metadata=_OMIT)
+    follow_face: bool = field(default=True, metadata=_OMIT)
+    keep_base: bool = field(default=True, metadata=_OMIT)
+    face_away: bool = field(default=True, metadata=_OMIT)
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -171,46 +180,32 @@ class Config(LocalNLPConfig):
 class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
 
-    0.10.0: the planner declares a preparation (:meth:`prepare`, docs/DESIGN.md §6): its NLPs'
-    derivatives and helpers compiled to C once per machine (:mod:`.compiled`), loaded by each
-    case instead of evaluated on CasADi's virtual machine. The compiled code computes the same
-    values to the bit, so the plans are 0.9.0's (plan digests and the reproducibility test are
-    unchanged); the version moves because the code path and the solve times do. 0.10.1: the
-    large functions (the global Hessians above all) compiled in pieces at ``-O1`` instead of whole
-    at ``-O0``; the same values to the bit, so the same plans, in less CPU.
+    0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the
+    same values to the bit, so the same plans, in less CPU), and an area tiling that tolerates
+    rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of tiles).
 
-    0.10.2: the candidate areas' tiling tolerates rounding (:data:`.hierarchy.TILE_TOL`): on a
-    site far from the origin (a sealed draw's shifted site) a dig area exactly k tiles wide lost
-    a row of tiles, and paper-switch's one-tile dig area its only tile (an empty plan). The
-    public suites' areas, hence their plans, are unchanged.
+    0.10.3: closed loop (:mod:`.receding`) keeps the first step's sides and asks for the missing
+    volume over the yield the truck has reported. Open-loop plans are 0.10.2's.
 
-    0.10.3: closed loop only (:mod:`.receding`): the areas face the first step's sides for the
-    whole run (read again from the truck's new stand, they turned to another side of the site and
-    the excavator drove around it), and each step asks for the missing volume corrected by the
-    yield the truck has reported so far, until the truck holds the target (the open loop's
-    ``volume_tol`` left runs a sliver short, which has no time to the target), and never more
-    than the truck surely takes. Open-loop plans are 0.10.2's.
-
-    0.10.4: an NLP's key leaves out the truck's capacity, which no constraint reads
-    (:func:`.model.nlp_truck`): the ``scale`` ladder's larger trucks had solved every NLP
-    uncompiled. The same plans (the same NLPs), in less CPU on such sites.
+    0.10.4: an NLP's key leaves out the truck's capacity (:func:`.model.nlp_truck`): the same
+    plans, the prepared NLPs now serving the ``scale`` ladder's larger trucks.
 
     0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
-    model. A dig whose arm's shadow would touch the truck is repaired or skipped like any other
-    the referee would reject; a phase-0 truck move whose way crosses ground beyond the truck's
-    grade, cross-slope or step limits is replaced by a drive to a stand of
-    ``planners/truck_stands.py`` (off the dig area, near the bearing of the NLP's stand),
-    alongside the excavator's move when they keep the clearance. The NLPs are unchanged.
+    model (digs under the arm skipped or repaired, truck moves over rough ground replaced).
 
     Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash
     the same): ``solver="fatrop"`` writes every NLP stage by stage too (:mod:`.staged`, the same
     problem with its phase variables carried as states) and solves it by FATROP, IPOPT on the
     classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``).
     Measured slower than IPOPT on these NLPs, so an option (planners/stl_tamp/NOTES.md).
-    """
+
+    0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off
+    the arm's reach, and the local NLP is bound to it; areas on the truck's side face away from it,
+    an area in reach keeps the base, and the truck follows the dig face (``Converter.follow``).
+    The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too."""
 
     name = "stl-tamp"
-    version = "0.10.5"
+    version = "0.11.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
@@ -234,6 +229,10 @@ class StlTampPlanner(Planner):
         local area: the contact box is the dig area itself, see :meth:`_local`)."""
         e = scenario.machines.excavator
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
+
+    def areas(self, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
+        """The candidate areas, some facing away from the truck (:func:`.stand.candidate_areas_for`)."""
+        return candidate_areas_for(self.config, scenario, z, side, layout)
 
     def _global_shape(self, exc: ExcavatorSpec, m_g: int, side: float, lattice: tuple[int, int], spacing: float,
                       sigma: float) -> Shape:
@@ -318,9 +317,9 @@ class StlTampPlanner(Planner):
         box = site_box(scenario)
         side = self.area_side(scenario)
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                         retime=c.retime_moves)
+                         retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
 
-        areas = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle)
+        areas = self.areas(scenario, st.z, side)
         work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
         # V_max per area is the global layer's unit; a dig area that is one local area (Fig. 6's
         # set-up) has nothing to split the target over: its local problem takes up to m_l buckets
@@ -357,8 +356,7 @@ class StlTampPlanner(Planner):
             if not left and remaining > c.volume_tol and trace.regenerated < 3:
                 # every area visited once: tile the lowered grid anew
                 trace.regenerated += 1
-                left = candidate_areas(scenario, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset,
-                                       c.truck_angle)
+                left = self.areas(scenario, st.z, side)
         if len(trace.global_["blocks"]) == 1:  # one window: the record as before
             trace.global_ = dict(trace.global_["blocks"][0])
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
@@ -486,14 +484,14 @@ class StlTampPlanner(Planner):
         nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        # phase 0 places the truck for this area (it drives while the excavator relocates): the
-        # guess takes it to the area's stand, the NLP moves it under clearance and dump reach
-        truck = area.truck
+        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand)
+        area, stand = place(c, conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate))
+        truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
         seeds = settle_contacts(nlp, s0, seeds, floor, params)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params)
-        sol, n_iter, t_solve, retry = self._solve_local(lp, exc, area, truck, box, w0)
+        sol, n_iter, t_solve, retry = self._solve_local(lp, exc, area, truck, box, w0, stand is not None)
         trace.add_build(nlp)
         rec: dict[str, Any] = {"area": [round(cx, 3), round(cy, 3)], "source": area.source, "target": v_local,
                                "status": sol.status, "iterations": n_iter, "solve_time_s": t_solve,
@@ -522,14 +520,15 @@ class StlTampPlanner(Planner):
         if c.as_planned:  # the NLP's own depth: its contact height less max(floor, that − d_dig)
             pz = nlp.evaluate(sol.info["w"], params)["contact_heights"]
             depths = np.clip(pz - np.maximum(floor, pz - shape.unit_depth), 0.0, shape.unit_depth)
-        got = self._emit(st, conv, nlp, sol, remaining, depths)
+        got = self._emit(st, conv, nlp, sol, remaining, depths, stand)
         rec["loaded"] = got
         rec["wall_s"] = time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
 
     def _solve_local(self, lp: LocalProblem, exc: ExcavatorSpec, area: Area, truck: tuple[float, float],
-                     box: tuple[float, float, float, float], w0: np.ndarray) -> tuple[Solution, int, float, str | None]:
+                     box: tuple[float, float, float, float], w0: np.ndarray,
+                     truck_fixed: bool = False) -> tuple[Solution, int, float, str | None]:
         """The local NLP solved from ``w0`` with its contacts kept near the area and its stand near
         the area's level stand: retried once if it fails (``retry``), restarted once out of the
         disjunction trap if it succeeds (``reseed``). Returns the solution kept, the iterations
@@ -539,10 +538,11 @@ class StlTampPlanner(Planner):
         half = math.hypot(cx - area.px, cy - area.py) + 0.5
         cbox = (max(cx - half, box[0]), min(cx + half, box[1]), max(cy - half, box[2]), min(cy + half, box[3]))
         stand = (area.base[0], area.base[1], c.stand_tol)
+        at = (truck[0], truck[1], c.stand_tol) if truck_fixed else None  # the truck's stand (.stand)
 
         def solve(w: np.ndarray) -> Solution:
             return nlp.solve(params, w, cbox, max_iter=c.max_iter, accept_feasible=c.accept_feasible,
-                             options=self._ipopt_options(), stand=stand, solver=c.solver)
+                             options=self._ipopt_options(), stand=stand, solver=c.solver, truck_stand=at)
 
         sol = solve(w0)
         n_iter, t_solve = sol.iterations, sol.solve_time_s
@@ -571,14 +571,15 @@ class StlTampPlanner(Planner):
         return sol, n_iter, t_solve, retry
 
     def _emit(self, st: SimState, conv: Converter, nlp, sol: Solution, remaining: float,
-              depths: np.ndarray | None = None) -> float:
+              depths: np.ndarray | None = None, stand=None) -> float:
         """Turn the phases of a local solution into actions (see :mod:`.convert`); with
         ``depths`` (the as-planned mode) each dig is the NLP's own at that depth."""
         n, kc = nlp.n, nlp.kc
         dts = np.diff(sol.times)
         U = sol.U
         loaded = 0.0
-        conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
+        if stand is None or to_stand(conv, st, U[:n, 0], U[:n, 1], dts[:n], stand) is None:
+            conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
         for i in range(1, nlp.m1):
             k0 = i * n
             if kc[i] > 0:

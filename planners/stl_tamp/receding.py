@@ -41,7 +41,6 @@ from .hierarchy import (
     Area,
     Layout,
     Trace,
-    candidate_areas,
     global_blocks,
     global_lattice,
     greedy_tour,
@@ -104,11 +103,10 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     side = planner.area_side(sc)
     box = site_box(sc)
     conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                     retime=c.retime_moves)
+                     retime=c.retime_moves, follow_face=c.follow_face)  # keep_soil: see NOTES.md, "0.11.0"
     if h.layout is None:
         h.layout = site_layout(sc)
-    areas = [a for a in candidate_areas(sc, st.z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset,
-                                        c.truck_angle, h.layout)
+    areas = [a for a in planner.areas(sc, st.z, side, h.layout)
              if all(math.dist(a.centre, d) > side / 2 for d in h.done)]
     if not areas:
         return None
