@@ -1,6 +1,7 @@
-"""The experimental strip loader (planners/strip_loader): a strip along the pile with the truck
-beside it where one fits, greedy-loader's cycles elsewhere; its plans are judged by the referee
-and never beat the loader bound (docs/metrics.md, "What the geometry forces")."""
+"""strip-loader (planners/strip_loader): a strip along the pile with the truck beside it where one
+fits, greedy-loader's cycles elsewhere. Its plans are judged by the referee on generated piles:
+valid, at the target, never below the loader bound (docs/metrics.md, "What the geometry
+forces"), and on these seeds within 2 × the bound at 4 m³."""
 
 from __future__ import annotations
 
@@ -14,31 +15,32 @@ from earthbench_planners.strip_loader.planner import StripLoader
 from earthbench_terrains.pile import pile
 
 
-def test_a_strip_loads_the_target_with_the_truck_moving_beside_it():
-    """pile seed 6, 2 m³: the one suite scenario where a strip keeps clear of the truck. The loader
-    never reverses out between charges (only the back-off along its heading), the truck moves
-    after its first stand, and the plan is valid at 2.15 × the bound (greedy-loader: 2.76 ×)."""
-    sc = pile(6, 2.0)
+@pytest.mark.parametrize("seed,target,within", [(1, 4.0, 2.0), (8, 4.0, 2.0), (6, 2.0, 2.3)])
+def test_a_strip_loads_the_target_with_the_truck_moving_beside_it(seed, target, within):
+    """The loader never turns between charges (one heading, only the back-off along it), the
+    truck drives once to its first stand and on before each further dump, and the plan is valid
+    between the bound and ``within`` × it (greedy-loader on these: 3.70, 3.72, 2.76 ×)."""
+    sc = pile(seed, target)
     plan = StripLoader().plan(sc)
     assert plan.info["strip"]
     v = judge(sc, plan)
     assert v.valid, v.violations[:3]
-    ratio = time_to_target(v.load_curve, 2.0) / lower_bound_time_to_target(sc)
-    assert 1.0 <= ratio < 2.2
+    ratio = time_to_target(v.load_curve, target) / lower_bound_time_to_target(sc)
+    assert 1.0 <= ratio < within
+    assert evaluate(sc, plan, v)["time_per_target_m3_bound_ratio"] == pytest.approx(ratio)
     charges = [a for a in plan.actions if isinstance(a, Charge)]
     dumps = [a for a in plan.actions if isinstance(a, Dump)]
-    assert len(charges) == len(dumps) >= 3
-    assert len({round(c.entry[2], 9) for c in charges}) == 1  # one heading: a straight strip
+    assert len(charges) == len(dumps) >= round(target / sc.machines.loader.bucket_capacity)
+    assert len({round(c.entry[2], 9) for c in charges}) == 1
     truck = [a for a in plan.actions if isinstance(a, Move) and a.machine == "truck"]
-    assert len(truck) == len(dumps)  # the route to the first stand, then on before each further dump
-    assert evaluate(sc, plan, v)["time_per_target_m3_bound_ratio"] == pytest.approx(ratio)
+    assert len(truck) == len(dumps)
 
 
-@pytest.mark.parametrize("seed,target", [(0, 2.0), (3, 4.0)])
-def test_where_no_strip_fits_it_plans_greedy_loaders_cycles(seed, target):
-    sc = pile(seed, target)
+def test_where_no_strip_fits_it_plans_greedy_loaders_cycles():
+    sc = pile(0, 4.0)  # the wall's ends are too short for 4 m³ with the truck's line on the map
     plan = StripLoader().plan(sc)
     assert not plan.info.get("strip")
     assert plan.actions == GreedyLoader().plan(sc).actions
     v = judge(sc, plan)
-    assert v.valid and v.loaded_volume >= target - 1e-6
+    assert v.valid and v.loaded_volume >= 4.0 - 1e-6
+

@@ -24,7 +24,8 @@ from earthbench.plan import Plan, Prediction
 
 from ..greedy.loader import GreedyLoader, GreedyLoaderConfig
 from ..loader_cycle import CycleBuilder
-from .strip import Strip, StripSettings, candidates, layout, timed
+from .schedule import timed
+from .strip import Strip, StripSettings, candidates, layout
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,7 @@ class StripLoader(GreedyLoader):
     def _strip(self, b: CycleBuilder) -> Strip | None:
         """The fastest strip that keeps clear of the truck, of the few whose layouts promise most."""
         s = StripSettings(back_off=self.config.back_off)
-        layouts = [lay for lay in (layout(b, e, s, None) for e in candidates(b, s)) if lay is not None]
+        layouts = [lay for lay in (layout(b, e, s) for e in candidates(b, s)) if lay is not None]
         best: Strip | None = None
         for lay in sorted(layouts, key=lambda lay: lay.estimate)[: s.timed]:
             if best is not None and lay.estimate >= best.t_end:

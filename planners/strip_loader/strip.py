@@ -13,18 +13,19 @@ route at its speed and yaw rate.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from earthbench.motion import dense_poses, loader_dump_excess, poses_at, turn_drive_turn
-from earthbench.plan import Charge, Dump, Move
-from earthbench.rules import bodies_touch, body_reach, off_map_excess, rectangles_touch, truck_ground
+from earthbench.motion import dense_poses, loader_dump_excess, turn_drive_turn
+from earthbench.rules import body_reach, off_map_excess, rectangles_touch, truck_ground
 from earthbench.world import Pose
 
 from ..greedy.loader import nearest_candidates
-from ..loader_cycle import MARGIN, ChargeResult, CycleBuilder, Route, entry_for, pile_side, search_dubins, search_routes, simulate_charge
+from ..loader_cycle import (MARGIN, ChargeResult, CycleBuilder, Route, Sample, entry_for, pile_side, search_dubins, search_routes,
+                            simulate_charge)
 
 
 @dataclass(frozen=True)
@@ -56,14 +57,15 @@ class Strip:
 
 @dataclass
 class Layout:
-    """A strip before its timing: the entry, the charges (from ``starts``), the truck's stands and
-    its route to the first, the expected load, and an optimistic end time to rank strips by."""
+    """A strip before its timing: the entry, the charges (from ``starts``), the truck's stands on
+    its line (heading ``truck_yaw`` or back), the expected load, and an optimistic end time to rank
+    strips by (the truck's fastest route, unchecked)."""
 
     entry: tuple[float, float, float]
     charges: list[ChargeResult]
     starts: list[tuple[float, float, float]]
     stands: list[tuple[float, float]]
-    first: list[tuple[float, float, float, float]]
+    truck_yaw: float
     loaded: float
     estimate: float
 
@@ -118,10 +120,12 @@ def _stand(b: CycleBuilder, z: np.ndarray, pose: tuple[float, float, float], sid
     return None
 
 
-def _arc_routes(start: Pose, goal: tuple[float, float], final: float, t0: float, v: float, radius: float) -> list[list]:
+def _arc_routes(start: Pose, goal: tuple[float, float], final: float, t0: float, v: float, w: float, radius: float) -> list[list]:
     """Straight, one arc at ``radius`` and straight (either may be driven in reverse) from
-    ``start`` to ``goal`` heading ``final``: the two lengths solve a 2 × 2 system per arc."""
+    ``start`` to ``goal`` heading ``final``: the two lengths solve a 2 × 2 system per arc. The
+    straights go at ``v``, the arc at ``v`` or slower, as the yaw rate ``w`` allows."""
     out = []
+    v_arc = min(v, w * radius)
     delta = math.remainder(final - start.yaw, 2 * math.pi)
     u0, uf = (math.cos(start.yaw), math.sin(start.yaw)), (math.cos(final), math.sin(final))
     det = u0[0] * uf[1] - u0[1] * uf[0]
@@ -136,7 +140,7 @@ def _arc_routes(start: Pose, goal: tuple[float, float], final: float, t0: float,
         l2 = (u0[0] * ry - u0[1] * rx) / det
         x1, y1 = start.x + l1 * u0[0], start.y + l1 * u0[1]
         t1 = t0 + abs(l1) / v
-        t2 = t1 + abs(ell) / v
+        t2 = t1 + abs(ell) / v_arc
         pts = [(t0, start.x, start.y, start.yaw)]
         if abs(l1) > 1e-6:
             pts.append((t1, x1, y1, start.yaw))
@@ -154,53 +158,117 @@ def _arc_routes(start: Pose, goal: tuple[float, float], final: float, t0: float,
     return out
 
 
-def _truck_route(b: CycleBuilder, stand: tuple[float, float], yaw: float, t0: float) -> list[tuple[float, float, float, float]] | None:
-    """The truck's fastest route from its pose to ``stand`` heading along the strip either way
-    (turn in place, straight and turn, or straight, one arc at its speed and yaw rate, straight)
-    that stays on the map and on ground within its grade and step limits; None if none does."""
+def truck_routes(b: CycleBuilder, stand: tuple[float, float], yaw: float, t0: float, slack: float = 1.5,
+                 check: bool = True, most: int = 4) -> list[list[Sample]]:
+    """The truck's routes from its pose to ``stand`` heading along the strip either way (turn in
+    place, straight and turn; or straight, one arc, straight at radii from its speed over its yaw
+    rate down to 2 m), the fastest first, at most ``most`` within ``slack`` seconds of it (their
+    paths differ: one may keep clear of the loader where another does not). With ``check``, only
+    those that stay on the map and on ground within the truck's grade and step limits."""
     tspec, start = b.sc.machines.truck, b.sc.machines.truck_pose
     if math.hypot(stand[0] - start.x, stand[1] - start.y) < 1e-6 and abs(math.remainder(yaw - start.yaw, math.pi)) < 1e-9:
-        return [(t0, start.x, start.y, start.yaw)]
-    v = tspec.travel_speed * MARGIN
+        return [[(t0, start.x, start.y, start.yaw)]]
+    v, w = tspec.travel_speed * MARGIN, tspec.yaw_rate * MARGIN
     routes = []
     for final in (yaw, yaw + math.pi):
         routes.append(turn_drive_turn(start, stand, t0, tspec.travel_speed, tspec.yaw_rate, final, margin=MARGIN))
-        routes += _arc_routes(start, stand, final, t0, v, tspec.travel_speed / tspec.yaw_rate * 1.01)
-    for route in sorted(routes, key=lambda r: r[-1][0]):
-        poses = dense_poses(np.array(route, dtype=float), 0.1, body_reach(tspec))[:, 1:4]
-        if off_map_excess(b.sc, tspec, poses).max() > -0.02:
+        for radius in (v / w * 1.01, 6.0, 4.5, 3.0, 2.0):
+            routes += _arc_routes(start, stand, final, t0, v, w, radius)
+    routes.sort(key=lambda r: r[-1][0])
+    if not check:
+        return routes[:1]
+    kept: list[list[Sample]] = []
+    for route in routes:
+        if len(kept) >= most or (kept and route[-1][0] > kept[0][-1][0] + slack):
+            break
+        poses = dense_poses(np.array(route, dtype=float), 0.2, body_reach(tspec))[:, 1:4]
+        if off_map_excess(b.sc, tspec, poses).max() > -0.1:
             continue
         grade, cross, step = truck_ground(b.sc, b.z, tspec, poses)
         if grade.max() <= 0.9 * tspec.max_grade and cross.max() <= 0.9 * tspec.max_cross_slope and step.max() <= tspec.max_step - 0.03:
-            return route
-    return None
+            kept.append(route)
+    return kept
 
 
-def _approach(b: CycleBuilder, entry: tuple[float, float, float]) -> Route | None:
+def approach_route(b: CycleBuilder, entry: tuple[float, float, float], away: tuple[float, float, float]) -> Route | None:
     """The loader's fastest route from where it stands to the strip's entry (as the cycles' return leg)."""
     if math.hypot(entry[0] - b.pose.x, entry[1] - b.pose.y) < 1e-6 and abs(math.remainder(entry[2] - b.pose.yaw, 2 * math.pi)) < 1e-9:
         return Route(np.array([b.t]), np.array([[b.pose.x, b.pose.y, b.pose.yaw]]), 0.0)
     ray = np.array([[entry[0], entry[1], -math.cos(entry[2]), -math.sin(entry[2])]])
-    routes = [search_routes(b.sc, b.firm, b.pose, b.t, ray, 0.0, 12.0, 0.0, 0.0, b.opts, b.step_base),
-              search_dubins(b.sc, b.firm, b.pose, b.t, entry, b.opts, b.step_base)]
+    # the searches keep clear of a truck standing still; this one drives off (the schedule keeps
+    # the loader clear of it, :mod:`.schedule`), so they see it parked at the strip's end
+    sc = dataclasses.replace(b.sc, machines=dataclasses.replace(b.sc.machines, truck_pose=Pose(*away)))
+    routes = [search_routes(sc, b.firm, b.pose, b.t, ray, 0.0, 12.0, 0.0, 0.0, b.opts, b.step_base),
+              search_dubins(sc, b.firm, b.pose, b.t, entry, b.opts, b.step_base)]
     found = [r for r in routes if r is not None]
     return min(found, key=lambda r: r.duration) if found else None
 
 
-def layout(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings, max_dumps: int | None,
-           continuing: bool = False) -> Layout | None:
-    """The strip from ``entry``: charges along it until the target is expected (or ``max_dumps``),
-    each with a truck stand on one line beside it, and the truck's route to the first stand.
-    None if the first charge, a stand or the truck's route is infeasible. ``continuing``: the
-    loader already stands on the strip (a closed-loop step after the first), so it backs off first."""
+def layout(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings) -> Layout | None:
+    """The strip from ``entry``: charges along it until the target is expected, each with a truck
+    stand on one line beside it (the first of ``s.laterals`` that has a stand for every dump).
+    None if a charge fails before the target or no line has every stand."""
     side = _truck_side(b, entry)
     if side is None:
         return None
+    charges, starts = _charges(b, entry, s)
+    if not charges:
+        return None
+    spec = b.spec
     for lateral in s.laterals:
-        found = _layout_on_line(b, entry, s, max_dumps, continuing, side, lateral)
-        if found is not None:
-            return found
+        stands = []
+        for ch in charges:
+            stand = _stand(b, ch.z, ch.end, side, lateral, s.aheads, entry[2])
+            if stand is None:
+                break
+            stands.append(stand)
+        if len(stands) < len(charges):
+            continue
+        fastest = truck_routes(b, stands[0], entry[2], b.t, check=False)
+        v = spec.travel_speed * MARGIN
+        work = sum(max(spec.min_charge_time, c.penetration / (spec.penetration_speed * MARGIN)) + s.back_off / v for c in charges[1:])
+        estimate = fastest[0][-1][0] + len(charges) * spec.min_dump_time + work
+        return Layout(entry, charges, starts, stands, entry[2], _loaded(b, charges), estimate)
     return None
+
+
+def _loaded(b: CycleBuilder, charges: list[ChargeResult]) -> float:
+    return b.loaded + sum(c.delivered for c in charges) * b.yield_factor
+
+
+def _drifted(b: CycleBuilder, k: int) -> tuple[float, float]:
+    """The overfill share and the step's base level for the ``k``-th charge planned without a new
+    scan, as the cycles' :meth:`CycleBuilder.drift` lowers them on the realistic track."""
+    if b.soil is None:
+        return b.share, b.step_base
+    return max(b.share - 0.025 * k, 0.6), max(b.step_base - 0.01 * k, b.base - b.ground.margin - 0.05)
+
+
+def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings) -> tuple[list[ChargeResult], list]:
+    """The charges along the strip from ``entry``, each after a back-off from the last one's end,
+    until the target is expected (empty if one fails first), and where each starts."""
+    spec, target = b.spec, b.sc.task.target_volume
+    u = (math.cos(entry[2]), math.sin(entry[2]))
+    z, firm, loaded, pose = b.z, b.firm, b.loaded, entry
+    charges: list[ChargeResult] = []
+    starts: list[tuple[float, float, float]] = []
+    while loaded < target - 1e-9:
+        if len(charges) >= b.cfg.max_cycles:
+            return [], []
+        start = pose if not charges else (pose[0] - s.back_off * u[0], pose[1] - s.back_off * u[1], pose[2])
+        share, step_base = _drifted(b, len(charges))
+        capacity = b.charge_capacity(target - loaded)
+        if b.soil is not None:
+            capacity = min(capacity, share * spec.bucket_capacity)
+        ch = simulate_charge(b.sc.terrain, z, spec, start, capacity, b.cfg.max_penetration, b.level, b.base, firm, b.soil, step_base,
+                             share * spec.bucket_capacity)
+        if ch is None:
+            return [], []
+        charges.append(ch)
+        starts.append(start)
+        z, firm, pose = ch.z, ch.firm, ch.end
+        loaded += ch.delivered * b.yield_factor
+    return charges, starts
 
 
 def _truck_side(b: CycleBuilder, entry: tuple[float, float, float]) -> float | None:
@@ -218,122 +286,3 @@ def _truck_side(b: CycleBuilder, entry: tuple[float, float, float]) -> float | N
         score[side] = float(np.maximum(b.z[j, i] - b.level, 0.0).sum())
     best = min(score, key=lambda k: score[k])
     return best if score[best] < score[-best] else None
-
-
-def _layout_on_line(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings, max_dumps: int | None,
-                    continuing: bool, side: float, lateral: float) -> Layout | None:
-    spec, target = b.spec, b.sc.task.target_volume
-    u = (math.cos(entry[2]), math.sin(entry[2]))
-    z, firm, loaded, pose = b.z, b.firm, b.loaded, entry
-    charges: list[ChargeResult] = []
-    stands: list[tuple[float, float]] = []
-    ends: list[tuple[float, float, float]] = []
-    tyaw = entry[2]
-    while loaded < target - 1e-9 and (max_dumps is None or len(charges) < max_dumps) and len(charges) < b.cfg.max_cycles:
-        start = pose if not charges and not continuing else (pose[0] - s.back_off * u[0], pose[1] - s.back_off * u[1], pose[2])
-        capacity = b.charge_capacity(target - loaded)
-        ch = simulate_charge(b.sc.terrain, z, spec, start, capacity, b.cfg.max_penetration, b.level, b.base, firm, b.soil,
-                             b.step_base, b.share * spec.bucket_capacity)
-        if ch is None:
-            break
-        stand = _stand(b, ch.z, ch.end, side, lateral, s.aheads, tyaw)
-        if stand is None:
-            break
-        charges.append(ch)
-        stands.append(stand)
-        ends.append(start)
-        z, firm, pose = ch.z, ch.firm, ch.end
-        loaded += ch.delivered * b.yield_factor
-    if not charges or (loaded < target - 1e-9 and (max_dumps is None or len(charges) < max_dumps)):
-        return None
-    first = _truck_route(b, stands[0], tyaw, b.t)
-    if first is None:
-        return None
-    v = spec.travel_speed * MARGIN
-    work = sum(max(spec.min_charge_time, c.penetration / (spec.penetration_speed * MARGIN)) + s.back_off / v for c in charges[1:])
-    estimate = first[-1][0] + len(charges) * spec.min_dump_time + work
-    return Layout(entry, charges, ends, stands, first, loaded, estimate)
-
-
-def timed(b: CycleBuilder, lay: Layout, continuing: bool = False) -> Strip | None:
-    """Both machines' timed actions (:func:`_schedule`), the loader driving part of its way at once
-    and waiting there for the truck to pass, so that it keeps clear of the truck; None if no
-    such wait in a small set does."""
-    entry, charges, starts, stands, first, loaded = lay.entry, lay.charges, lay.starts, lay.stands, lay.first, lay.loaded
-    if continuing:
-        strip = _schedule(b, None, entry, charges, starts, stands, first, loaded, continuing)
-        return strip if _clear(b, strip) else None
-    approach = _approach(b, entry)
-    if approach is None:
-        return None
-    late = max(first[-1][0] - float(approach.t[-1]), 0.0)  # it arrives as the truck reaches its first stand
-    for wait in [*range(0, len(approach.t), 3), len(approach.t) - 1]:
-        for delay in (late, late + 1.0, late + 2.5):
-            t = approach.t + np.where(np.arange(len(approach.t)) > wait, delay, 0.0)
-            strip = _schedule(b, Route(t, approach.p, approach.length), entry, charges, starts, stands, first, loaded, continuing)
-            if _clear(b, strip):
-                return strip
-    return None
-
-
-def _path(b: CycleBuilder, actions: list, machine: str) -> np.ndarray:
-    """The samples (t, x, y, yaw) of one machine's moves and charges, from its pose at the plan's start."""
-    p = b.pose if machine == "loader" else b.sc.machines.truck_pose
-    rows = [(b.t, p.x, p.y, p.yaw)]
-    for a in actions:
-        if isinstance(a, Move):
-            rows += [tuple(r) for r in a.path]
-        elif isinstance(a, Charge):
-            rows += [(a.t_start, *a.entry), (a.t_end, *a.end)]
-    return np.array(rows, dtype=float)
-
-
-def _clear(b: CycleBuilder, strip: Strip, step: float = 0.05) -> bool:
-    """Whether the loader and the truck keep the clearance and their bodies apart all along
-    (the collision rule's geometry, :func:`earthbench.rules.bodies_touch`, sampled finely)."""
-    la, ta = _path(b, strip.loader, "loader"), _path(b, strip.truck, "truck")
-    times = np.union1d(np.arange(b.t, strip.t_end + step, step), np.concatenate([la[:, 0], ta[:, 0]]))
-    pa, pb = poses_at(la, times), poses_at(ta, times)
-    if np.min(np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])) < b.spec.clearance + 0.05:
-        return False
-    return not bodies_touch(b.spec, pa, b.sc.machines.truck, pb, 0.1).any()
-
-
-def _schedule(b: CycleBuilder, approach: Route | None, entry, charges, starts, stands, first, loaded, continuing) -> Strip:
-    """The actions of both machines with their times: the loader's approach, then per charge its
-    back-off, the charge and the dump once the truck stands; the truck's route to the first stand
-    and on along its line as each dump ends."""
-    spec, tspec = b.spec, b.sc.machines.truck
-    loader: list = []
-    t = b.t
-    if approach is not None:
-        if len(approach.t) > 1:
-            loader.append(Move("loader", tuple(approach.samples)))
-        t = float(approach.t[-1])
-        entry = (entry[0], entry[1], float(approach.p[-1, 2]))
-    truck: list = [Move("truck", tuple(first))] if len(first) > 1 else []
-    ready, tyaw = first[-1][0], first[-1][3]
-    here = (first[-1][1], first[-1][2])
-    v = spec.travel_speed * MARGIN
-    for k, (ch, start, stand) in enumerate(zip(charges, starts, stands)):
-        if k > 0 or continuing:
-            prev = charges[k - 1].end if k > 0 else (b.pose.x, b.pose.y, b.pose.yaw)
-            d = math.hypot(prev[0] - start[0], prev[1] - start[1])
-            if d > 1e-9:
-                loader.append(Move("loader", ((t, prev[0], prev[1], prev[2]), (t + d / v, start[0], start[1], start[2]))))
-                t += d / v
-        yaw_c = entry[2] if k == 0 and not continuing else start[2]
-        dur = max(spec.min_charge_time, ch.penetration / (spec.penetration_speed * MARGIN)) + 1e-6
-        loader.append(Charge("loader", t, t + dur, (start[0], start[1], yaw_c), ch.penetration))
-        t += dur
-        if k > 0:  # the truck moves on along its line as the last dump ends
-            d = math.hypot(stand[0] - here[0], stand[1] - here[1])
-            if d > 1e-6:
-                arrive = ready + d / (tspec.travel_speed * MARGIN)
-                truck.append(Move("truck", ((ready, here[0], here[1], tyaw), (arrive, stand[0], stand[1], tyaw))))
-                ready, here = arrive, stand
-        t = max(t, ready + 1e-6)
-        loader.append(Dump("loader", t, t + spec.min_dump_time + 1e-6))
-        t += spec.min_dump_time + 1e-6
-        ready = max(ready, t)
-    return Strip(loader, truck, loaded, t, list(charges))
