@@ -18,28 +18,30 @@ from .strip import Layout, Strip, approach_route, truck_routes
 
 
 def timed(b: CycleBuilder, lay: Layout) -> Strip | None:
-    """The first of a few schedules that keeps the loader clear of the truck, for each of the
-    truck's routes: the loader charges at once and, while the truck comes, waits in the strip or
-    backs out of it to wait beside it and drives back to dump as the truck stands (an
-    excursion); or it drives part of its way and waits there until the truck has passed. None
-    if none keeps clear."""
+    """The fastest of a few schedules that keep the loader clear of the truck, over the truck's
+    routes: the loader charges at once and, while the truck comes, waits in the strip or backs
+    out of it to wait beside it and drives back to dump as the truck stands (an excursion); or
+    it drives part of its way and waits there until the truck has passed. None if none keeps
+    clear."""
     approach = approach_route(b, lay.entry, (*lay.stands[-1], 0.0))
     if approach is None:
         return None
     outs = [None, *_excursions(b, lay)]
+    best: Strip | None = None
     for first in truck_routes(b, lay.stands[0], lay.truck_yaw, b.t):
-        for out in outs:
-            strip = _schedule(b, approach, lay, first, out)
-            if _clear(b, strip):
-                return strip
+        tries = [_schedule(b, approach, lay, first, out) for out in outs]
         late = max(first[-1][0] - float(approach.t[-1]), 0.0)  # it arrives as the truck reaches its first stand
         for wait in [*range(0, len(approach.t), 3), len(approach.t) - 1]:
             for delay in (late, late + 1.0, late + 2.5):
                 t = approach.t + np.where(np.arange(len(approach.t)) > wait, delay, 0.0)
-                strip = _schedule(b, Route(t, approach.p, approach.length), lay, first, None)
-                if _clear(b, strip):
-                    return strip
-    return None
+                tries.append(_schedule(b, Route(t, approach.p, approach.length), lay, first, None))
+        for strip in sorted(tries, key=lambda st: st.t_end):
+            if best is not None and strip.t_end >= best.t_end:
+                break
+            if _clear(b, strip):
+                best = strip
+                break
+    return best
 
 
 def _excursions(b: CycleBuilder, lay: Layout) -> list[np.ndarray]:
