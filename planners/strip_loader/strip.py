@@ -32,14 +32,16 @@ from ..loader_cycle import (MARGIN, ChargeResult, CycleBuilder, Route, Sample, e
 class StripSettings:
     """The strip's geometry (m): the bucket's floor-side edge ``outside`` the contour, the back-off
     before each further charge (the row where a bucket filled is left partly cut), the truck's
-    lines beside the strip (``laterals``, its centre from the strip's line) and its stands
-    ahead of the loader's pose (``aheads``), contour points tried ``spacing`` apart, and how many of
+    lines beside the strip (``gaps``: its centre from the strip's line is the half widths of the
+    loader's body and the truck's plus a gap) and its stands ahead of the loader's pose (the
+    bucket's offset plus ``shares`` of the dump's reach from the truck's centre, its loading
+    radius and dump reach), contour points tried ``spacing`` apart, and how many of
     the most promising strips are timed."""
 
     outside: float = 0.05
     back_off: float = 0.2
-    laterals: tuple[float, ...] = (1.8, 1.75, 1.85, 1.7, 1.9)
-    aheads: tuple[float, ...] = (1.94, 1.9, 2.0, 1.85, 2.05, 1.8, 2.1)
+    gaps: tuple[float, ...] = (0.2, 0.15, 0.25, 0.1, 0.3)
+    shares: tuple[float, ...] = (0.37, 0.35, 0.4, 0.325, 0.425, 0.3, 0.45)
     spacing: float = 0.3
     timed: int = 6
 
@@ -206,7 +208,7 @@ def approach_route(b: CycleBuilder, entry: tuple[float, float, float], away: tup
 
 def layout(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings) -> Layout | None:
     """The strip from ``entry``: charges along it until the target is expected, each with a truck
-    stand on one line beside it (the first of ``s.laterals`` that has a stand for every dump).
+    stand on one line beside it (the first of ``s.gaps`` that has a stand for every dump).
     None if a charge fails before the target or no line has every stand."""
     side = _truck_side(b, entry)
     if side is None:
@@ -215,10 +217,14 @@ def layout(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings)
     if not charges:
         return None
     spec = b.spec
-    for lateral in s.laterals:
+    tspec = b.sc.machines.truck
+    reach = tspec.loading_radius + spec.dump_reach
+    aheads = tuple(spec.bucket_offset + reach * f for f in s.shares)
+    for gap in s.gaps:
+        lateral = spec.wheel_width / 2 + tspec.width / 2 + gap
         stands = []
         for ch in charges:
-            stand = _stand(b, ch.z, ch.end, side, lateral, s.aheads, entry[2])
+            stand = _stand(b, ch.z, ch.end, side, lateral, aheads, entry[2])
             if stand is None:
                 break
             stands.append(stand)
