@@ -20,12 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.motion import dense_poses, loader_dump_excess, turn_drive_turn
-from earthbench.rules import body_reach, off_map_excess, rectangles_touch, truck_ground
+from earthbench.cut import charge_along
+from earthbench.rules import body_reach, off_map_excess, rectangles_touch, truck_ground, wheel_step_excess
 from earthbench.world import Pose
 
 from ..greedy.loader import nearest_candidates
 from ..loader_cycle import (MARGIN, ChargeResult, CycleBuilder, Route, Sample, entry_for, pile_side, search_dubins, search_routes,
-                            simulate_charge)
+                            charge_model, simulate_charge)
 
 
 @dataclass(frozen=True)
@@ -242,6 +243,28 @@ def _loaded(b: CycleBuilder, charges: list[ChargeResult]) -> float:
     return b.loaded + sum(c.delivered for c in charges) * b.yield_factor
 
 
+def _full_charge(b: CycleBuilder, z: np.ndarray, firm: np.ndarray, start: tuple[float, float, float],
+                 capacity: float) -> ChargeResult | None:
+    """On exact ground, a charge that fills the bucket to ``capacity`` to the litre: the edge stops
+    half a cell past where the public cut model fills it (the ``overfill`` rule allows a cell),
+    so every bucket of the strip is a whole one (whole cells, as the cycles take, leave each a
+    little short, and the target a bucket more away). None where it would take (almost) nothing
+    or the wheels could not follow it."""
+    spec, t = b.spec, b.sc.terrain
+    probe = charge_along(t, z, spec, start, b.cfg.max_penetration, b.level, capacity, apply=False)
+    if probe.full_at is None:
+        return simulate_charge(t, z, spec, start, capacity, b.cfg.max_penetration, b.level, b.base, firm, None, b.step_base)
+    pen = min(probe.full_at + t.resolution / 2, b.cfg.max_penetration)
+    vol, zz, new_firm = charge_model(t, z, firm, spec, start, pen, b.level, capacity, None)
+    if vol < 0.02 * spec.bucket_capacity:
+        return None
+    x, y, yaw = start
+    end = (x + pen * math.cos(yaw), y + pen * math.sin(yaw), yaw)
+    if wheel_step_excess(t, new_firm, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), b.step_base)[0] > -1e-3:
+        return None
+    return ChargeResult(pen, vol, zz, end, new_firm, vol)
+
+
 def _drifted(b: CycleBuilder, k: int) -> tuple[float, float]:
     """The overfill share and the step's base level for the ``k``-th charge planned without a new
     scan, as the cycles' :meth:`CycleBuilder.drift` lowers them on the realistic track."""
@@ -264,10 +287,11 @@ def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSetting
         start = pose if not charges else (pose[0] - s.back_off * u[0], pose[1] - s.back_off * u[1], pose[2])
         share, step_base = _drifted(b, len(charges))
         capacity = b.charge_capacity(target - loaded)
-        if b.soil is not None:
-            capacity = min(capacity, share * spec.bucket_capacity)
-        ch = simulate_charge(b.sc.terrain, z, spec, start, capacity, b.cfg.max_penetration, b.level, b.base, firm, b.soil, step_base,
-                             share * spec.bucket_capacity)
+        if b.soil is None:
+            ch = _full_charge(b, z, firm, start, capacity)
+        else:
+            ch = simulate_charge(b.sc.terrain, z, spec, start, min(capacity, share * spec.bucket_capacity), b.cfg.max_penetration,
+                                 b.level, b.base, firm, b.soil, step_base, share * spec.bucket_capacity)
         if ch is None:
             return [], []
         charges.append(ch)
