@@ -164,8 +164,8 @@ def _arc_routes(start: Pose, goal: tuple[float, float], final: float, t0: float,
 def truck_routes(b: CycleBuilder, stand: tuple[float, float], yaw: float, t0: float, slack: float = 1.5,
                  check: bool = True, most: int = 4) -> list[list[Sample]]:
     """The truck's routes from its pose to ``stand`` heading along the strip either way (turn in
-    place, straight and turn; or straight, one arc, straight at radii from its speed over its yaw
-    rate down to 2 m), the fastest first, at most ``most`` within ``slack`` seconds of it (their
+    place, straight and turn; or a turn in place of up to 90°, then straight, one arc, straight at
+    radii from its speed over its yaw rate down to 2 m), the fastest first, at most ``most`` within ``slack`` seconds of it (their
     paths differ: one may keep clear of the loader where another does not). With ``check``, only
     those that stay on the map and on ground within the truck's grade and step limits."""
     tspec, start = b.sc.machines.truck, b.sc.machines.truck_pose
@@ -175,8 +175,11 @@ def truck_routes(b: CycleBuilder, stand: tuple[float, float], yaw: float, t0: fl
     routes = []
     for final in (yaw, yaw + math.pi):
         routes.append(turn_drive_turn(start, stand, t0, tspec.travel_speed, tspec.yaw_rate, final, margin=MARGIN))
-        for radius in (v / w * 1.01, 6.0, 4.5, 3.0, 2.0):
-            routes += _arc_routes(start, stand, final, t0, v, w, radius)
+        for turn in np.radians(np.arange(-90.0, 91.0, 5.0)):  # a turn in place first: a slow truck turns while it waits
+            turned = Pose(start.x, start.y, start.yaw + float(turn))
+            head = [(t0, start.x, start.y, start.yaw)] if abs(turn) > 1e-9 else []
+            for radius in (v / w * 1.01, 6.0, 4.5, 3.0, 2.0):
+                routes += [head + r for r in _arc_routes(turned, stand, final, t0 + abs(float(turn)) / w, v, w, radius)]
     routes.sort(key=lambda r: r[-1][0])
     if not check:
         return routes[:1]
