@@ -13,6 +13,8 @@ from earthbench.motion import dense_poses, poses_at
 from earthbench.plan import Charge, Dump, Move
 from earthbench.rules import bodies_touch, off_map_excess, reach_of, wheel_step_excess
 
+from earthbench.world import Pose
+
 from ..loader_cycle import MARGIN, RADIUS_MARGIN, ChargeResult, CycleBuilder, Route, Sample
 from .strip import Layout, Strip, approach_route, truck_routes
 
@@ -27,14 +29,25 @@ def timed(b: CycleBuilder, lay: Layout) -> Strip | None:
     if approach is None:
         return None
     outs = [None, *_excursions(b, lay)]
+    firsts = truck_routes(b, lay.stands[0], lay.truck_yaw, b.t)
+    best = _fastest_clear(b, lay, firsts, outs, [approach])
+    # only if that fails: first step aside, out of the way of a truck that sweeps the loader's pose
+    return best if best is not None else _fastest_clear(b, lay, firsts, [], _stepped_aside(b, lay))
+
+
+def _fastest_clear(b: CycleBuilder, lay: Layout, firsts: list[list[Sample]], outs: list, ways: list[Route]) -> Strip | None:
+    """The fastest clear schedule over the truck's routes ``firsts``: the first of ``ways`` at
+    once with each of ``outs`` (excursions, None: none), and every way with a wait at a few of
+    its samples until the truck has (about) reached its first stand."""
     best: Strip | None = None
-    for first in truck_routes(b, lay.stands[0], lay.truck_yaw, b.t):
-        tries = [_schedule(b, approach, lay, first, out) for out in outs]
-        late = max(first[-1][0] - float(approach.t[-1]), 0.0)  # it arrives as the truck reaches its first stand
-        for wait in [*range(0, len(approach.t), 3), len(approach.t) - 1]:
-            for delay in (late, late + 1.0, late + 2.5):
-                t = approach.t + np.where(np.arange(len(approach.t)) > wait, delay, 0.0)
-                tries.append(_schedule(b, Route(t, approach.p, approach.length), lay, first, None))
+    for first in firsts:
+        tries = [_schedule(b, ways[0], lay, first, out) for out in outs]
+        for way in ways:
+            late = max(first[-1][0] - float(way.t[-1]), 0.0)  # it arrives as the truck reaches its first stand
+            for wait in sorted({0, 1, *range(0, len(way.t), 3), len(way.t) - 1}):
+                for delay in (late, late + 1.0, late + 2.5):
+                    t = way.t + np.where(np.arange(len(way.t)) > wait, delay, 0.0)
+                    tries.append(_schedule(b, Route(t, way.p, way.length), lay, first, None))
         for strip in sorted(tries, key=lambda st: st.t_end):
             if best is not None and strip.t_end >= best.t_end:
                 break
@@ -42,6 +55,27 @@ def timed(b: CycleBuilder, lay: Layout) -> Strip | None:
                 best = strip
                 break
     return best
+
+
+def _stepped_aside(b: CycleBuilder, lay: Layout) -> list[Route]:
+    """Approaches that first drive straight ahead or back from the loader's pose (out of the way
+    of a truck that will sweep it), to wait there (the schedule's waits) and go on to the strip."""
+    spec, p = b.spec, b.pose
+    v = spec.travel_speed * MARGIN
+    out = []
+    for step in (2.0, -2.0, 3.5):
+        to = Pose(p.x + step * math.cos(p.yaw), p.y + step * math.sin(p.yaw), p.yaw)
+        n = max(int(math.ceil(abs(step) / 0.25)), 1)
+        poses = np.column_stack([np.linspace(p.x, to.x, n + 1), np.linspace(p.y, to.y, n + 1), np.full(n + 1, p.yaw)])
+        path = np.column_stack([b.t + np.arange(n + 1) * abs(step) / n / v, poses])
+        dense = dense_poses(path, b.sc.terrain.resolution / 2, reach_of(spec.outline(0.0, 0.0, 0.0)))[:, 1:4]
+        if np.max(off_map_excess(b.sc, spec, dense)) > -0.05 or wheel_step_excess(b.sc.terrain, b.firm, spec, path, b.step_base)[0] > -1e-3:
+            continue
+        rest = approach_route(b, lay.entry, (*lay.stands[-1], 0.0), to, float(path[-1, 0]))
+        if rest is None:
+            continue
+        out.append(Route(np.concatenate([path[:, 0], rest.t[1:]]), np.vstack([poses, rest.p[1:]]), abs(step) + rest.length))
+    return out
 
 
 def _excursions(b: CycleBuilder, lay: Layout) -> list[np.ndarray]:

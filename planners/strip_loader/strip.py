@@ -196,16 +196,20 @@ def truck_routes(b: CycleBuilder, stand: tuple[float, float], yaw: float, t0: fl
     return kept
 
 
-def approach_route(b: CycleBuilder, entry: tuple[float, float, float], away: tuple[float, float, float]) -> Route | None:
-    """The loader's fastest route from where it stands to the strip's entry (as the cycles' return leg)."""
-    if math.hypot(entry[0] - b.pose.x, entry[1] - b.pose.y) < 1e-6 and abs(math.remainder(entry[2] - b.pose.yaw, 2 * math.pi)) < 1e-9:
-        return Route(np.array([b.t]), np.array([[b.pose.x, b.pose.y, b.pose.yaw]]), 0.0)
+def approach_route(b: CycleBuilder, entry: tuple[float, float, float], away: tuple[float, float, float],
+                   start: Pose | None = None, t0: float | None = None) -> Route | None:
+    """The loader's fastest route from ``start`` (where it stands) at ``t0`` to the strip's entry
+    (as the cycles' return leg)."""
+    start = b.pose if start is None else start
+    t0 = b.t if t0 is None else t0
+    if math.hypot(entry[0] - start.x, entry[1] - start.y) < 1e-6 and abs(math.remainder(entry[2] - start.yaw, 2 * math.pi)) < 1e-9:
+        return Route(np.array([t0]), np.array([[start.x, start.y, start.yaw]]), 0.0)
     ray = np.array([[entry[0], entry[1], -math.cos(entry[2]), -math.sin(entry[2])]])
     # the searches keep clear of a truck standing still; this one drives off (the schedule keeps
     # the loader clear of it, :mod:`.schedule`), so they see it parked at the strip's end
     sc = dataclasses.replace(b.sc, machines=dataclasses.replace(b.sc.machines, truck_pose=Pose(*away)))
-    routes = [search_routes(sc, b.firm, b.pose, b.t, ray, 0.0, 12.0, 0.0, 0.0, b.opts, b.step_base),
-              search_dubins(sc, b.firm, b.pose, b.t, entry, b.opts, b.step_base)]
+    routes = [search_routes(sc, b.firm, start, t0, ray, 0.0, 12.0, 0.0, 0.0, b.opts, b.step_base),
+              search_dubins(sc, b.firm, start, t0, entry, b.opts, b.step_base)]
     found = [r for r in routes if r is not None]
     return min(found, key=lambda r: r.duration) if found else None
 
