@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from earthbench.motion import dense_poses, loader_dump_excess, turn_drive_turn
-from earthbench.cut import charge_along
+from earthbench.cut import cut_along
 from earthbench.rules import body_reach, off_map_excess, rectangles_touch, truck_ground, wheel_step_excess
 from earthbench.world import Pose
 
@@ -258,14 +258,15 @@ def _full_charge(b: CycleBuilder, z: np.ndarray, firm: np.ndarray, start: tuple[
     little short, and the target a bucket more away). None where it would take (almost) nothing
     or the wheels could not follow it."""
     spec, t = b.spec, b.sc.terrain
-    probe = charge_along(t, z, spec, start, b.cfg.max_penetration, b.level, capacity, apply=False)
+    x, y, yaw = start
+    edge = (x + spec.bucket_offset * math.cos(yaw), y + spec.bucket_offset * math.sin(yaw))
+    probe = cut_along(t, z, edge, yaw, spec.bucket_width, b.cfg.max_penetration, b.level, capacity, apply=False)
     if probe.full_at is None:
         return simulate_charge(t, z, spec, start, capacity, b.cfg.max_penetration, b.level, b.base, firm, None, b.step_base)
     pen = min(probe.full_at + t.resolution / 2, b.cfg.max_penetration)
     vol, zz, new_firm = charge_model(t, z, firm, spec, start, pen, b.level, capacity, None)
     if vol < 0.02 * spec.bucket_capacity:
         return None
-    x, y, yaw = start
     end = (x + pen * math.cos(yaw), y + pen * math.sin(yaw), yaw)
     if wheel_step_excess(t, new_firm, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), b.step_base)[0] > -1e-3:
         return None
