@@ -35,10 +35,12 @@ def timed(b: CycleBuilder, lay: Layout) -> Strip | None:
     return best if best is not None else _fastest_clear(b, lay, firsts, [], _stepped_aside(b, lay))
 
 
-def _fastest_clear(b: CycleBuilder, lay: Layout, firsts: list[list[Sample]], outs: list, ways: list[Route]) -> Strip | None:
+def _fastest_clear(b: CycleBuilder, lay: Layout, firsts: list[list[Sample]], outs: list, ways: list[Route],
+                   checks: int = 40) -> Strip | None:
     """The fastest clear schedule over the truck's routes ``firsts``: the first of ``ways`` at
     once with each of ``outs`` (excursions, None: none), and every way with a wait at a few of
-    its samples until the truck has (about) reached its first stand."""
+    its samples until the truck has (about) reached its first stand; the ``checks`` fastest of
+    them per truck route are checked."""
     best: Strip | None = None
     for first in firsts:
         tries = [_schedule(b, ways[0], lay, first, out) for out in outs]
@@ -48,7 +50,7 @@ def _fastest_clear(b: CycleBuilder, lay: Layout, firsts: list[list[Sample]], out
                 for delay in (late, late + 1.0, late + 2.5):
                     t = way.t + np.where(np.arange(len(way.t)) > wait, delay, 0.0)
                     tries.append(_schedule(b, Route(t, way.p, way.length), lay, first, None))
-        for strip in sorted(tries, key=lambda st: st.t_end):
+        for strip in sorted(tries, key=lambda st: st.t_end)[:checks]:  # the fastest few: the rest fail alike
             if best is not None and strip.t_end >= best.t_end:
                 break
             if _clear(b, strip):

@@ -78,7 +78,7 @@ def candidates(b: CycleBuilder, s: StripSettings) -> list[tuple[float, float, fl
     out: list[tuple[float, float, float]] = []
     truck = b.sc.machines.truck_pose
     for line in b.contours():
-        step = max(int(round(s.spacing / b.cfg.contour_spacing)), 1)
+        step = max(int(round(max(s.spacing, b.spec.bucket_width / 6) / b.cfg.contour_spacing)), 1)  # a bigger bucket, sparser points
         M, n = nearest_candidates(line, b.spec.bucket_width)
         M, n = M[::step], n[::step]
         if not len(M):
