@@ -12,7 +12,6 @@ import numpy as np
 from earthbench.motion import dense_poses, poses_at
 from earthbench.plan import Charge, Dump, Move
 from earthbench.rules import bodies_touch, off_map_excess, reach_of, wheel_step_excess
-
 from earthbench.world import Pose
 
 from ..loader_cycle import MARGIN, RADIUS_MARGIN, ChargeResult, CycleBuilder, Route, Sample

@@ -7,8 +7,8 @@ Candidate strips start at points of the zero contour and run along its tangent, 
 ends across the strip: a wall's end), the truck must find a stand for every dump on one line
 beside the strip (within the dump reach and 45° of the loader's heading, clear of the loader's
 body, on ground within its grade and step limits), and the charges must load what is asked
-(:func:`roll_out`). The truck drives there once, on a turn-drive-turn or a straight-arc-straight
-route at its speed and yaw rate.
+(:func:`layout`). The truck drives there once (:func:`truck_routes`); the loader's way to the
+strip is the cycles' route search (:func:`approach_route`); :mod:`.schedule` times both.
 """
 
 from __future__ import annotations
@@ -19,14 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from earthbench.motion import dense_poses, loader_dump_excess, turn_drive_turn
 from earthbench.cut import cut_along
+from earthbench.motion import dense_poses, loader_dump_excess, turn_drive_turn
 from earthbench.rules import body_reach, off_map_excess, rectangles_touch, truck_ground, wheel_step_excess
 from earthbench.world import Pose
 
 from ..greedy.loader import nearest_candidates
-from ..loader_cycle import (MARGIN, ChargeResult, CycleBuilder, Route, Sample, entry_for, pile_side, search_dubins, search_routes,
-                            charge_model, simulate_charge)
+from ..loader_cycle import (MARGIN, ChargeResult, CycleBuilder, Route, Sample, charge_model, entry_for, pile_side, search_dubins,
+                            search_routes, simulate_charge)
 
 
 @dataclass(frozen=True)
