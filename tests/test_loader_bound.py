@@ -22,6 +22,7 @@ from earthbench.results.scoring import time_to_target
 from earthbench_metrics import lower_bound_time_to_target
 from earthbench_planners.greedy.loader import GreedyLoader
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+from earthbench_planners.strip_loader.planner import StripLoader
 from earthbench_terrains.pile import pile
 
 from helpers.bounds import assert_no_valid_plan_beats_the_bound
@@ -150,8 +151,8 @@ def test_no_valid_loader_plan_beats_the_bound(height, slope, wall, truck_south, 
     assert_no_valid_plan_beats_the_bound(sc, plan, target)
 
 
-@pytest.mark.parametrize("planner", [GreedyLoader, SinghCannonLoader])
-@pytest.mark.parametrize("seed,target", [(0, 4.0), (3, 2.0), (7, 2.0)])
+@pytest.mark.parametrize("planner", [GreedyLoader, SinghCannonLoader, StripLoader])
+@pytest.mark.parametrize("seed,target", [(0, 4.0), (3, 2.0), (7, 2.0), (8, 4.0)])
 def test_the_loader_planners_never_beat_the_bound(planner, seed, target):
     sc = pile(seed, target)
     plan = planner().plan(sc)

@@ -16,6 +16,7 @@ from earthbench_metrics import lower_bound_time_per_m3
 from earthbench_planners.greedy.loader import GreedyLoader, nearest_candidates
 from earthbench_planners.loader_cycle import LoaderPlanConfig, CycleBuilder, zero_contour
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader, corner_candidates
+from earthbench_planners.strip_loader.planner import StripLoader
 from earthbench_terrains.common import dig_area_volume
 from earthbench_terrains.pile import pile
 
@@ -97,7 +98,7 @@ def test_zero_contour_follows_the_pile_foot():
 # -- planners -------------------------------------------------------------------------------------
 
 def test_loader_planners_are_registered_for_the_wheel_loader_track():
-    for name, cls in (("singh-cannon-loader", SinghCannonLoader), ("greedy-loader", GreedyLoader)):
+    for name, cls in (("singh-cannon-loader", SinghCannonLoader), ("greedy-loader", GreedyLoader), ("strip-loader", StripLoader)):
         assert PLANNERS.get(name) is cls
         assert cls().supports(pile(0, 2.0)) and cls.tracks == ("wheel_loader",)
 

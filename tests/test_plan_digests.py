@@ -54,7 +54,7 @@ def test_plan_is_byte_identical(scenarios, planner, scenario_id):
 
 def test_every_built_in_planner_is_pinned():
     pinned = json.loads(GOLDEN.read_text())["plans"]
-    assert set(pinned) == {"greedy", "greedy-loader", "separate", "singh-cannon-backhoe", "singh-cannon-loader", "stl-tamp"}
+    assert set(pinned) == {"greedy", "greedy-loader", "separate", "singh-cannon-backhoe", "singh-cannon-loader", "stl-tamp", "strip-loader"}
     assert all(len(v) >= 4 for v in pinned.values())
 
 
