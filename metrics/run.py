@@ -2,7 +2,7 @@
 (docs/DESIGN.md §7).
 
 ``time_to_target_s`` — the end of the first dump after which the truck holds the target
-(:func:`earthbench.scoring.time_to_target`, the rule's one definition); infinite for a plan
+(:func:`earthbench.results.scoring.time_to_target`, the rule's one definition); infinite for a plan
 that never gets there. ``time_per_target_m3`` divides it by the target. Loading past the target
 cannot lower it (the dumps after the target end later), and stopping short of it can only raise
 it to infinity, so no prefix of a plan scores better than the plan (docs/metrics.md). When the
@@ -116,7 +116,7 @@ def lower_bound_time_per_m3(scenario: Scenario) -> float:
 
 
 def _buckets(target: float, capacity: float) -> int:
-    """The fewest loaded dumps after which the scoring rule (:func:`earthbench.scoring.time_to_target`,
+    """The fewest loaded dumps after which the scoring rule (:func:`earthbench.results.scoring.time_to_target`,
     with its slack) finds ``target`` loaded when each carries at most ``capacity``; float sums of
     the digs may exceed a whole number of buckets by rounding, so a bucket counts 1e-9 fuller."""
     n = max(1, math.ceil(target / capacity) - 1)
@@ -224,7 +224,7 @@ def lower_bound_time_to_target(scenario: Scenario) -> float:
 def time_to_target(verdict: Verdict, target: float) -> float:
     """End of the first dump after which the truck holds ``target`` m³ (s), ``inf`` if none does.
 
-    Kept for callers of this name; the rule is :func:`earthbench.scoring.time_to_target`.
+    Kept for callers of this name; the rule is :func:`earthbench.results.scoring.time_to_target`.
     """
     return scoring_time_to_target(verdict.load_curve, target)
 

@@ -26,7 +26,7 @@ from collections import defaultdict
 import numpy as np
 
 from earthbench.plan import Dig, Dump, Move, Plan
-from earthbench.store import Store, decompress
+from earthbench.results.store import Store, decompress
 
 PARTS = ("stroke", "swing_dig", "dump", "swing_dump", "exc_move", "idle")
 

@@ -18,7 +18,7 @@ import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from earthbench.store import Store
+from earthbench.results.store import Store
 
 
 def main() -> None:

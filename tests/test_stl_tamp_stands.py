@@ -12,7 +12,7 @@ from earthbench.motion import wrap
 from earthbench.plan import Dig, Dump
 from earthbench.referee import judge
 from earthbench.referee.state import Replay
-from earthbench.suite import load_suite
+from earthbench.results.suite import load_suite
 from earthbench_planners.stl_tamp import StlTampPlanner
 from earthbench_planners.stl_tamp.convert import Converter, SimState
 from earthbench_planners.stl_tamp.stand import area_shadow, kept_base, truck_stand

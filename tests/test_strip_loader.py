@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from earthbench import Charge, Dump, Move, judge
-from earthbench.scoring import evaluate, time_to_target
+from earthbench.results.scoring import evaluate, time_to_target
 from earthbench_metrics import lower_bound_time_to_target
 from earthbench_planners.greedy.loader import GreedyLoader
 from earthbench_planners.strip_loader.planner import StripLoader
