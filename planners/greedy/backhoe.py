@@ -50,6 +50,7 @@ from ..truck_stands import TruckStands
 from .moves import Moves
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
+_DRIVE_PAD = 0.5  # metres a dig's arm shadow keeps from where the truck still drives (see still_driving)
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
 PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
 
@@ -101,7 +102,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.3"
+    version = "1.4"
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -134,6 +135,7 @@ class _Greedy(Moves):
         self.turn = 0.0
         self.t = 0.0
         self.truck_ready = 0.0  # when the truck stands still where it is going
+        self.truck_path: list[tuple[float, float, float, float]] = []  # its last move (samples)
         self.loaded = 0.0
         self.actions: list = []
         self.stands = TruckStands(sc, self.exc, self.z)
@@ -317,11 +319,12 @@ class _Greedy(Moves):
         for i, c in enumerate(confirmed):
             least = float(np.abs(_wrap(bearings - math.atan2(c[2][1] - self.base.y, c[2][0] - self.base.x))).min())
             confirmed[i] = (min(c[1], want) / (c[5] + e.min_dump_time + least / e.swing_rate), *c[1:])
+        pending = self.still_driving()
         for bound, vol, contact, heading, k, dur in sorted(confirmed, key=lambda c: -c[0]):
             if best is not None and bound <= best.score + 1e-12:
                 break
             stand = self.stands.best_for_dig(self.base, self.truck, stands, contact, heading, e.max_drag_length,
-                                             self.t, self.t + dur)
+                                             self.t, self.t + dur, self.truck_ready, pending)
             if stand is None:
                 continue  # the arm would pass over the truck wherever it stands
             cycle = max(stand[1], self.t + dur) - self.t + stand[2] / e.swing_rate + e.min_dump_time
@@ -329,6 +332,16 @@ class _Greedy(Moves):
             if best is None or score > best.score + 1e-12:
                 best = _Dig(score, vol, contact, heading, float(depth[k]), stand[0], stand[1])
         return best, fullest
+
+    def still_driving(self) -> Polygon | None:
+        """What the truck's body still covers from now to the end of the move it is on (None: it
+        stands still), grown by :data:`_DRIVE_PAD`: a dig meanwhile keeps its arm's shadow that far
+        from it, so the truck never passes under the arm nor drives over ground a cut (and its
+        slump) lowered."""
+        if self.truck_ready <= self.t or not self.truck_path:
+            return None
+        sweep = self.stands.sweep_between(self.truck_path, self.t, self.truck_ready)
+        return None if sweep is None else sweep.buffer(_DRIVE_PAD)
 
     def truck_line(self) -> tuple[np.ndarray, np.ndarray]:
         """The stands along the truck's heading it may take for a dig here (kept per truck pose)."""
@@ -391,6 +404,7 @@ class _Greedy(Moves):
             path = turn_drive_turn(self.truck, (best.stand.x, best.stand.y), max(self.t, self.truck_ready),
                                    self.truck_spec.travel_speed, self.truck_spec.yaw_rate)
             self.actions.append(Move("truck", tuple(path)))
+            self.truck_path = path
             self.truck = Pose(path[-1][1], path[-1][2], path[-1][3])
             self.truck_ready = path[-1][0]
         self.actions.append(Dig("excavator", self.t, self.t + dur, contact, heading, depth, e.max_drag_length))

@@ -81,10 +81,12 @@ class Moves:
             return
         path = turn_drive_turn(pose, goal, max(self.t, self.truck_ready), spec.travel_speed, spec.yaw_rate, final_yaw=yaw)
         self.actions.append(Move(machine, tuple(path)))
-        self.t = path[-1][0]
         end = Pose(path[-1][1], path[-1][2], path[-1][3])
         if machine == "excavator":
+            self.t = path[-1][0]
             self.base = end  # the upper body turns with the base: ``turn`` is relative
         else:
-            self.truck = end
-            self.truck_ready = self.t
+            # the excavator digs on while the truck drives (a dig checks where it still drives:
+            # ``still_driving``); a drive of the excavator after it waits (``truck_ready``)
+            self.truck, self.truck_path = end, path
+            self.truck_ready = path[-1][0]
