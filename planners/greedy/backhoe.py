@@ -537,7 +537,7 @@ class _Greedy(Moves):
             move = self._truck_move(Pose(key[0], key[1], self.base.yaw))
             if move is None:
                 continue
-            yaw = turn_drive_turn(self.base, key, 0.0, self.exc.travel_speed, self.exc.yaw_rate)[-1][3]
+            yaw = self._exc_path(key, 0.0)[-1][3]
             if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - self.margins.tilt:
                 continue  # the referee's tilt rule
             self._drive_in_turn(key, *move)
