@@ -157,6 +157,24 @@ class TruckStands:
         k = int(np.argmin(done + 1e-3 * dist))
         return Pose(float(st[k, 0]), float(st[k, 1]), float(st[k, 2])), float(arrive[k]), float(swing[k])
 
+    def drive_times(self, truck: Pose, x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The truck's least time (s) from ``truck`` to each stand ``(x, y, yaw)`` the way
+        :func:`drive` goes (turn, drive, turn; or arc, drive, turn), and the stand's yaw (``yaw``
+        or its reverse, the same body: whichever ends the shorter turn in place)."""
+        t = self.truck
+        arrive = _arrival(truck, x, y)
+        travel = np.arctan2(y - truck.y, x - truck.x)
+        turn_in = np.abs(_wrap(travel - truck.yaw))
+        turn_in = np.where(np.hypot(x - truck.x, y - truck.y) > 1e-6, np.minimum(turn_in, math.pi - turn_in), 0.0)
+        turn_out = np.abs(_wrap(yaw - arrive))
+        yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
+        turn_out = np.minimum(turn_out, math.pi - turn_out)
+        time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
+        for side in (1, -1):  # or on an arc, then straight, then turning in place
+            arc_time, heading = arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)
+            time = np.minimum(time, arc_time + np.abs(_wrap(yaw - heading)) / t.yaw_rate)
+        return time, _wrap(yaw)
+
     def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> Iterator[Pose]:
         """Stands for a truck serving ``base`` whose material lies toward ``bearing``, cheapest
         first: the truck's time to get there (turn, drive, turn; or arc, drive, turn: :func:`drive`) plus ``buckets`` cycles' swing
@@ -168,22 +186,12 @@ class TruckStands:
         ang = bearing + np.radians(np.arange(-180, 180, 7.5))
         R, A = np.meshgrid(rad, ang)
         x, y = base.x + R.ravel() * np.cos(A.ravel()), base.y + R.ravel() * np.sin(A.ravel())
-        travel = np.arctan2(y - truck.y, x - truck.x)
-        turn_in = np.abs(_wrap(travel - truck.yaw))
-        arrive = np.where(turn_in > math.pi / 2, travel + math.pi, travel)  # reversing when shorter
-        turn_in = np.minimum(turn_in, math.pi - turn_in)
-        moved = np.hypot(x - truck.x, y - truck.y) > 1e-6
-        arrive, turn_in = np.where(moved, arrive, truck.yaw), np.where(moved, turn_in, 0.0)
+        arrive = _arrival(truck, x, y)
         poses, costs = [], []
-        arcs = [arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side) for side in (1, -1)]
-        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive, arcs[0][1], arcs[1][1]):
-            turn_out = np.abs(_wrap(yaw - arrive))
-            yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
-            turn_out = np.minimum(turn_out, math.pi - turn_out)
-            time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
-            for arc_time, heading in arcs:  # or on an arc, then straight, then turning in place (:func:`drive`)
-                time = np.minimum(time, arc_time + np.abs(_wrap(yaw - heading)) / t.yaw_rate)
-            poses.append(np.column_stack([x, y, _wrap(yaw)]))
+        arcs = [arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)[1] for side in (1, -1)]
+        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive, *arcs):
+            time, yaw = self.drive_times(truck, x, y, yaw)
+            poses.append(np.column_stack([x, y, yaw]))
             costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
         here = abs(_wrap(np.array([math.atan2(truck.y - base.y, truck.x - base.x) - bearing])))
         poses.append(np.array([[truck.x, truck.y, truck.yaw]]))
@@ -200,6 +208,14 @@ class TruckStands:
 
 def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _arrival(truck: Pose, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The truck's heading on arriving straight at each ``(x, y)`` (reversing when that turn is shorter)."""
+    travel = np.arctan2(y - truck.y, x - truck.x)
+    turn_in = np.abs(_wrap(travel - truck.yaw))
+    arrive = np.where(turn_in > math.pi / 2, travel + math.pi, travel)
+    return np.where(np.hypot(x - truck.x, y - truck.y) > 1e-6, arrive, truck.yaw)
 
 
 def arc_times(start: Pose, x: np.ndarray, y: np.ndarray, speed: float, yaw_rate: float,

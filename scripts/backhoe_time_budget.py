@@ -36,7 +36,7 @@ from earthbench.referee import judge
 from earthbench.scoring import time_to_target
 from earthbench.store import Store
 from earthbench.world import Scenario
-from earthbench_metrics.run import _buckets, _first_dump_start, lower_bound_time_to_target
+from earthbench_metrics.run import lower_bound_time_to_target
 
 PARTS = ("buckets", "dig swing", "dump swing", "exc move", "wait")
 
@@ -51,8 +51,9 @@ def budget(sc: Scenario, plan: Plan) -> dict[str, float] | None:
     e = sc.machines.excavator
     assert e is not None
     fill = sc.soil.fill_factor if sc.soil is not None else 1.0
-    n = _buckets(target, e.bucket_capacity * fill)
-    s1_travel = _first_dump_start(sc) - e.min_stroke_time
+    n = math.ceil(target / (e.bucket_capacity * fill) - 1e-9)
+    bound = lower_bound_time_to_target(sc)
+    s1_travel = max(bound - e.min_dump_time - (n - 1) * (e.min_stroke_time + e.min_dump_time) - e.min_stroke_time, 0.0)
     digs = [a for a in plan.actions if isinstance(a, Dig) and a.machine == "excavator" and a.t_end <= end + 1e-9]
     dumps = [a for a in plan.actions if isinstance(a, Dump) and a.machine == "excavator" and a.t_end <= end + 1e-9]
     moves = [a for a in plan.actions if isinstance(a, Move)]
@@ -62,7 +63,6 @@ def budget(sc: Scenario, plan: Plan) -> dict[str, float] | None:
     dig_t = sum(d.t_end - d.t_start for d in digs)
     dump_t = sum(d.t_end - d.t_start for d in dumps)
     k = min(len(digs), len(dumps))
-    bound = lower_bound_time_to_target(sc)
     out = {
         "time": end,
         "bound": bound,

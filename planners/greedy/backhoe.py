@@ -48,6 +48,7 @@ from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
 from ..truck_stands import TruckStands
 from .moves import Moves
+from .opening import Opening
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _DRIVE_PAD = 0.5  # metres a dig's arm shadow keeps from where the truck still drives (see still_driving)
@@ -118,7 +119,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
         return session.run(carried, max_dumps=1)
 
 
-class _Greedy(Moves):
+class _Greedy(Moves, Opening):
     def __init__(self, sc: Scenario, cfg: GreedyConfig):
         self.sc, self.cfg = sc, cfg
         self.exc: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
@@ -156,6 +157,8 @@ class _Greedy(Moves):
         goal = min(target, self.truck_spec.capacity)
         visited = set() if visited is None else visited
         start, dumps, parked = self.loaded, 0, False
+        if not self.actions and self.loaded <= 1e-9:
+            self.opening(visited)  # stay, or first drive where the target's buckets swing least
         while self.loaded < goal - 1e-9 and len(self.actions) < self.cfg.max_actions:
             need = goal - self.loaded
             threshold = min(self.cfg.min_fill * self.exc.bucket_capacity, need)

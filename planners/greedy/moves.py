@@ -35,14 +35,15 @@ class Moves:
             return False
         return seg.distance(Point(static.x, static.y)) >= self.exc.clearance + 0.05
 
-    def _truck_move(self, new_base: Pose, toward: tuple[float, float] | None = None) -> tuple[str, Pose] | None:
+    def _truck_move(self, new_base: Pose, toward: tuple[float, float] | None = None,
+                    spots: list[Pose] | None = None) -> tuple[str, Pose] | None:
         """Where the truck stands for a base at ``new_base`` and which machine drives first so
         neither path passes the other machine — or ``both`` at once, when their paths keep the
-        clearance apart wherever each machine is (None: no spot works)."""
+        clearance apart wherever each machine is (None: no spot works). ``spots``: only these stands."""
         dest = (new_base.x, new_base.y)
         exc_path = self._exc_path(dest, 0.0)
         tried = 0
-        for tpose in self._truck_spots(new_base, toward):
+        for tpose in spots if spots is not None else self._truck_spots(new_base, toward):
             truck_path = self._truck_path(tpose, 0.0)
             if not self._clear(truck_path, self.base if len(exc_path) == 1 else Pose(*dest, 0.0)):
                 continue
