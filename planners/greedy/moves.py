@@ -9,7 +9,9 @@ from collections.abc import Iterator
 
 from shapely.geometry import LineString, Point
 
-from earthbench.motion import Sample, wrap
+import numpy as np
+
+from earthbench.motion import Sample, poses_at, wrap
 from earthbench.plan import Move
 from earthbench.world import Pose
 
@@ -38,8 +40,8 @@ class Moves:
     def _truck_move(self, new_base: Pose, toward: tuple[float, float] | None = None,
                     spots: list[Pose] | None = None) -> tuple[str, Pose] | None:
         """Where the truck stands for a base at ``new_base`` and which machine drives first so
-        neither path passes the other machine — or ``both`` at once, when their paths keep the
-        clearance apart wherever each machine is (None: no spot works). ``spots``: only these stands."""
+        neither path passes the other machine — or ``both`` at once, when they keep the
+        clearance apart at every instant, starting together (None: no spot works). ``spots``: only these stands."""
         dest = (new_base.x, new_base.y)
         exc_path = self._exc_path(dest, 0.0)
         tried = 0
@@ -47,7 +49,7 @@ class Moves:
             truck_path = self._truck_path(tpose, 0.0)
             if not self._clear(truck_path, self.base if len(exc_path) == 1 else Pose(*dest, 0.0)):
                 continue
-            if len(exc_path) == 1 or _line(exc_path).distance(_line(truck_path)) >= self.exc.clearance + 0.05:
+            if len(exc_path) == 1 or self._apart(exc_path, truck_path):
                 first = "both"
             elif self._clear(exc_path, self.truck) and self._clear(truck_path, Pose(*dest, 0.0)):
                 first = "excavator"
@@ -61,6 +63,14 @@ class Moves:
             if tried >= 40:
                 break
         return None
+
+    def _apart(self, a: list[Sample], b: list[Sample]) -> bool:
+        """Whether two moves starting at the same time keep the machines' centres the clearance
+        (and 0.1 m: the footprints' corners) apart at every instant, each waiting at its end."""
+        end = max(a[-1][0], b[-1][0])
+        times = np.append(np.arange(0.0, end, 0.05), end)
+        pa, pb = poses_at(np.asarray(a), times), poses_at(np.asarray(b), times)
+        return bool(np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]).min() >= self.exc.clearance + 0.1)
 
     def _truck_path(self, spot: Pose, t0: float) -> list[Sample]:
         return drive(self.truck, (spot.x, spot.y), t0, self.truck_spec.travel_speed, self.truck_spec.yaw_rate, final_yaw=spot.yaw)
