@@ -45,6 +45,8 @@ class Opening:
         n = math.ceil(need / e.bucket_capacity - 1e-9)
         if n < _BUCKETS:
             return False  # a few buckets: the drive would not pay; ``relocate`` decides where to go
+        if self.sc.soil is not None:
+            return False  # a scan (the realistic track) shows ground far from where it was taken too roughly to pick a station on the soil
         bases = self._opening_stations(need)
         found: list[tuple[float, int, list[Pose]]] = []
         here = math.inf
