@@ -157,10 +157,12 @@ class TruckStands:
         k = int(np.argmin(done + 1e-3 * dist))
         return Pose(float(st[k, 0]), float(st[k, 1]), float(st[k, 2])), float(arrive[k]), float(swing[k])
 
-    def drive_times(self, truck: Pose, x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def drive_times(self, truck: Pose, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
+                    arcs: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """The truck's least time (s) from ``truck`` to each stand ``(x, y, yaw)`` the way
-        :func:`drive` goes (turn, drive, turn; or arc, drive, turn), and the stand's yaw (``yaw``
-        or its reverse, the same body: whichever ends the shorter turn in place)."""
+        :func:`drive` goes (turn, drive, turn; or arc, drive, turn; without ``arcs`` the first
+        only, as :func:`earthbench.motion.turn_drive_turn`), and the stand's yaw (``yaw`` or its
+        reverse, the same body: whichever ends the shorter turn in place)."""
         t = self.truck
         arrive = _arrival(truck, x, y)
         travel = np.arctan2(y - truck.y, x - truck.x)
@@ -170,16 +172,17 @@ class TruckStands:
         yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
         turn_out = np.minimum(turn_out, math.pi - turn_out)
         time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
-        for side in (1, -1):  # or on an arc, then straight, then turning in place
+        for side in (1, -1) if arcs else ():  # or on an arc, then straight, then turning in place
             arc_time, heading = arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)
             time = np.minimum(time, arc_time + np.abs(_wrap(yaw - heading)) / t.yaw_rate)
         return time, _wrap(yaw)
 
-    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> Iterator[Pose]:
+    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float, arcs: bool = False) -> Iterator[Pose]:
         """Stands for a truck serving ``base`` whose material lies toward ``bearing``, cheapest
-        first: the truck's time to get there (turn, drive, turn; or arc, drive, turn: :func:`drive`) plus ``buckets`` cycles' swing
+        first: the truck's time to get there (turn, drive, turn; with ``arcs`` also arc, drive,
+        turn: :func:`drive`) plus ``buckets`` cycles' swing
         between that bearing and the stand. Each stand is offered broadside to the bearing (the
-        truck can then slide along the face), radial, or as the truck arrives (no last turn, straight or on an arc);
+        truck can then slide along the face), radial, or as the truck arrives (no last turn; with ``arcs`` also off an arc);
         all keep the truck's ground, off the dig area, in dump reach."""
         e, t = self.spec, self.truck
         rad = np.arange(e.reach_max + t.loading_radius - 0.1, e.clearance + 0.2, -0.3)
@@ -188,9 +191,9 @@ class TruckStands:
         x, y = base.x + R.ravel() * np.cos(A.ravel()), base.y + R.ravel() * np.sin(A.ravel())
         arrive = _arrival(truck, x, y)
         poses, costs = [], []
-        arcs = [arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)[1] for side in (1, -1)]
-        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive, *arcs):
-            time, yaw = self.drive_times(truck, x, y, yaw)
+        headings = [arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)[1] for side in (1, -1)] if arcs else []
+        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive, *headings):
+            time, yaw = self.drive_times(truck, x, y, yaw, arcs)
             poses.append(np.column_stack([x, y, yaw]))
             costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
         here = abs(_wrap(np.array([math.atan2(truck.y - base.y, truck.x - base.x) - bearing])))

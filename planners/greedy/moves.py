@@ -28,7 +28,7 @@ class Moves:
         bearing = (math.atan2(toward[1] - base.y, toward[0] - base.x) if toward is not None
                    else self.material_bearing(base))
         buckets = (self.sc.task.target_volume - self.loaded) / self.exc.bucket_capacity
-        return self.stands.parking(base, self.truck, bearing, max(buckets, 1.0))
+        return self.stands.parking(base, self.truck, bearing, max(buckets, 1.0), arcs=True)
 
     def _clear(self, path: list[Sample], static: Pose) -> bool:
         """Whether a move's ``path`` keeps out of keep-outs and the clearance from a machine standing at ``static``."""

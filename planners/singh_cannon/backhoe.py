@@ -178,7 +178,7 @@ class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.5"
+    version = "1.4"
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -517,9 +517,9 @@ class Session(TruckMoves):
             # else once the excavator has arrived (its route keeps clear of the new station)
             t0 = max(self.t, self.truck_ready)
             epath = turn_drive_turn(self.base, goal, t0, e.travel_speed, e.yaw_rate)
-            tpath = self.truck_path(route, t0, yaw, pose) if route else []
+            tpath = self.truck_path(route, t0, yaw) if route else []
             if tpath and not self.apart(epath, tpath):
-                tpath = self.truck_path(route, epath[-1][0], yaw, pose)
+                tpath = self.truck_path(route, epath[-1][0], yaw)
             if len(epath) > 1:
                 self.actions.append(Move("excavator", tuple(epath)))
                 self.base = Pose(epath[-1][1], epath[-1][2], epath[-1][3])  # ``turn`` is relative

@@ -13,8 +13,6 @@ from earthbench.motion import turn_drive_turn
 from earthbench.plan import Move
 from earthbench.world import Pose
 
-from ..truck_stands import drive
-
 
 class TruckMoves:
     """The truck's moves of a :class:`~earthbench_planners.singh_cannon.backhoe.Session`, which
@@ -70,27 +68,17 @@ class TruckMoves:
                 if route is None:
                     continue
                 tried += 1
-                if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw, base)):
+                if self.stands.path_ok(self.truck_path(route, 0.0, stand.yaw)):
                     return route, stand.yaw  # its way keeps the truck's ground limits
                 failed.add((round(p[0], 2), round(p[1], 2)))
                 if tried >= 40:
                     break
         return None
 
-    def truck_path(self, route: list[tuple[float, float]], t0: float, yaw: float | None = None,
-                   base: Pose | None = None) -> list[tuple[float, float, float, float]]:
+    def truck_path(self, route: list[tuple[float, float]], t0: float, yaw: float | None = None) -> list[tuple[float, float, float, float]]:
         """Samples of the truck driving through ``route`` from its current pose, starting at ``t0``,
-        turning to ``yaw`` at the end; to a single stand on an arc first where that is faster
-        (``truck_stands.drive``) and keeps clear of the excavator at ``base`` (default: where it
-        stands) and the keep-outs."""
+        turning to ``yaw`` at the end."""
         pose, t = self.truck, t0
-        b = base or self.base
-        if len(route) == 1:  # straight to the stand, or on an arc first when that is faster and as clear
-            path = drive(pose, route[0], t0, self.truck_spec.travel_speed, self.truck_spec.yaw_rate, final_yaw=yaw)
-            pts = list(dict.fromkeys((p[1], p[2]) for p in path))
-            track = LineString(pts) if len(pts) > 1 else Point(pts[0])
-            if not any(track.intersects(k) for k in self.keep_outs) and track.distance(Point(b.x, b.y)) >= self.spec.clearance + 0.05:
-                return path
         samples = [(t0, pose.x, pose.y, pose.yaw)]
         for k, p in enumerate(route):
             seg = turn_drive_turn(pose, p, t, self.truck_spec.travel_speed, self.truck_spec.yaw_rate,
