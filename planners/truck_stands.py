@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import MARGIN, Sample, dense_poses, poses_at, turn_drive_turn, wrap
+from earthbench.motion import dense_poses, poses_at, turn_drive_turn, wrap
 from earthbench.rules import arm_shadow, reach_of, truck_ground
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
@@ -31,6 +31,11 @@ GAP = 0.15
 SLOPE_MARGIN, STEP_MARGIN = 0.02, 0.03
 #: Spacing (m) of the stands along the truck's heading, and how far either way they go.
 STEP, SPAN = 0.1, 6.0
+#: A move's samples (t, x, y, yaw).
+Sample = tuple[float, float, float, float]
+#: Share of its speed and yaw rate limits a machine drives at (``turn_drive_turn``'s default
+#: margin), so rounding never breaks a limit.
+MARGIN = 0.999
 #: Largest turn (rad) between two samples of an arc (the referee joins them by the same arc; the
 #: chord strays 2 cm from it at the truck's tightest full-speed radius, for checks on the chords).
 ARC_PIECE = 0.15

@@ -7,8 +7,11 @@ heading to the stand nearest the dig's bearing that keeps its body out of the ar
 the dig area and on ground within its limits (``planners/truck_stands.py``, rules version 2), so
 a dump swings little. When nothing in reach is worth a dig, it drives to the station with the
 most material in reach (less a travel penalty) and the truck is parked toward that material,
-broadside to it (the cheapest stand in travel and swing). Relocations are sequential: one
-machine drives at a time. Dig volumes are screened with a vectorised estimate and the best few
+broadside to it (the cheapest stand in travel and swing). The two drive at once when they keep
+the clearance at every instant, the truck on an arc when that beats turning in place
+(``truck_stands.drive``), and the excavator digs while the truck drives to it. For a target of
+8 buckets or more it may first drive to the station where the target swings least
+(``opening.py``, issue 49). Dig volumes are screened with a vectorised estimate and the best few
 confirmed with the referee's own cut model (and, on the realistic track, the soil's slump), so
 the planner's predicted volume equals the referee's.
 

@@ -11,11 +11,11 @@ from shapely.geometry import LineString, Point
 
 import numpy as np
 
-from earthbench.motion import Sample, poses_at, wrap
+from earthbench.motion import poses_at, wrap
 from earthbench.plan import Move
 from earthbench.world import Pose
 
-from ..truck_stands import drive
+from ..truck_stands import Sample, drive
 
 
 class Moves:
