@@ -84,6 +84,12 @@ class GreedyConfig:
     observation (``planners/stability.py``: 0 on the exact track)."""
 
 
+def _referee_order(a: Dig | Dump | Move) -> tuple[float, int]:
+    """The order the referee replays a plan in (by start time), the excavator's action first
+    where a truck move starts at the same time: a replay's terrain then changes as time goes."""
+    return (a.path[0][0], 1) if isinstance(a, Move) else (a.t_start, 0)
+
+
 def _wrap(a: np.ndarray) -> np.ndarray:
     """Angles wrapped to [-π, π)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
@@ -183,7 +189,7 @@ class _Greedy(Moves, Opening):
             if max_dumps is not None and dumps >= max_dumps:
                 break
         return Plan(
-            tuple(self.actions),
+            tuple(sorted(self.actions, key=_referee_order)),
             Prediction(volume=self.loaded - start, makespan=self.t),
             {"planner": "greedy", "stations": len(visited)},
         )
