@@ -30,7 +30,8 @@ machine ``i`` loads at most ``C_i / (t_i + t_d,i)`` m³ per second, so the bound
 scenario forces on the time to its target and the bound above leaves out: whole buckets (the
 target needs ``n = ⌈target / C_eff⌉`` loaded dumps, ``C_eff`` the bank m³ a bucket really holds:
 the capacity × the soil's fill factor on the realistic track), and the travel before the first
-dump when the truck starts out of dump reach of the excavator. It does **not** price the swing
+dump when the truck starts out of dump reach of the excavator or the excavator out of reach of
+the dig area. It does **not** price the swing
 of each cycle: the referee lets the truck stand anywhere clear of the excavator, including on the
 ray to the contact (on the dig area beyond it, or between the base and a contact the arm reaches
 over), where a cycle swings 0 rad; ``tests/test_bound.py`` builds such a plan (docs/metrics.md,
@@ -84,6 +85,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from shapely.geometry import Point, Polygon
 
 from earthbench.motion import ABS_TOL, RATE_TOL
 from earthbench.plan import Plan
@@ -127,21 +129,24 @@ def _buckets(target: float, capacity: float) -> int:
 
 def _first_dump_start(scenario: Scenario) -> float:
     """The earliest start of the first loaded dump (s): the excavator digs once first (at least
-    the minimum stroke), and the truck must be within dump reach (centre distance ≤ ``reach_max``
-    + loading radius). Whatever gap ``G`` the two starting poses leave, the two machines close
-    it between them: the truck by driving ``L_t``, the excavator by ``L_e`` (its driving and its
-    dig never overlap), ``L_e + L_t ≥ G``. The start is at least ``max(L_e / v_e + t_s, L_t / v_t)``,
-    least over the split where both are equal."""
+    the minimum stroke), from a base within ``reach_max`` of the dig area (the contact lies in
+    its bucket's footprint, on the dig area, and in reach), and the truck must be within dump
+    reach (centre distance ≤ ``reach_max`` + loading radius). So the excavator drives at least
+    ``A``, its start's distance to the dig area less ``reach_max``, before that dig; and whatever
+    gap ``G`` the two starting poses leave, the two machines close it between them: the truck by
+    driving ``L_t``, the excavator by ``L_e ≥ A`` (its driving and its dig never overlap),
+    ``L_e + L_t ≥ G``. The start is at least ``max(L_e / v_e + t_s, (G − L_e)⁺ / v_t)``, least
+    at ``L_e = max(A, the split where both are equal)``."""
     m = scenario.machines
     exc, truck, p, q = m.excavator, m.truck, m.excavator_pose, m.truck_pose
     assert exc is not None and p is not None
     ts = exc.min_stroke_time
     gap = math.hypot(q.x - p.x, q.y - p.y) - (exc.reach_max + truck.loading_radius + ABS_TOL)
     ve, vt = exc.travel_speed * (1 + RATE_TOL), truck.travel_speed * (1 + RATE_TOL)
-    if gap <= 0 or gap / vt <= ts:
-        return ts
-    le = (gap / vt - ts) / (1 / ve + 1 / vt)  # the excavator's share where both take as long
-    return ts + le / ve
+    approach = max(Polygon(scenario.site.dig_area).distance(Point(p.x, p.y)) - exc.reach_max - ABS_TOL, 0.0)
+    split = max((gap / vt - ts) / (1 / ve + 1 / vt), 0.0)  # the excavator's share where both take as long
+    le = max(approach, split)
+    return max(ts + le / ve, max(gap - le, 0.0) / vt)
 
 
 def _material(scenario: Scenario) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from earthbench.motion import dense_poses, poses_at, wrap
+from earthbench.motion import dense_poses, poses_at, turn_drive_turn, wrap
 from earthbench.rules import arm_shadow, reach_of, truck_ground
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
@@ -31,6 +31,14 @@ GAP = 0.15
 SLOPE_MARGIN, STEP_MARGIN = 0.02, 0.03
 #: Spacing (m) of the stands along the truck's heading, and how far either way they go.
 STEP, SPAN = 0.1, 6.0
+#: A move's samples (t, x, y, yaw).
+Sample = tuple[float, float, float, float]
+#: Share of its speed and yaw rate limits a machine drives at (``turn_drive_turn``'s default
+#: margin), so rounding never breaks a limit.
+MARGIN = 0.999
+#: Largest turn (rad) between two samples of an arc (the referee joins them by the same arc; the
+#: chord strays 2 cm from it at the truck's tightest full-speed radius, for checks on the chords).
+ARC_PIECE = 0.15
 
 
 class TruckStands:
@@ -154,30 +162,44 @@ class TruckStands:
         k = int(np.argmin(done + 1e-3 * dist))
         return Pose(float(st[k, 0]), float(st[k, 1]), float(st[k, 2])), float(arrive[k]), float(swing[k])
 
-    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float) -> Iterator[Pose]:
+    def drive_times(self, truck: Pose, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
+                    arcs: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """The truck's least time (s) from ``truck`` to each stand ``(x, y, yaw)`` the way
+        :func:`drive` goes (turn, drive, turn; or arc, drive, turn; without ``arcs`` the first
+        only, as :func:`earthbench.motion.turn_drive_turn`), and the stand's yaw (``yaw`` or its
+        reverse, the same body: whichever ends the shorter turn in place)."""
+        t = self.truck
+        arrive = _arrival(truck, x, y)
+        travel = np.arctan2(y - truck.y, x - truck.x)
+        turn_in = np.abs(_wrap(travel - truck.yaw))
+        turn_in = np.where(np.hypot(x - truck.x, y - truck.y) > 1e-6, np.minimum(turn_in, math.pi - turn_in), 0.0)
+        turn_out = np.abs(_wrap(yaw - arrive))
+        yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
+        turn_out = np.minimum(turn_out, math.pi - turn_out)
+        time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
+        for side in (1, -1) if arcs else ():  # or on an arc, then straight, then turning in place
+            arc_time, heading = arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)
+            time = np.minimum(time, arc_time + np.abs(_wrap(yaw - heading)) / t.yaw_rate)
+        return time, _wrap(yaw)
+
+    def parking(self, base: Pose, truck: Pose, bearing: float, buckets: float, arcs: bool = False) -> Iterator[Pose]:
         """Stands for a truck serving ``base`` whose material lies toward ``bearing``, cheapest
-        first: the truck's time to get there (turn, drive, turn) plus ``buckets`` cycles' swing
+        first: the truck's time to get there (turn, drive, turn; with ``arcs`` also arc, drive,
+        turn: :func:`drive`) plus ``buckets`` cycles' swing
         between that bearing and the stand. Each stand is offered broadside to the bearing (the
-        truck can then slide along the face), radial, or as the truck arrives (no last turn);
+        truck can then slide along the face), radial, or as the truck arrives (no last turn; with ``arcs`` also off an arc);
         all keep the truck's ground, off the dig area, in dump reach."""
         e, t = self.spec, self.truck
         rad = np.arange(e.reach_max + t.loading_radius - 0.1, e.clearance + 0.2, -0.3)
         ang = bearing + np.radians(np.arange(-180, 180, 7.5))
         R, A = np.meshgrid(rad, ang)
         x, y = base.x + R.ravel() * np.cos(A.ravel()), base.y + R.ravel() * np.sin(A.ravel())
-        travel = np.arctan2(y - truck.y, x - truck.x)
-        turn_in = np.abs(_wrap(travel - truck.yaw))
-        arrive = np.where(turn_in > math.pi / 2, travel + math.pi, travel)  # reversing when shorter
-        turn_in = np.minimum(turn_in, math.pi - turn_in)
-        moved = np.hypot(x - truck.x, y - truck.y) > 1e-6
-        arrive, turn_in = np.where(moved, arrive, truck.yaw), np.where(moved, turn_in, 0.0)
+        arrive = _arrival(truck, x, y)
         poses, costs = [], []
-        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive):
-            turn_out = np.abs(_wrap(yaw - arrive))
-            yaw = np.where(turn_out > math.pi / 2, yaw + math.pi, yaw)  # the same body, the shorter turn
-            turn_out = np.minimum(turn_out, math.pi - turn_out)
-            time = (turn_in + turn_out) / t.yaw_rate + np.hypot(x - truck.x, y - truck.y) / t.travel_speed
-            poses.append(np.column_stack([x, y, _wrap(yaw)]))
+        headings = [arc_times(truck, x, y, t.travel_speed, t.yaw_rate, side)[1] for side in (1, -1)] if arcs else []
+        for yaw in (A.ravel() + math.pi / 2, A.ravel(), arrive, *headings):
+            time, yaw = self.drive_times(truck, x, y, yaw, arcs)
+            poses.append(np.column_stack([x, y, yaw]))
             costs.append(time + buckets * 2 * np.abs(_wrap(A.ravel() - bearing)) / e.swing_rate)
         here = abs(_wrap(np.array([math.atan2(truck.y - base.y, truck.x - base.x) - bearing])))
         poses.append(np.array([[truck.x, truck.y, truck.yaw]]))
@@ -194,6 +216,63 @@ class TruckStands:
 
 def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _arrival(truck: Pose, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The truck's heading on arriving straight at each ``(x, y)`` (reversing when that turn is shorter)."""
+    travel = np.arctan2(y - truck.y, x - truck.x)
+    turn_in = np.abs(_wrap(travel - truck.yaw))
+    arrive = np.where(turn_in > math.pi / 2, travel + math.pi, travel)
+    return np.where(np.hypot(x - truck.x, y - truck.y) > 1e-6, arrive, truck.yaw)
+
+
+def arc_times(start: Pose, x: np.ndarray, y: np.ndarray, speed: float, yaw_rate: float,
+              side: int) -> tuple[np.ndarray, np.ndarray]:
+    """Driving from ``start`` forward on the arc of the tightest radius at full speed
+    (``speed / yaw_rate``) turning to ``side`` (+1 left, −1 right) until the heading points at
+    each goal ``(x, y)``, then straight to it: the time (s; inf where the goal lies inside the
+    circle) and the heading on arrival (rad). A truck turns 0.11 rad/s: turning in place first
+    costs 7.7 s for 48°, where this arc covers ground meanwhile."""
+    v, w = speed * MARGIN, yaw_rate * MARGIN
+    radius = speed / yaw_rate
+    cx = start.x - side * radius * math.sin(start.yaw)
+    cy = start.y + side * radius * math.cos(start.yaw)
+    d = np.hypot(x - cx, y - cy)
+    inside = d <= radius + 1e-9
+    d = np.where(inside, radius + 1.0, d)
+    tangent = np.arctan2(y - cy, x - cx) - side * np.arccos(radius / d)  # the angle (from the centre) where it leaves the circle
+    swept = np.mod(side * (tangent - (start.yaw - side * math.pi / 2)), 2 * math.pi)
+    time = swept / w + np.sqrt(d * d - radius * radius) / v
+    return np.where(inside, np.inf, time), _wrap(tangent + side * math.pi / 2)
+
+
+def drive(start: Pose, goal: tuple[float, float], t0: float, speed: float, yaw_rate: float,
+          final_yaw: float | None = None) -> list[Sample]:
+    """The faster way from ``start`` to ``goal`` (and ``final_yaw``, turned in place at the end):
+    :func:`earthbench.motion.turn_drive_turn`, or an arc at full speed and yaw rate either way
+    then straight (:func:`arc_times`), sampled every :data:`ARC_PIECE` of turn."""
+    best = turn_drive_turn(start, goal, t0, speed, yaw_rate, final_yaw=final_yaw)
+    gx, gy = np.array([goal[0]]), np.array([goal[1]])
+    w, radius = yaw_rate * MARGIN, speed / yaw_rate
+    for side in (1, -1):
+        time, heading = arc_times(start, gx, gy, speed, yaw_rate, side)
+        if not math.isfinite(time[0]):
+            continue
+        turn_out = 0.0 if final_yaw is None else abs(wrap(final_yaw - float(heading[0])))
+        if t0 + float(time[0]) + turn_out / w >= best[-1][0] - 1e-9:
+            continue
+        cx, cy = start.x - side * radius * math.sin(start.yaw), start.y + side * radius * math.cos(start.yaw)
+        swept = float(np.mod(side * (float(heading[0]) - start.yaw), 2 * math.pi))
+        pieces = max(int(math.ceil(swept / ARC_PIECE)), 1)
+        samples: list[Sample] = [(t0, start.x, start.y, start.yaw)]
+        for k in range(1, pieces + 1):
+            yaw = start.yaw + side * swept * k / pieces
+            a = yaw - side * math.pi / 2
+            samples.append((t0 + swept * k / pieces / w, cx + radius * math.cos(a), cy + radius * math.sin(a), yaw))
+        rest = turn_drive_turn(Pose(*samples[-1][1:]), goal, samples[-1][0], speed, yaw_rate, final_yaw=final_yaw,
+                               allow_reverse=False)
+        best = samples + rest[1:]
+    return best
 
 
 def _segment_distance(p: Pose, a: tuple[float, float], b: tuple[float, float]) -> float:

@@ -1,19 +1,24 @@
-"""Where a backhoe plan's time goes: the excavator's timeline split into its parts, per family.
+"""Issue 49: where a backhoe plan's time to the target goes above the target bound.
 
-For every stored backhoe run of a suite (a board's store, read only), the excavator's makespan
-to the target is split into dig strokes at their minimum, swing to the contact, dump at its
-minimum, swing to the truck, excavator moves, and idle (waiting for the truck, or nothing); with
-the dig count, the mean bucket fill, the swing per dump (degrees, between the last dig's contact
-and the truck's centre, seen from the base) and the metres each machine travels. Every figure is
-per target m³ (seconds) except the counts, and the table shows each family's median over its
-runs, planner by planner, so two planners compare on the same scenarios (issue 49)::
+For each valid plan it re-judges (a store's runs of one planner, or the best known plans of a
+folder), the excavator's timeline up to the end of the dump that reached the target is split
+into what the bound charges and what it does not (docs/metrics.md, "What the geometry forces"):
 
-    python scripts/backhoe_time_budget.py leaderboard/standard.db [--suite standard] [--planner stl-tamp --planner greedy]
-    python scripts/backhoe_time_budget.py /tmp/new.db leaderboard/standard.db --planner stl-tamp
+- ``bound``     — ``lower_bound_time_to_target``: ``n`` strokes and dumps at their least time and
+                  the travel before the first dump (``S₁ − t_s``);
+- ``buckets``   — the digs and dumps beyond ``n`` (part-filled buckets: ``(k − n)(t_s + t_d)``);
+- ``dig swing`` — the digs' time above the least stroke (the swing to the contact, and slack);
+- ``dump swing``— the dumps' time above the least dump (the swing to the truck, and slack);
+- ``exc move``  — the excavator driving (relocations), less the travel the bound already counts;
+- ``wait``      — the excavator idle (for the truck, or for nothing).
 
-With several stores, runs are told apart by the store's place on the command line (``[0]``,
-``[1]``) and only scenarios present in every store's runs are counted (a side-by-side
-comparison of a new run against the board).
+Each is reported in seconds and as a share of the bound; the rows add up to the plan's time to the
+target. Also the truck's driving time, and the number of relocations.
+
+    python scripts/backhoe_time_budget.py STORE.db --planner greedy [--family F] [--limit N]
+    python scripts/backhoe_time_budget.py STORE.db --best leaderboard/best/standard [--family F]
+
+(the store supplies the scenarios by digest in both cases).
 """
 
 from __future__ import annotations
@@ -25,92 +30,100 @@ from collections import defaultdict
 
 import numpy as np
 
+from earthbench.publishing.best import kept
 from earthbench.plan import Dig, Dump, Move, Plan
-from earthbench.results.store import Store, decompress
+from earthbench.referee import judge
+from earthbench.results.scoring import time_to_target
+from earthbench.results.store import Store
+from earthbench.world import Scenario
+from earthbench_metrics.run import lower_bound_time_to_target
 
-PARTS = ("stroke", "swing_dig", "dump", "swing_dump", "exc_move", "idle")
+PARTS = ("buckets", "dig swing", "dump swing", "exc move", "wait")
 
 
-def budget(plan: Plan, stroke: float, dump: float) -> dict[str, float]:
-    """Seconds of each part of the excavator's timeline, with counts, swing and travel."""
-    acts = sorted((a for a in plan.actions if a.machine == "excavator"), key=lambda a: a.t_start)
-    out = dict.fromkeys(PARTS, 0.0)
-    t, swings, digs = 0.0, [], 0
-    truck = [a for a in plan.actions if isinstance(a, Move) and a.machine == "truck"]
-    end = max((a.t_end for a in plan.actions), default=0.0)
-    for a in acts:
-        out["idle"] += max(a.t_start - t, 0.0)
-        d = a.t_end - a.t_start
-        if isinstance(a, Dig):
-            digs += 1
-            out["stroke"] += min(stroke, d)
-            out["swing_dig"] += max(d - stroke, 0.0)
-        elif isinstance(a, Dump):
-            out["dump"] += min(dump, d)
-            out["swing_dump"] += max(d - dump, 0.0)
-            swings.append(d - dump)
-        elif isinstance(a, Move):
-            out["exc_move"] += d
-        t = max(t, a.t_end)
-    out["idle"] += max(end - t, 0.0)
-    out["digs"] = digs
-    out["exc_m"] = sum(_length(a) for a in acts if isinstance(a, Move))
-    out["truck_m"] = sum(_length(a) for a in truck)
-    out["truck_moves"] = len(truck)
-    out["swing_per_dump_s"] = float(np.mean(swings)) if swings else math.nan
+def budget(sc: Scenario, plan: Plan) -> dict[str, float] | None:
+    """The split of the module docstring (seconds), or None for an invalid plan or one short of the target."""
+    v = judge(sc, plan)
+    target = sc.task.target_volume
+    end = time_to_target(v.load_curve, target)
+    if not v.valid or not math.isfinite(end):
+        return None
+    e = sc.machines.excavator
+    assert e is not None
+    fill = sc.soil.fill_factor if sc.soil is not None else 1.0
+    n = math.ceil(target / (e.bucket_capacity * fill) - 1e-9)
+    bound = lower_bound_time_to_target(sc)
+    s1_travel = max(bound - e.min_dump_time - (n - 1) * (e.min_stroke_time + e.min_dump_time) - e.min_stroke_time, 0.0)
+    digs = [a for a in plan.actions if isinstance(a, Dig) and a.machine == "excavator" and a.t_end <= end + 1e-9]
+    dumps = [a for a in plan.actions if isinstance(a, Dump) and a.machine == "excavator" and a.t_end <= end + 1e-9]
+    moves = [a for a in plan.actions if isinstance(a, Move)]
+    exc_move = sum(min(m.path[-1][0], end) - m.path[0][0] for m in moves if m.machine == "excavator" and m.path[0][0] < end)
+    truck_move = sum(min(m.path[-1][0], end) - m.path[0][0] for m in moves if m.machine == "truck" and m.path[0][0] < end)
+    relocations = sum(1 for m in moves if m.machine == "excavator" and m.path[0][0] < end)
+    dig_t = sum(d.t_end - d.t_start for d in digs)
+    dump_t = sum(d.t_end - d.t_start for d in dumps)
+    k = min(len(digs), len(dumps))
+    out = {
+        "time": end,
+        "bound": bound,
+        "buckets": (k - n) * (e.min_stroke_time + e.min_dump_time),
+        "dig swing": dig_t - len(digs) * e.min_stroke_time - max(len(digs) - k, 0) * e.min_stroke_time,
+        "dump swing": dump_t - len(dumps) * e.min_dump_time,
+        "exc move": exc_move - min(s1_travel, exc_move),
+        "truck move": truck_move,
+        "relocations": float(relocations),
+        "digs": float(len(digs)),
+        "n": float(n),
+    }
+    out["wait"] = end - bound - sum(out[p] for p in PARTS[:-1])
     return out
 
 
-def _length(m: Move) -> float:
-    p = np.asarray(m.path)
-    return float(np.sum(np.hypot(np.diff(p[:, 1]), np.diff(p[:, 2]))))
-
-
-def _swing_deg(seconds: float, rate: float) -> float:
-    return math.degrees(seconds * rate)
+def _rows(args: argparse.Namespace, store: Store) -> list[tuple[str, str, str, str]]:
+    """(scenario id, family, plan JSON, scenario digest) to study."""
+    rows = []
+    if args.best:
+        ids = {r["scenario_digest"]: (r["scenario_id"], r["family"]) for r in store.runs()}
+        for digest, doc in kept(args.best.rsplit("/", 1)[0], args.best.rsplit("/", 1)[1]).items():
+            if digest in ids:
+                plan = doc["plan"]
+                rows.append((*ids[digest], plan if isinstance(plan, str) else json.dumps(plan), digest))
+    else:
+        for r in store.runs():
+            text = store.plan_json(int(r["id"])) if r["planner"] == args.planner and r["reason"] == "ok" else None
+            if text is not None:
+                rows.append((r["scenario_id"], r["family"], text, r["scenario_digest"]))
+    rows = [r for r in rows if not args.family or r[1] == args.family]
+    return sorted(rows)[: args.limit or None]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stores", nargs="+")
-    ap.add_argument("--suite", default="standard")
-    ap.add_argument("--planner", action="append", default=None)
+    ap.add_argument("store")
+    ap.add_argument("--planner", default="greedy")
+    ap.add_argument("--best", default="", help="a best-known suite folder (ROOT/SUITE) instead of a planner's runs")
+    ap.add_argument("--family", default="")
+    ap.add_argument("--limit", type=int, default=0)
+    ap.add_argument("--quiet", action="store_true", help="only the per-family medians")
     args = ap.parse_args()
-    rows: dict[tuple[str, str], dict[str, dict[str, object]]] = defaultdict(dict)
-    for n, path in enumerate(args.stores):
-        store = Store(path, read_only=True)
-        tag = f" [{n}]" if len(args.stores) > 1 else ""
-        for r in store.runs():
-            if r["suite"] != args.suite or r["track"] != "backhoe" or r["plan"] is None:
-                continue
-            if args.planner and r["planner"] not in args.planner:
-                continue
-            rows[(r["planner"], r["planner_version"] + tag)][r["scenario_digest"]] = dict(r) | {"store": store}
-    common = set.intersection(*(set(v) for v in rows.values())) if rows else set()
-    print(f"{len(common)} scenarios in every planner's runs; seconds per target m³, family medians")
-    head = ["family", "planner", "n", "t/m3", "valid", *PARTS, "digs", "fill", "swing°", "exc_m", "truck_m", "cpu_s"]
-    print(" ".join(f"{h:>12}" for h in head))
-    by_family: dict[tuple[str, str, str], list[dict[str, float]]] = defaultdict(list)
-    for key, runs in rows.items():
-        for digest in common:
-            r = runs[digest]
-            store = r["store"]
-            sc = store.scenario(digest)  # type: ignore[attr-defined]
-            spec = sc.machines.excavator
-            plan = Plan.from_json(decompress(r["plan"]))
-            b = budget(plan, spec.min_stroke_time, spec.min_dump_time)
-            v = float(r["target_volume"])
-            row = {p: b[p] / v for p in PARTS} | {"digs": b["digs"], "exc_m": b["exc_m"], "truck_m": b["truck_m"],
-                                                   "swing°": _swing_deg(b["swing_per_dump_s"], spec.swing_rate),
-                                                   "fill": float(r["mean_bucket_fill"] or math.nan),
-                                                   "t/m3": json.loads(r["metrics"] or "{}").get("time_per_target_m3", math.nan)
-                                                   if r["success"] else math.nan,
-                                                   "valid": float(bool(r["valid"])), "cpu_s": float(r["solve_cpu_s"] or math.nan)}
-            by_family[(str(r["family"]).split(".")[0], *key)].append(row)
-    for (fam, planner, version), rs in sorted(by_family.items()):
-        cols = ["t/m3", "valid", *PARTS, "digs", "fill", "swing°", "exc_m", "truck_m", "cpu_s"]
-        med = [float(np.nanmedian([x[c] for x in rs])) if c != "valid" else float(np.mean([x[c] for x in rs])) for c in cols]
-        print(" ".join([f"{fam:>12}", f"{planner + ' ' + version:>12}", f"{len(rs):>12}"] + [f"{m:12.2f}" for m in med]))
+    store = Store(args.store, read_only=True)
+    per_family: dict[str, list[dict[str, float]]] = defaultdict(list)
+    for sid, family, plan_json, digest in _rows(args, store):
+        sc = store.scenario(digest)
+        b = budget(sc, Plan.from_json(plan_json))
+        if b is None:
+            continue
+        per_family[family].append(b)
+        if not args.quiet:
+            parts = ", ".join(f"{p} {b[p] / b['bound']:+.2f}" for p in PARTS)
+            print(f"{sid}: {b['time'] / b['bound']:.2f} × bound = 1 {parts}; {b['digs']:.0f} digs for n={b['n']:.0f}, "
+                  f"{b['relocations']:.0f} relocations, truck driving {b['truck move']:.0f} s")
+    for family, bs in sorted(per_family.items()):
+        med = {p: float(np.median([b[p] / b["bound"] for b in bs])) for p in (*PARTS, "time")}
+        mean = {p: float(np.mean([b[p] / b["bound"] for b in bs])) for p in PARTS}
+        print(f"{family} ({len(bs)} plans): median {med['time']:.2f} × bound; mean share of the bound above it: "
+              + ", ".join(f"{p} {mean[p]:.3f}" for p in PARTS)
+              + f"; median relocations {np.median([b['relocations'] for b in bs]):.0f}")
 
 
 if __name__ == "__main__":

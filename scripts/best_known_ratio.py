@@ -3,7 +3,7 @@
 Reads the kept best known plans of a suite (``leaderboard/best/<suite>/``, `earthbench best`) and
 the runs of one or more stores; each run's time per target m³ is divided by its scenario's best
 known one (a run short of the target counts as infinite). Stores are told apart by their place
-on the command line, as in ``scripts/backhoe_time_budget.py``::
+on the command line, as in ``scripts/backhoe_timeline.py``::
 
     python scripts/best_known_ratio.py new.db leaderboard/standard.db --planner stl-tamp --planner greedy
 """

@@ -43,7 +43,7 @@ def plans(smoke):
 def _delayed(plan: Plan, dt: float) -> Plan:
     def later(a):
         if isinstance(a, Move):
-            return dataclasses.replace(a, path=((0.0, *a.path[0][1:]),) + tuple((t + dt, x, y, yaw) for t, x, y, yaw in a.path))
+            return dataclasses.replace(a, path=tuple((t + dt, x, y, yaw) for t, x, y, yaw in a.path))  # it waits where it is
         return dataclasses.replace(a, t_start=a.t_start + dt, t_end=a.t_end + dt)
     return Plan(tuple(later(a) for a in plan.actions))
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from earthbench import Budget, Dig, Dump, Heightmap, Machines, Move, Plan, Pose, Scenario, Site, Soil, Task, judge
@@ -186,3 +186,51 @@ def test_rescore_fills_the_new_columns_and_the_tables_carry_their_median(tmp_pat
     summary = aggregate(runs).set_index("planner")
     assert summary.loc["greedy", "time_per_target_m3_bound_ratio_median"] == pytest.approx(
         ok["time_per_target_m3_bound_ratio"].median())
+
+
+def test_the_bound_counts_the_excavators_drive_to_the_dig_area():
+    """An excavator starting beyond reach of the dig area drives there before its first dig:
+    (distance − reach_max) / v_e more, while the truck beside it waits in reach."""
+    base = Pose(4.0, 15.0, -math.pi / 2)  # 9 m from the slab's edge: 2.9 m beyond reach
+    sc = slab(1.0, base, Pose(9.0, 15.0, math.pi), target=0.28)
+    v = 0.86 * 1.001
+    assert lower_bound_time_to_target(sc) == pytest.approx((9.0 - 6.1) / v + 3.0 + 2.0, abs=1e-4)
+    # a plan that drives straight on until a stroke along the edge is in reach (0.55 m more:
+    # the bucket's half-width and the stroke's offset), digs and dumps at once, is that close
+    # but for its swings (the dump's 130° to the truck behind: 2.1 s)
+    spec = sc.machines.excavator
+    path = turn_drive_turn(base, (4.0, 11.45), 0.0, spec.travel_speed, spec.yaw_rate)
+    here = Pose(4.0, 11.45, base.yaw)
+    acts = [Move("excavator", tuple(path)), *cycles(sc, [(4.5, 5.6, math.pi)], (9.0, 15.0), 0.0, base=here, t0=path[-1][0])]
+    verdict = judge(sc, Plan(tuple(acts)))
+    assert verdict.valid, verdict.violations
+    ttt = time_to_target(verdict.load_curve, 0.28)
+    assert lower_bound_time_to_target(sc) - 1e-9 <= ttt <= lower_bound_time_to_target(sc) + 0.55 / v + 2.3
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
+@given(
+    base_y=st.floats(12.2, 16.0),
+    truck_start=st.tuples(st.floats(-4.0, 24.0), st.floats(6.5, 22.0), st.floats(-math.pi, math.pi)),
+    stand=st.tuples(st.floats(-1.6, 1.6), st.floats(3.7, 7.0)),
+    contacts=st.lists(st.tuples(st.floats(4.4, 6.09), st.floats(-0.5, 0.5), st.sampled_from([0.0, math.pi, math.pi / 2])),
+                      min_size=1, max_size=6),
+    target=st.floats(0.1, 1.0),
+    back=st.floats(0.0, 1.5),
+)
+def test_no_valid_plan_beats_the_bound_from_beyond_reach_of_the_dig_area(base_y, truck_start, stand, contacts, target, back):
+    """The excavator starts beyond reach of the slab and drives toward it until a stroke near
+    its edge is in reach (``back`` more), then digs at contacts drawn in its reach (distance,
+    bearing off south); the truck meets it at a random stand."""
+    base = Pose(4.0, base_y, -math.pi / 2)
+    sc = slab(1.0, base, Pose(*truck_start), target)
+    spec = sc.machines.excavator
+    here = Pose(base.x, min(base_y, 6.0 + spec.reach_max - 0.36 - back), base.yaw)
+    ang, rho = stand
+    spot = (here.x + rho * math.sin(ang), here.y + rho * math.cos(ang))
+    path = turn_drive_turn(base, (here.x, here.y), 0.0, spec.travel_speed, spec.yaw_rate)
+    move, arrive = truck_to(sc, spot)
+    digs = reachable(sc, here, [(here.x + r * math.sin(a), here.y - r * math.cos(a), h) for r, a, h in contacts])
+    assume(digs)
+    acts = [Move("excavator", tuple(path)), move, *cycles(sc, digs, spot, arrive, base=here, t0=path[-1][0])]
+    assert_no_valid_plan_beats_the_bound(sc, Plan(tuple(acts)), target)

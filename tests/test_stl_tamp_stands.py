@@ -42,7 +42,7 @@ def _dump_swings(sc, plan) -> list[float]:
 def test_the_truck_stands_on_the_digs_bearing_beyond_the_bench(bench):
     """The plan keeps every rule, and the truck stands beyond the bench on the digs' bearing:
     0.10.5 parked it beside the excavator, away from the arm, for a median swing of 72° a dump
-    on this map (backhoe_time_budget.py on the committed board); without the stand decision and
+    on this map (backhoe_timeline.py on the committed board); without the stand decision and
     the areas facing away from the truck it is back above 60°."""
     plan = StlTampPlanner().plan(bench)
     v = judge(bench, plan)

@@ -55,3 +55,25 @@ def test_bench_plans_keep_the_site_rules_with_the_truck_following_the_face(plann
     digs = [a for a in plan.actions if isinstance(a, Dig)]
     slides = [a for a in plan.actions if isinstance(a, Move) and a.machine == "truck"]
     assert any(d.t_start < s.path[-1][0] and s.path[0][0] < d.t_end for d in digs for s in slides)
+
+
+def test_the_truck_drives_an_arc_when_that_beats_turning_in_place():
+    """A stand ahead and to the side: the arc at the truck's full speed and yaw rate gets there
+    sooner than turning in place first (0.11 rad/s), and the referee accepts it; a goal behind
+    the truck is reached turning in place."""
+    from earthbench.motion import turn_drive_turn
+    from earthbench.plan import Plan
+    from earthbench.world import Pose
+    from earthbench_planners.truck_stands import drive
+
+    sc = bench(0, 4.0)
+    t, start = sc.machines.truck, sc.machines.truck_pose  # on the floor west of the bench, heading north
+    goal = (start.x - 3.0, start.y + 9.0)
+    path = drive(start, goal, 0.0, t.travel_speed, t.yaw_rate)
+    straight = turn_drive_turn(start, goal, 0.0, t.travel_speed, t.yaw_rate)
+    assert path[-1][0] < straight[-1][0] - 2.0 and path[-1][1:3] == pytest.approx(goal)
+    verdict = judge(sc, Plan((Move("truck", tuple(path)),)))
+    assert not verdict.violations, verdict.violations[:3]
+    behind = (start.x - 1.0, start.y - 2.0)
+    assert drive(start, behind, 0.0, t.travel_speed, t.yaw_rate) == turn_drive_turn(start, behind, 0.0, t.travel_speed, t.yaw_rate)
+    assert Pose(*path[-1][1:]).yaw != start.yaw

@@ -7,8 +7,11 @@ heading to the stand nearest the dig's bearing that keeps its body out of the ar
 the dig area and on ground within its limits (``planners/truck_stands.py``, rules version 2), so
 a dump swings little. When nothing in reach is worth a dig, it drives to the station with the
 most material in reach (less a travel penalty) and the truck is parked toward that material,
-broadside to it (the cheapest stand in travel and swing). Relocations are sequential: one
-machine drives at a time. Dig volumes are screened with a vectorised estimate and the best few
+broadside to it (the cheapest stand in travel and swing). The two drive at once when they keep
+the clearance at every instant, the truck on an arc when that beats turning in place
+(``truck_stands.drive``), and the excavator digs while the truck drives to it. For a target of
+8 buckets or more it may first drive to the station where the target swings least
+(``opening.py``, issue 49). Dig volumes are screened with a vectorised estimate and the best few
 confirmed with the referee's own cut model (and, on the realistic track, the soil's slump), so
 the planner's predicted volume equals the referee's.
 
@@ -48,8 +51,10 @@ from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
 from ..truck_stands import TruckStands
 from .moves import Moves
+from .opening import Opening
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
+_DRIVE_PAD = 0.5  # metres a dig's arm shadow keeps from where the truck still drives (see still_driving)
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
 PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
 
@@ -79,6 +84,12 @@ class GreedyConfig:
     observation (``planners/stability.py``: 0 on the exact track)."""
 
 
+def _referee_order(a: Dig | Dump | Move) -> tuple[float, int]:
+    """The order the referee replays a plan in (by start time), the excavator's action first
+    where a truck move starts at the same time: a replay's terrain then changes as time goes."""
+    return (a.path[0][0], 1) if isinstance(a, Move) else (a.t_start, 0)
+
+
 def _wrap(a: np.ndarray) -> np.ndarray:
     """Angles wrapped to [-π, π)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
@@ -101,7 +112,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.3"
+    version = "1.4"
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -117,7 +128,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
         return session.run(carried, max_dumps=1)
 
 
-class _Greedy(Moves):
+class _Greedy(Moves, Opening):
     def __init__(self, sc: Scenario, cfg: GreedyConfig):
         self.sc, self.cfg = sc, cfg
         self.exc: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
@@ -134,6 +145,7 @@ class _Greedy(Moves):
         self.turn = 0.0
         self.t = 0.0
         self.truck_ready = 0.0  # when the truck stands still where it is going
+        self.truck_path: list[tuple[float, float, float, float]] = []  # its last move (samples)
         self.loaded = 0.0
         self.actions: list = []
         self.stands = TruckStands(sc, self.exc, self.z)
@@ -154,6 +166,8 @@ class _Greedy(Moves):
         goal = min(target, self.truck_spec.capacity)
         visited = set() if visited is None else visited
         start, dumps, parked = self.loaded, 0, False
+        if not self.actions and self.loaded <= 1e-9:
+            self.opening(visited)  # stay, or first drive where the target's buckets swing least
         while self.loaded < goal - 1e-9 and len(self.actions) < self.cfg.max_actions:
             need = goal - self.loaded
             threshold = min(self.cfg.min_fill * self.exc.bucket_capacity, need)
@@ -175,7 +189,7 @@ class _Greedy(Moves):
             if max_dumps is not None and dumps >= max_dumps:
                 break
         return Plan(
-            tuple(self.actions),
+            tuple(sorted(self.actions, key=_referee_order)),
             Prediction(volume=self.loaded - start, makespan=self.t),
             {"planner": "greedy", "stations": len(visited)},
         )
@@ -317,11 +331,12 @@ class _Greedy(Moves):
         for i, c in enumerate(confirmed):
             least = float(np.abs(_wrap(bearings - math.atan2(c[2][1] - self.base.y, c[2][0] - self.base.x))).min())
             confirmed[i] = (min(c[1], want) / (c[5] + e.min_dump_time + least / e.swing_rate), *c[1:])
+        pending = self.still_driving()
         for bound, vol, contact, heading, k, dur in sorted(confirmed, key=lambda c: -c[0]):
             if best is not None and bound <= best.score + 1e-12:
                 break
             stand = self.stands.best_for_dig(self.base, self.truck, stands, contact, heading, e.max_drag_length,
-                                             self.t, self.t + dur)
+                                             self.t, self.t + dur, self.truck_ready, pending)
             if stand is None:
                 continue  # the arm would pass over the truck wherever it stands
             cycle = max(stand[1], self.t + dur) - self.t + stand[2] / e.swing_rate + e.min_dump_time
@@ -329,6 +344,16 @@ class _Greedy(Moves):
             if best is None or score > best.score + 1e-12:
                 best = _Dig(score, vol, contact, heading, float(depth[k]), stand[0], stand[1])
         return best, fullest
+
+    def still_driving(self) -> Polygon | None:
+        """What the truck's body still covers from now to the end of the move it is on (None: it
+        stands still), grown by :data:`_DRIVE_PAD`: a dig meanwhile keeps its arm's shadow that far
+        from it, so the truck never passes under the arm nor drives over ground a cut (and its
+        slump) lowered."""
+        if self.truck_ready <= self.t or not self.truck_path:
+            return None
+        sweep = self.stands.sweep_between(self.truck_path, self.t, self.truck_ready)
+        return None if sweep is None else sweep.buffer(_DRIVE_PAD)
 
     def truck_line(self) -> tuple[np.ndarray, np.ndarray]:
         """The stands along the truck's heading it may take for a dig here (kept per truck pose)."""
@@ -391,6 +416,7 @@ class _Greedy(Moves):
             path = turn_drive_turn(self.truck, (best.stand.x, best.stand.y), max(self.t, self.truck_ready),
                                    self.truck_spec.travel_speed, self.truck_spec.yaw_rate)
             self.actions.append(Move("truck", tuple(path)))
+            self.truck_path = path
             self.truck = Pose(path[-1][1], path[-1][2], path[-1][3])
             self.truck_ready = path[-1][0]
         self.actions.append(Dig("excavator", self.t, self.t + dur, contact, heading, depth, e.max_drag_length))
@@ -523,7 +549,7 @@ class _Greedy(Moves):
             move = self._truck_move(Pose(key[0], key[1], self.base.yaw))
             if move is None:
                 continue
-            yaw = turn_drive_turn(self.base, key, 0.0, self.exc.travel_speed, self.exc.yaw_rate)[-1][3]
+            yaw = self._exc_path(key, 0.0)[-1][3]
             if self.station(Pose(key[0], key[1], yaw))[1] > self.exc.max_tilt - self.margins.tilt:
                 continue  # the referee's tilt rule
             self._drive_in_turn(key, *move)

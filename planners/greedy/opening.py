@@ -1,0 +1,140 @@
+"""Where the greedy backhoe starts digging: stay, or first drive to a station whose material lies
+toward ground where the truck can stand, so that the target's buckets swing little (issue 49).
+
+From a base beside a dig area, with the truck off it on the same side, every dump swings from the
+soil's bearing to the truck's; from a base on the far side of the soil, the truck stands beyond
+it and a dump costs next to no swing (docs/metrics.md, "What the geometry forces"). Whether the
+drive there pays depends on the target: the estimate weighs the time until the first dump can
+start (the excavator's drive and one stroke, or the truck's drive, whichever is longer) against
+the swing the target's buckets need — for ``n`` buckets, ``n`` times the angle either side of the
+truck's bearing within which the material holds them (a dig swings to the contact and back).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from earthbench.world import Pose
+
+#: Directions (per turn) and distances (m) of the truck stands looked at around each station.
+_DIRECTIONS, _DISTANCES = 24, (5.2, 6.2, 6.9)
+#: Cells of the grid (one in so many each way) sampled for the material's bearings, and the
+#: width (rad) of the bins they are summed in.
+_SUBSAMPLE, _BIN = 4, math.radians(2.0)
+#: Stations looked at: those whose reach holds the target this many times over, within this
+#: radius (m) of the excavator, every one of the grid within the near radius and every other one beyond.
+_HOLDS, _RADIUS, _NEAR = 1.5, 14.0, 3.0
+#: Buckets the target needs at least before a drive to a better station is considered.
+_BUCKETS = 8
+#: Seconds the estimate must gain before the excavator drives off; stations tried for the truck's
+#: way there (best first), and stands offered at each.
+_GAIN, _TRIED, _STANDS = 1.0, 4, 12
+
+
+class Opening:
+    """The opening of a :class:`~earthbench_planners.greedy.backhoe._Greedy` session, which holds
+    the state it reads and changes."""
+
+    def opening(self, visited: set[tuple[float, float]]) -> bool:
+        """Drive to the station of least estimated time to the target, if it is not here; True if moved."""
+        e = self.exc
+        need = min(self.sc.task.target_volume, self.truck_spec.capacity) - self.loaded
+        n = math.ceil(need / e.bucket_capacity - 1e-9)
+        if n < _BUCKETS:
+            return False  # a few buckets: the drive would not pay; ``relocate`` decides where to go
+        if self.sc.soil is not None:
+            return False  # a scan (the realistic track) shows ground far from where it was taken too roughly to pick a station on the soil
+        bases = self._opening_stations(need)
+        found: list[tuple[float, int, list[Pose]]] = []
+        here = math.inf
+        for k, (x, y) in enumerate(bases):  # here first: a station that cannot beat it is not looked at closely
+            est = self._opening_estimate(Pose(float(x), float(y), self.base.yaw), need, n, moved=k > 0, beat=here - _GAIN)
+            if k == 0:
+                here = math.inf if est is None else est[0]
+            elif est is not None:
+                found.append((est[0], k, est[1]))
+        for _, k, spots in sorted(found, key=lambda f: f[0])[:_TRIED]:
+            key = (round(float(bases[k, 0]), 3), round(float(bases[k, 1]), 3))
+            move = self._truck_move(Pose(key[0], key[1], self.base.yaw), spots=spots)
+            if move is not None:
+                visited.add(key)
+                self._drive_in_turn(key, *move)
+                return True
+        return False
+
+    def _opening_stations(self, need: float) -> np.ndarray:
+        """Here first, then the stations of the relocation grid within ``_RADIUS`` (every other one
+        beyond ``_NEAR``) whose reach holds the target ``_HOLDS`` times over, nearest first."""
+        xmin, xmax, ymin, ymax = self.terrain.extent
+        pad = self.exc.reach_min + self.exc.max_drag_length
+        s = self.cfg.station_step
+        gx, gy = np.meshgrid(np.arange(xmin - pad, xmax + pad + 1e-9, s), np.arange(ymin - pad, ymax + pad + 1e-9, s))
+        grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        vol = self.station_volumes(grid)
+        dist = np.hypot(grid[:, 0] - self.base.x, grid[:, 1] - self.base.y)
+        every_other = (np.round((gx - gx[0, 0]) / s).astype(int) % 2 == 0) & (np.round((gy - gy[0, 0]) / s).astype(int) % 2 == 0)
+        keep = (vol >= _HOLDS * need) & (dist > 1e-6) & (dist <= _RADIUS) & ((dist <= _NEAR) | every_other.ravel())
+        order = np.flatnonzero(keep)[np.argsort(dist[keep], kind="stable")]
+        return np.vstack([[self.base.x, self.base.y], grid[order]])
+
+    def _opening_estimate(self, base: Pose, need: float, n: int, moved: bool,
+                          beat: float = math.inf) -> tuple[float, list[Pose]] | None:
+        """(estimated time to the first dump plus the target's swing at the best truck stand
+        around ``base``, the stands on ground the truck may stand on, broadside to their bearing
+        so it can slide along the face, best first); None when the tracks may not stand there,
+        no stand serves it, or none comes under ``beat``."""
+        e = self.exc
+        t_exc = 0.0
+        if moved:
+            path = self._exc_path((base.x, base.y), 0.0)
+            base, t_exc = Pose(base.x, base.y, path[-1][3]), path[-1][0]
+            if any(shapely.contains_xy(ko, base.x, base.y) for ko in self.keep_outs):
+                return None
+        theta, w = self._material_bearings(base)
+        if w.sum() < need:
+            return None
+        ang = np.arange(_DIRECTIONS) * (2 * math.pi / _DIRECTIONS)
+        A, D = (a.ravel() for a in np.meshgrid(ang, np.array(_DISTANCES)))
+        x, y = base.x + D * np.cos(A), base.y + D * np.sin(A)
+        ok = self.stands.in_reach(base, np.column_stack([x, y]), 0.3)
+        A, x, y = A[ok], x[ok], y[ok]
+        time, yaw = self.stands.drive_times(self.truck, x, y, A + math.pi / 2)
+        # the angle either side of each stand's bearing within which the material holds the
+        # target: window sums of the material's bearings binned by _BIN (a circular prefix sum)
+        bins = int(round(2 * math.pi / _BIN))
+        hist = np.bincount((np.mod(theta, 2 * math.pi) / _BIN).astype(int) % bins, weights=w, minlength=bins)
+        cum = np.concatenate([[0.0], np.cumsum(np.tile(hist, 3))])
+        centre = (np.mod(A, 2 * math.pi) / _BIN).astype(int) % bins + bins
+        half = np.arange(bins // 2)
+        held = cum[centre[:, None] + half + 1] - cum[centre[:, None] - half] >= need
+        spread = np.where(held.any(axis=1), (held.argmax(axis=1) + 0.5) * _BIN, math.pi)
+        est = np.maximum(t_exc + e.min_stroke_time, time) + n * spread / e.swing_rate
+        rank = np.argsort(est, kind="stable")
+        rank = rank[est[rank] < beat]
+        if not len(rank) or (moved and self.station(base)[1] > e.max_tilt - self.margins.tilt):
+            return None
+        rank = rank[:_STANDS]
+        good = rank[self.stands.ground_ok(np.column_stack([x[rank], y[rank], yaw[rank]]))]
+        if not len(good):
+            return None
+        return float(est[good[0]]), [Pose(float(x[i]), float(y[i]), float(yaw[i])) for i in good]
+
+    def _material_bearings(self, base: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """Bearings from ``base`` and volumes (m³, above the floor, a cut depth deep at most) of
+        the material its strokes reach (two cuts deep at most), on a grid of every ``_SUBSAMPLE``-th cell."""
+        e, hm = self.exc, self.terrain
+        r, (x0, y0) = hm.resolution, hm.origin
+        ny, nx = self.z.shape
+        i0, i1 = max(int((base.x - e.reach_max - x0) / r), 0), min(int((base.x + e.reach_max - x0) / r) + 1, nx)
+        j0, j1 = max(int((base.y - e.reach_max - y0) / r), 0), min(int((base.y + e.reach_max - y0) / r) + 1, ny)
+        if i0 >= i1 or j0 >= j1:
+            return np.zeros(0), np.zeros(0)
+        sl = (slice(j0, j1, _SUBSAMPLE), slice(i0, i1, _SUBSAMPLE))
+        dx, dy = self.cx[sl] - base.x, self.cy[sl] - base.y
+        d = np.hypot(dx, dy)
+        depth = np.clip(self.z[sl] - self.floor, 0.0, 2 * e.max_cut_depth)
+        inside = self.in_area[sl] & (d >= e.reach_min + e.max_drag_length) & (d <= e.reach_max - e.bucket_width / 2) & (depth > 0.02)
+        return np.arctan2(dy[inside], dx[inside]), depth[inside] * (r * _SUBSAMPLE) ** 2
