@@ -103,7 +103,7 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     side = planner.area_side(sc)
     box = site_box(sc)
     conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
-                     retime=c.retime_moves, follow_face=c.follow_face)  # keep_soil: see NOTES.md, "0.11.0"
+                     retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
     if h.layout is None:
         h.layout = site_layout(sc)
     areas = [a for a in planner.areas(sc, st.z, side, h.layout)
