@@ -47,7 +47,8 @@ def collect(dbs: list[str]) -> pd.DataFrame:
         runs = load_runs(db)
         keep = runs["suite"].isin(SUITES) | on_paper_extensive(runs)
         frames.append(runs[keep & runs["planner"].isin(["stl-tamp", "separate"])])
-    runs = latest_version_runs(pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "planner_version", "config_hash"]))
+    runs = pd.concat(frames, ignore_index=True).drop_duplicates(["scenario_digest", "planner", "planner_version", "config_hash"])
+    runs = latest_version_runs(runs)
     runs["solver"] = runs.apply(label, axis=1)
     return runs
 
