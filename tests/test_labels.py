@@ -72,3 +72,14 @@ def test_seeds_summary_counts_only_the_selection_and_an_empty_one_is_an_error(tw
     assert " 2/2 " in closed and "100% [16%–100%]" in closed  # not "2/4", 50 %
     assert main(["run", "smoke", "--seeds", "5-9", "--db", str(two_configs.parent / "x.db")]) == 2
     assert "--seeds 5-9 selects no scenario of suite 'smoke'; its seeds: 0, 1" in capsys.readouterr().err
+
+
+def test_a_selector_without_a_version_takes_the_latest_one_and_a_version_takes_that_one(tmp_path):
+    from earthbench.results.store import load_runs
+
+    defaults = {"arc_step": 0.35, "max_actions": 2000, "min_fill": 0.6, "radial_step": 0.25, "station_step": 1.0,
+                "travel_penalty": 0.05, "truck_distance": 4.6}
+    behaviours = [Behaviour(ref("greedy", "1.9", defaults), solve_s=0.5), Behaviour(ref("greedy", "1.10", defaults), solve_s=0.5)]
+    runs = load_runs(fill_store(tmp_path / "v.db", suite_of(2), behaviours))
+    assert set(Selector.parse("greedy").pick(runs, "A")["planner_version"]) == {"1.10"}  # 1.10 is later than 1.9
+    assert set(Selector.parse("greedy@1.9").pick(runs, "A")["planner_version"]) == {"1.9"}

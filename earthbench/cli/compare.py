@@ -2,8 +2,9 @@
 
 With two databases, side A is read from DB_A and side B from DB_B (e.g. before and after a
 change, run on the same suite); with one, both sides come from it. Each side is a selection
-PLANNER[@VERSION][#CONFIG] (--a, --b) that must match exactly one configuration; it may be
-left out when the database holds only one. Runs are paired by scenario digest; each metric
+PLANNER[@VERSION][#CONFIG] (--a, --b) that must match exactly one configuration (without
+@VERSION, each configuration's latest version, as boards rank); it may be left out when the
+database holds only one. Runs are paired by scenario digest; each metric
 gets the medians, the median difference B − A with its distribution-free 95 % interval (none
 below 6 pairs), the mean difference and a two-sided Wilcoxon signed-rank p-value, Holm-adjusted
 across the metrics; success gets an exact McNemar test. A run short of the target has an

@@ -67,7 +67,8 @@ class Selector:
         return cls(planner or None, version or None, config or None)
 
     def pick(self, runs: pd.DataFrame, side: str) -> pd.DataFrame:
-        """The runs of exactly one (planner, version, config); an error lists the choices otherwise."""
+        """The runs of exactly one (planner, version, config); with no version named, each
+        configuration's latest (as boards rank); an error lists the choices otherwise."""
         from ..results.labels import config_labels
 
         names = config_labels(runs)
@@ -89,6 +90,9 @@ class Selector:
         keys = keys_of(m)
         if len(keys) > 1 and self.planner is not None and (m & (label == self.planner)).any():
             m &= label == self.planner  # the name is also a configuration's label: that configuration
+            keys = keys_of(m)
+        if len(keys) > 1 and self.version is None:
+            m &= _latest_versions(runs, m)  # no version named: each configuration's latest, as boards rank
             keys = keys_of(m)
         if not keys:
             choices = ", ".join(_choice(k) for k in keys_of(pd.Series(True, index=runs.index))) or "(none)"
@@ -129,6 +133,18 @@ class Comparison:
         if s["p_value"] < self.alpha and s["rate_b"] < s["rate_a"]:
             worse.add(SUCCESS)
         return [m for m in metrics if m in worse]
+
+
+def _latest_versions(runs: pd.DataFrame, mask: pd.Series) -> pd.Series:
+    """Rows of ``mask`` whose version is the latest of their planner and settings among ``mask``
+    (the settings as stored, so that a hash that also covers the version still groups them)."""
+    from ..results.aggregate import version_key
+
+    settings = runs["config" if "config" in runs else "config_hash"].fillna("").astype(str)
+    sub = runs[mask].assign(settings=settings[mask])
+    latest = sub.groupby(["planner", "settings"])["planner_version"].agg(lambda v: max(map(str, v.unique()), key=version_key))
+    want = pd.Series([latest.get((p, c)) for p, c in zip(runs["planner"], settings)], index=runs.index)
+    return mask & (runs["planner_version"].astype(str) == want)
 
 
 def _choice(key: tuple[str, str, str, str]) -> str:
