@@ -501,6 +501,14 @@ class _Greedy(Moves, Opening):
             out[start:start + len(block)] = np.where(rows, outer - inner, 0.0).sum(axis=1)
         return out
 
+    def station_grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """The relocation grid's x and y (``station_step`` apart, a drag beyond the map on every
+        side), as ``np.meshgrid`` gives them."""
+        xmin, xmax, ymin, ymax = self.terrain.extent
+        pad = self.exc.reach_min + self.exc.max_drag_length
+        s = self.cfg.station_step
+        return np.meshgrid(np.arange(xmin - pad, xmax + pad + 1e-9, s), np.arange(ymin - pad, ymax + pad + 1e-9, s))
+
     def station_volumes(self, bases: np.ndarray) -> np.ndarray:
         """:meth:`reachable_volume` of the station grid ``bases``, kept between relocations:
         only the stations within reach of what was dug since are scored again, so a relocation
@@ -527,10 +535,7 @@ class _Greedy(Moves, Opening):
         contact ``toward``); False if none works."""
         if stay:
             return self._go(self.base, toward)
-        xmin, xmax, ymin, ymax = self.terrain.extent
-        pad = self.exc.reach_min + self.exc.max_drag_length
-        s = self.cfg.station_step
-        gx, gy = np.meshgrid(np.arange(xmin - pad, xmax + pad + 1e-9, s), np.arange(ymin - pad, ymax + pad + 1e-9, s))
+        gx, gy = self.station_grid()
         bases = np.stack([gx.ravel(), gy.ravel()], axis=1)
         vol = self.station_volumes(bases)
         travel = np.hypot(bases[:, 0] - self.base.x, bases[:, 1] - self.base.y)

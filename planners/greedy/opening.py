@@ -68,10 +68,8 @@ class Opening:
     def _opening_stations(self, need: float) -> np.ndarray:
         """Here first, then the stations of the relocation grid within ``_RADIUS`` (every other one
         beyond ``_NEAR``) whose reach holds the target ``_HOLDS`` times over, nearest first."""
-        xmin, xmax, ymin, ymax = self.terrain.extent
-        pad = self.exc.reach_min + self.exc.max_drag_length
         s = self.cfg.station_step
-        gx, gy = np.meshgrid(np.arange(xmin - pad, xmax + pad + 1e-9, s), np.arange(ymin - pad, ymax + pad + 1e-9, s))
+        gx, gy = self.station_grid()
         grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
         vol = self.station_volumes(grid)
         dist = np.hypot(grid[:, 0] - self.base.x, grid[:, 1] - self.base.y)
