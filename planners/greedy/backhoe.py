@@ -561,15 +561,23 @@ class _Greedy(Moves, Opening):
             return True
         return False
 
-    def material_bearing(self, base: Pose) -> float:
-        """The bearing from ``base`` of the material it reaches (weighted by the depth above the floor)."""
+    def reach_window(self, base: Pose) -> tuple[int, int, int, int] | None:
+        """The grid's rows ``j0:j1`` and columns ``i0:i1`` within ``reach_max`` of ``base`` along
+        each axis, or None where that window lies off the map."""
         e, hm = self.exc, self.terrain
         r, (x0, y0) = hm.resolution, hm.origin
         ny, nx = self.z.shape
         i0, i1 = max(int((base.x - e.reach_max - x0) / r), 0), min(int((base.x + e.reach_max - x0) / r) + 1, nx)
         j0, j1 = max(int((base.y - e.reach_max - y0) / r), 0), min(int((base.y + e.reach_max - y0) / r) + 1, ny)
-        if i0 >= i1 or j0 >= j1:
+        return None if i0 >= i1 or j0 >= j1 else (j0, j1, i0, i1)
+
+    def material_bearing(self, base: Pose) -> float:
+        """The bearing from ``base`` of the material it reaches (weighted by the depth above the floor)."""
+        e = self.exc
+        window = self.reach_window(base)
+        if window is None:
             return base.yaw
+        j0, j1, i0, i1 = window
         dx, dy = self.cx[j0:j1, i0:i1] - base.x, self.cy[j0:j1, i0:i1] - base.y
         d = np.hypot(dx, dy)
         w = np.where(self.in_area[j0:j1, i0:i1] & (d >= e.reach_min) & (d <= e.reach_max),

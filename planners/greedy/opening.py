@@ -123,16 +123,14 @@ class Opening:
     def _material_bearings(self, base: Pose) -> tuple[np.ndarray, np.ndarray]:
         """Bearings from ``base`` and volumes (m³, above the floor, a cut depth deep at most) of
         the material its strokes reach (two cuts deep at most), on a grid of every ``_SUBSAMPLE``-th cell."""
-        e, hm = self.exc, self.terrain
-        r, (x0, y0) = hm.resolution, hm.origin
-        ny, nx = self.z.shape
-        i0, i1 = max(int((base.x - e.reach_max - x0) / r), 0), min(int((base.x + e.reach_max - x0) / r) + 1, nx)
-        j0, j1 = max(int((base.y - e.reach_max - y0) / r), 0), min(int((base.y + e.reach_max - y0) / r) + 1, ny)
-        if i0 >= i1 or j0 >= j1:
+        e = self.exc
+        window = self.reach_window(base)
+        if window is None:
             return np.zeros(0), np.zeros(0)
+        j0, j1, i0, i1 = window
         sl = (slice(j0, j1, _SUBSAMPLE), slice(i0, i1, _SUBSAMPLE))
         dx, dy = self.cx[sl] - base.x, self.cy[sl] - base.y
         d = np.hypot(dx, dy)
         depth = np.clip(self.z[sl] - self.floor, 0.0, 2 * e.max_cut_depth)
         inside = self.in_area[sl] & (d >= e.reach_min + e.max_drag_length) & (d <= e.reach_max - e.bucket_width / 2) & (depth > 0.02)
-        return np.arctan2(dy[inside], dx[inside]), depth[inside] * (r * _SUBSAMPLE) ** 2
+        return np.arctan2(dy[inside], dx[inside]), depth[inside] * (self.terrain.resolution * _SUBSAMPLE) ** 2
