@@ -8,26 +8,17 @@ from __future__ import annotations
 
 import pytest
 
-from earthbench_planners.stl_tamp import StlTampPlanner
-from earthbench_planners.stl_tamp.convert import SimState
 from earthbench_planners.stl_tamp.guess import build_guess, fill_volumes
-from earthbench_planners.stl_tamp.hierarchy import candidate_areas, get_nlp, local_seeds, site_box
-from earthbench_terrains.rbf import rbf, rbf_surface
+from earthbench_planners.stl_tamp.hierarchy import local_seeds
 from earthbench_planners.stl_tamp.surface import fit_rbf
+from earthbench_terrains.rbf import rbf, rbf_surface
+from helpers.stl_tamp import richest_local_area
 
 
 def _local_case(seed: int, target: float):
-    sc = rbf(seed, 4.0, n_bases=30)
-    pl = StlTampPlanner()
+    sc, pl, nlp, st, area, surf = richest_local_area(rbf(seed, 4.0, n_bases=30), solver="cholesky")
     c = pl.config
-    nlp, _ = get_nlp(pl.local_shape(sc), sc, site_box(sc))
-    st = SimState.start(sc)
-    areas = candidate_areas(sc, st.z, pl.area_side(sc), c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset)
-    area = max(areas, key=lambda a: a.estimate)
     cx, cy = area.centre
-    hw = c.local_fit_half
-    surf = fit_rbf(sc.terrain, spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                   shape=nlp.shape.terrain_shape, margin=0, solver="cholesky")
     k = int(-(-target // (0.28 * c.fill_estimate)))
     seeds = local_seeds(area, k, c.m_local, 0.7, 1.0, surf, c.eta_init, area.truck)
     p = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=st.s0, vt=target,

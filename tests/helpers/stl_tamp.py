@@ -11,10 +11,10 @@ from earthbench_planners.stl_tamp.surface import fit_rbf
 from earthbench_terrains.rbf import rbf
 
 
-def richest_local_area() -> tuple[Any, StlTampPlanner, Any, SimState, Any, Any]:
-    """The local NLP (built once, as in a run), the richest area of a 14-basis map and its fit:
-    ``(scenario, planner, nlp, start state, area, surface)``."""
-    sc = rbf(0, 1.0, n_bases=14)
+def richest_local_area(sc: Any = None, solver: str = "cvxpy") -> tuple[Any, StlTampPlanner, Any, SimState, Any, Any]:
+    """The local NLP (built once, as in a run), the richest area of ``sc`` (a 14-basis map by
+    default) and its fit by ``solver``: ``(scenario, planner, nlp, start state, area, surface)``."""
+    sc = sc if sc is not None else rbf(0, 1.0, n_bases=14)
     pl = StlTampPlanner()
     c = pl.config
     nlp, _ = get_nlp(pl.local_shape(sc), sc, site_box(sc))
@@ -24,5 +24,5 @@ def richest_local_area() -> tuple[Any, StlTampPlanner, Any, SimState, Any, Any]:
     cx, cy = area.centre
     hw = c.local_fit_half
     surf = fit_rbf(sc.terrain, spacing=c.local_fit_spacing, window=(cx - hw, cx + hw, cy - hw, cy + hw),
-                   shape=nlp.shape.terrain_shape, margin=0)
+                   shape=nlp.shape.terrain_shape, margin=0, solver=solver)
     return sc, pl, nlp, st, area, surf
