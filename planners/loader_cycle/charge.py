@@ -45,7 +45,9 @@ class ChargeResult:
     """A simulated charge: its penetration, the model's cut volume, the bank volume the truck is
     expected to get (``delivered``: the cut, but no more than the bucket's nominal fill), the
     grid after the cut and its slump (``z``), the firm ground under it (``firm``: what the
-    wheels stand on, without what slumped) and the loader's pose at the end."""
+    wheels stand on, without what slumped), the loader's pose at the end, and the most the
+    truck may really get from it (``most``, :func:`most_delivered`; ``delivered`` on exact
+    ground)."""
 
     penetration: float
     volume: float
@@ -53,6 +55,7 @@ class ChargeResult:
     end: tuple[float, float, float]
     firm: np.ndarray
     delivered: float
+    most: float
 
 
 def charge_model(
@@ -159,5 +162,7 @@ def simulate_charge(
     sb = base if step_base is None else step_base
     if wheel_step_excess(terrain, new_firm, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), sb)[0] > -1e-3:
         return None
-    delivered = vol if soil is None else min(vol, soil.fill * spec.bucket_capacity)
-    return ChargeResult(pen, vol, zz, end, new_firm, delivered)
+    if soil is None:
+        return ChargeResult(pen, vol, zz, end, new_firm, vol, vol)
+    delivered = min(vol, soil.fill * spec.bucket_capacity)
+    return ChargeResult(pen, vol, zz, end, new_firm, delivered, soil.most_delivered(float(public[k]), spec.bucket_capacity))
