@@ -18,6 +18,7 @@ from .charge import ChargeResult, charge_model, entry_for, simulate_charge
 from .contours import zero_contour
 from .routes import MARGIN, Route, RouteOptions, dump_rays, search_dubins, search_routes
 from .scan import read_scan
+from ..truck_load import SCAN_ALLOWANCE, LoadBound
 from .soil_model import SoilModel
 
 
@@ -72,7 +73,8 @@ class CycleBuilder:
         self.z = self.ground.z
         self.firm = self.z
         self.step_base = self.base - self.ground.margin
-        self.soil = SoilModel.of(scenario.soil, self.z if z0 is None else z0, machines=scenario.machines.machine_class)
+        self.soil = SoilModel.of(scenario.soil, self.z if z0 is None else z0)
+        self.load = LoadBound.of(scenario)
         self.yield_factor = yield_factor
         self.share = cfg.charge_share
         self.t = 0.0
@@ -111,16 +113,15 @@ class CycleBuilder:
         """The least bank m³ the truck can take from this plan's charges: its loose capacity at
         the class's largest swell, less what it held when the plan began (exact ground: no
         bound, the cut model is the referee's)."""
-        if self.soil is None:
-            return math.inf
-        return self.sc.machines.truck.capacity * self.soil.truck_least - self.loaded0
+        return math.inf if self.load is None else self.load.room - self.loaded0
 
     def truck_took_all(self, most: float) -> bool:
         """Whether the truck surely took all of charges that delivered at most ``most``: only
         then does a further charge start with an empty bucket (the ``bucket_not_empty`` rule;
         a dump into a full truck leaves the rest in the bucket). An open-loop plan cannot see
         the truck fill, so it bounds what its charges may really deliver
-        (:attr:`ChargeResult.most`) by the class's fullest bucket and its largest swell."""
+        (:attr:`ChargeResult.most`) by the class's fullest bucket and its largest swell
+        (:class:`LoadBound`)."""
         return most <= self.room + 1e-9
 
     def public_cap(self, most: float, capacity: float, need: float, share: float) -> float:
@@ -131,9 +132,9 @@ class CycleBuilder:
         (:meth:`truck_took_all`), unless that is under a quarter of a bucket: then it is a full
         charge, and the last."""
         cap = share * self.spec.bucket_capacity
-        if self.soil is None or capacity * self.yield_factor >= need:
+        if self.load is None or capacity * self.yield_factor >= need:
             return cap
-        left = self.room - most - 0.1 * self.spec.bucket_capacity
+        left = self.room - most - SCAN_ALLOWANCE * self.spec.bucket_capacity
         return cap if left < 0.25 * self.spec.bucket_capacity else min(cap, left)
 
     def charge_capacity(self, need: float) -> float:
@@ -145,7 +146,7 @@ class CycleBuilder:
     def _simulate(self, entry: tuple[float, float, float], capacity: float) -> ChargeResult | None:
         return simulate_charge(self.sc.terrain, self.z, self.spec, entry, capacity, self.cfg.max_penetration, self.level,
                                self.base, self.firm, self.soil, self.step_base,
-                               min(self.share * self.spec.bucket_capacity, self.path_cap))
+                               min(self.share * self.spec.bucket_capacity, self.path_cap), self.load)
 
     def try_candidate(self, M: np.ndarray, h: np.ndarray, capacity: float) -> Cycle | None:
         """Approach, charge and route to the truck for the bucket edge centred at ``M`` heading

@@ -301,7 +301,7 @@ def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSetting
         else:
             public = b.public_cap(sum(c.most for c in charges), capacity, target - loaded, share)
             ch = simulate_charge(b.sc.terrain, z, spec, start, min(capacity, share * spec.bucket_capacity), b.cfg.max_penetration,
-                                 b.level, b.base, firm, b.soil, step_base, public)
+                                 b.level, b.base, firm, b.soil, step_base, public, b.load)
         if ch is None:
             return [], []
         charges.append(ch)
