@@ -14,11 +14,11 @@ from earthbench.planner import Observation, closed_loop_setting
 from earthbench.rules import loader_base_level
 from earthbench.world import LoaderSpec, Pose, Scenario
 
+from ..truck_load import SCAN_ALLOWANCE, LoadBound
 from .charge import ChargeResult, charge_model, entry_for, simulate_charge
 from .contours import zero_contour
 from .routes import MARGIN, Route, RouteOptions, dump_rays, search_dubins, search_routes
 from .scan import read_scan
-from ..truck_load import SCAN_ALLOWANCE, LoadBound
 from .soil_model import SoilModel
 
 
@@ -240,7 +240,7 @@ class CycleBuilder:
         while self.loaded < target - 1e-9:
             if len(self.cycles) >= max_cycles:
                 return "max_cycles"
-            if not self.truck_took_all(self.most):
+            if self.cycles and not self.truck_took_all(self.most):
                 return "truck may be full"
             if max_dumps is not None and len(self.cycles) >= max_dumps:
                 return "step done"
@@ -248,7 +248,8 @@ class CycleBuilder:
             if not lines:
                 return "no contour left"
             capacity = self.charge_capacity(target - self.loaded)
-            self.path_cap = self.public_cap(self.most, capacity, target - self.loaded, self.share)
+            if max_dumps is None or len(self.cycles) + 1 < max_dumps:  # a cycle of this plan may follow
+                self.path_cap = self.public_cap(self.most, capacity, target - self.loaded, self.share)
             chosen = choose(lines, capacity)
             if isinstance(chosen, str) and capacity > 0.5 * self.spec.bucket_capacity:
                 # a smaller charge is a shorter one: its wheels stay off the bank a full one would climb

@@ -290,7 +290,7 @@ def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSetting
     z, firm, loaded, pose = b.z, b.firm, b.loaded, entry
     charges: list[ChargeResult] = []
     starts: list[tuple[float, float, float]] = []
-    while loaded < target - 1e-9 and b.truck_took_all(sum(c.most for c in charges)):
+    while loaded < target - 1e-9 and (not charges or b.truck_took_all(sum(c.most for c in charges))):
         if len(charges) >= b.cfg.max_cycles:
             return [], []
         start = pose if not charges else (pose[0] - s.back_off * u[0], pose[1] - s.back_off * u[1], pose[2])
