@@ -38,7 +38,7 @@ PUBLIC: dict[str, tuple[str, ...]] = {
     # the judge, for metrics (a Verdict) and scripts; a planner calls the rules above, never the judge
     "earthbench.referee": ("Execution", "RULES", "RULES_VERSION", "Verdict", "Violation", "judge"),
     # the realistic track
-    "earthbench.soil": ("MATERIALS", "Material", "draw", "nominal", "slump"),
+    "earthbench.soil": ("MATERIALS", "Material", "draw", "fill_range", "nominal", "slump"),
     "earthbench.sensing": ("observe",),
     # machine classes (docs/machine-classes.md): a generator or script may fit a scenario to one
     "earthbench.classes": ("MachineClass", "fit", "machine_class", "machine_classes"),

@@ -85,6 +85,15 @@ def nominal(material: str, machines: str = DEFAULT_CLASS) -> Soil:
     return Soil(material, round(mid[0] / mid[1], 6), round(mid[1], 6), round(mid[2], 6), round(mid[3], 6), m.hard_penetration)
 
 
+def fill_range(material: str, machines: str = DEFAULT_CLASS) -> tuple[float, float]:
+    """The least and the most bank m³ a full bucket of ``material`` can hold per m³ of capacity
+    on a site :func:`draw` makes for the machine class ``machines``: the handbook fill factor's
+    ends over the swell's other ends. What a planner may bound a load by (it knows the class)."""
+    m = _material(material, "soil")
+    lo, hi = _fill_loose(m, material, machines)
+    return lo / m.swell[1], hi / m.swell[0]
+
+
 def draw(spec: dict[str, Any], seed: int, where: str = "soil", machines: str = DEFAULT_CLASS) -> Soil:
     """A site's true soil: ``spec["material"]``'s ranges sampled with ``seed`` (any other key
     of ``spec`` — a field of :class:`~earthbench.world.Soil` — fixes that value instead), the

@@ -7,6 +7,12 @@ the lowest scanned cell under the tracks lies about ``√(2 ln N)·σ`` below th
 level it plans from the scanned contact height is off by about σ as well. ``greedy`` and
 ``singh-cannon-backhoe`` keep the margins of :func:`margins` (their ``scan_margin`` setting).
 
+The scan is not the only error. An open-loop plan cuts its own copy of the ground, and the truth
+drifts from it: the cut faces slump (:func:`cut_and_slump` models it), and the harder layer and
+the site's fill make a stroke stop elsewhere along its drag than the planner's model says, so a
+cut planned to stop short of the tracks may reach on toward them (:func:`path_undermines` checks
+the whole drag on the realistic track).
+
 The scan's σ is not told to a planner (the observation has no ``sensing`` section), so it is
 estimated from the scan itself (:func:`noise_sigma`). A scenario without soil is the exact
 track, where the planner sees the truth: no margin, and its plans are what they were.
@@ -19,7 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from earthbench.world import ExcavatorSpec, Scenario
+from earthbench.cut import apply_cut, cut_along, path_window
+from earthbench.rules import undermining_excess
+from earthbench.soil import MATERIALS, slump
+from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 #: The tilt margin (rad) both planners always kept below ``max_tilt`` on exact ground.
 TILT_MARGIN = 0.01
@@ -73,3 +82,63 @@ def margins(sc: Scenario, setting: float | None = None) -> Margins:
     # the slope of a least-squares plane over a rectangle of side L sampled n times: σ·√12 / (√n·L)
     slope_se = sigma * math.sqrt(12.0) / (math.sqrt(n) * min(e.track_length, e.track_width))
     return Margins(under, TILT_MARGIN + 3.0 * slope_se)
+
+
+def cut_and_slump(sc: Scenario, z: np.ndarray, stroke: Stroke, slumps: bool) -> float:
+    """Apply ``stroke``'s cut to the planner's grid ``z`` (the public cut model; returns its
+    volume); with ``slumps`` (a cut below the tracks' ground) on the realistic track, the faces it
+    leaves then slump to the class's gentlest angle of repose (:func:`earthbench.soil.slump`, the
+    referee's model): the lowest the true ground can have settled to, so the next cut level read
+    near it is not above the one the referee will read."""
+    e: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
+    rows, cols = path_window(sc.terrain, z.shape, stroke.contact, stroke.heading, e.bucket_width, stroke.drag)
+    if not slumps or sc.soil is None:
+        return apply_cut(sc.terrain, z, stroke.contact, stroke.heading, e.bucket_width, stroke.drag, stroke.level, stroke.capacity)
+    repose = _least_repose(sc)
+    pad = int(math.ceil((2 * e.max_cut_depth + e.max_drag_length) / math.tan(math.radians(repose)) / sc.terrain.resolution)) + 2
+    box = (max(rows.start - pad, 0), min(rows.stop + pad, z.shape[0]), max(cols.start - pad, 0), min(cols.stop + pad, z.shape[1]))
+    before = z[box[0]:box[1], box[2]:box[3]].copy()
+    vol = apply_cut(sc.terrain, z, stroke.contact, stroke.heading, e.bucket_width, stroke.drag, stroke.level, stroke.capacity)
+    slump(z, sc.terrain.resolution, repose, before, box)
+    return vol
+
+
+def _least_repose(sc: Scenario) -> float:
+    assert sc.soil is not None
+    known = MATERIALS.get(sc.soil.material)
+    return known.repose_deg[0] if known is not None else sc.soil.repose_deg
+
+
+def path_undermines(sc: Scenario, z: np.ndarray, base: Pose, track_level: float, stroke: Stroke, margin: float) -> bool:
+    """Whether ``stroke`` may break the referee's undermining rule (by more than ``-margin``):
+    on the exact track the cut the public model makes, on the realistic track every cell of the
+    drag above the level cut to it — the true bucket may fill later along the drag than the
+    planner's model (a harder layer cuts each cell less, the site's fill is not the model's).
+    ``z`` is cut for the check and put back."""
+    e: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]
+    jj, ii, _ = stroke.cells
+    before = z[jj, ii].copy()
+    if sc.soil is None:
+        cut_along(sc.terrain, z, stroke.contact, stroke.heading, e.bucket_width, stroke.drag, stroke.level, stroke.capacity,
+                  stroke.cells)
+    else:
+        z[jj, ii] = np.minimum(before, stroke.lowest)
+    cut = z[jj, ii] < before
+    excess = undermining_excess(sc.terrain, z, e, base, track_level, jj[cut], ii[cut])
+    z[jj, ii] = before
+    return excess > -max(1e-6, margin)
+
+
+@dataclass(frozen=True)
+class Stroke:
+    """A stroke as :func:`path_undermines` checks it and :func:`cut_and_slump` cuts it: ``cells``
+    are its :func:`earthbench.cut.path_cells` (rows, columns, distance along; only the check reads
+    them), ``lowest`` the lowest level its cut may really reach (the floor: the grade control)."""
+
+    contact: tuple[float, float]
+    heading: float
+    drag: float
+    level: float
+    capacity: float
+    cells: tuple[np.ndarray, np.ndarray, np.ndarray]
+    lowest: float

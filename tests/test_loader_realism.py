@@ -4,6 +4,8 @@ are valid on the truth, open and closed loop."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -11,11 +13,12 @@ from earthbench import judge
 from earthbench.running.harness.steps import run_closed_loop
 from earthbench.results.scoring import evaluate
 from earthbench.sensing import observe
-from earthbench.soil import draw
+from earthbench.soil import MATERIALS, draw, fill_range
 from earthbench.world import Scenario, Sensing
 from earthbench_planners.greedy.loader import GreedyLoader
 from earthbench_planners.loader_cycle import read_scan
 from earthbench_planners.singh_cannon.loader import SinghCannonLoader
+from earthbench_planners.strip_loader.planner import StripLoader
 from earthbench_terrains.pile import pile
 
 CAB = Sensing(noise=0.03, bias=0.02, cell_size=0.1, occlusion=True, sensor_height=3.0, seed=11)
@@ -67,3 +70,26 @@ def test_closed_loop_digs_on_when_charges_come_back_short(planner):
     assert v.valid, v.violations[:3]
     assert v.loaded_volume >= 0.9 * truth.task.target_volume
     assert len(v.digs) >= 4  # 2 m³ at 0.55 × 0.8 m³ a charge at most: at least four charges
+
+
+def _pile_20t_clay() -> Scenario:
+    from earthbench.results.suite import load_suite
+
+    return next(sc for sc in load_suite("pile-20t-realistic").scenarios if sc.id == "pile-20t-realistic/pile-clay-survey/s4/v8")
+
+
+@pytest.mark.parametrize(("planner", "fullest"), [(GreedyLoader, False), (SinghCannonLoader, False), (StripLoader, False),
+                                                  (GreedyLoader, True)])
+def test_open_loop_never_charges_after_a_dump_that_may_have_filled_the_truck(planner, fullest):
+    # the 20t class's truck holds 8.1-8.8 bank m³ of clay and the target is 8: charges that
+    # deliver more than the planner expects fill it before the plan thinks it is done, and a
+    # charge after that dump starts with soil in the bucket (bucket_not_empty). The planner
+    # bounds what its charges may deliver by the class's fullest bucket and largest swell.
+    truth = _pile_20t_clay()
+    if fullest:  # the worst site the class allows: the fullest buckets, the smallest truck
+        lo, hi = fill_range("clay", "20t")
+        truth = truth.replace(soil=dataclasses.replace(truth.soil, fill_factor=round(hi, 6), swell=MATERIALS["clay"].swell[1]))
+    plan = planner().plan(observe(truth))
+    v = judge(truth, plan)
+    assert v.valid, v.violations[:3]
+    assert evaluate(truth, plan, v)["success"]

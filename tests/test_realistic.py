@@ -18,7 +18,7 @@ from earthbench import Plan, Scenario, judge
 from earthbench.errors import ScenarioError, SuiteError
 from earthbench.results.scoring import score
 from earthbench.sensing import ANONYMOUS_ID, observe, visible_cells
-from earthbench.soil import MATERIALS, draw, nominal, reach_cells, slump, slump_cells
+from earthbench.soil import MATERIALS, draw, fill_range, nominal, reach_cells, slump, slump_cells
 from earthbench.results.suite import load_suite, parse_suite
 from earthbench.world import Heightmap, Pose, Sensing, Soil
 from helpers import block_scenario, dig_dump_plan
@@ -109,6 +109,16 @@ def test_a_site_draws_its_soil_within_its_class_from_its_seed():
             assert m.fill_loose[0] / m.swell[1] - 1e-6 <= s.fill_factor <= m.fill_loose[1] / m.swell[0] + 1e-6
         assert draw({"material": material}, 0) != draw({"material": material}, 1)
     assert draw({"material": "sand", "fill_factor": 1.0}, 0).fill_factor == 1.0
+
+
+@pytest.mark.parametrize("machines", ["compact", "20t"])
+def test_fill_range_bounds_every_site_a_class_draws_and_its_nominal_fill(machines):
+    for material in MATERIALS:
+        lo, hi = fill_range(material, machines)
+        fills = [draw({"material": material}, seed, machines=machines).fill_factor for seed in range(40)]
+        assert lo - 1e-6 <= min(fills) and max(fills) <= hi + 1e-6
+        assert max(fills) > hi - 0.25 * (hi - lo)  # the bound is near the class's end, not a loose one
+        assert lo < nominal(material, machines).fill_factor < hi
 
 
 # -- slumping --------------------------------------------------------------------------------------

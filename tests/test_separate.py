@@ -18,11 +18,12 @@ from earthbench import Dig
 from earthbench.cut import apply_cut, cut_level
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
+from earthbench.sensing import observe
 from earthbench_planners.stl_tamp import StlTampPlanner
 from earthbench_planners.separate.planner import Config, SeparatePlanner, rule_digs
 from earthbench_terrains.rbf import rbf
 
-from helpers import block_scenario
+from helpers import block_scenario, published_sealed_scenario
 
 
 def replay_grids(scenario, plan):
@@ -219,3 +220,16 @@ def test_tour_and_rule_are_the_same_on_a_turned_or_mirrored_site():
             moved_areas, moved_digs = tour(t.apply(sc), t)
             assert (moved_areas[:6], moved_digs) == (areas[:6], digs), (turns, mirror)
             assert sorted(moved_areas) == sorted(areas)
+
+
+@pytest.mark.slow
+def test_open_loop_digs_no_more_after_a_dump_that_may_have_filled_the_truck():
+    """The board's case (``standard-realistic``'s sealed draw b31d5ba6fff0, bench loam, survey
+    scan, 8 m³): the compact truck's 10 loose m³ hold 7.7 to 8.3 bank m³ of loam, and 0.4.4 dug
+    on after the truck was full (``bucket_not_empty``: the dump left soil in the bucket). 0.4.5
+    bounds what its digs may really deliver by the class's fullest bucket and the truck's room by
+    the class's largest swell (planners/truck_load.py), and stops there."""
+    truth = published_sealed_scenario("realistic/keys/standard-realistic~sealed-b31d5ba6fff0.key", "bench-loam-survey/s2/v8")
+    v = judge(truth, SeparatePlanner().plan(observe(truth)))
+    assert v.valid, v.violations[:3]
+    assert v.loaded_volume >= 0.9 * truth.task.target_volume

@@ -12,6 +12,7 @@ from shapely.geometry import Polygon
 from earthbench import PLANNERS, judge
 from earthbench.plan import Move, Plan
 from earthbench.cut import apply_cut, cut_level, footprint
+from earthbench.sensing import observe
 from earthbench.world import Site
 from earthbench.results.scoring import evaluate
 from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
@@ -20,7 +21,7 @@ from earthbench_terrains.bench import bench
 from earthbench_terrains.dem import dem
 from earthbench_terrains.rbf import rbf
 
-from helpers import load_script
+from helpers import load_script, published_sealed_scenario
 
 fig11 = load_script("backhoe_fig11")
 
@@ -260,3 +261,17 @@ def test_station_convolution_is_the_direct_sum():
             want = sum(blocks[a, b] * kernel[i - a, j - b] for a in range(7) for b in range(11)
                        if 0 <= i - a < 5 and 0 <= j - b < 3)
             assert out[i, j] == pytest.approx(want, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_open_loop_on_a_scanned_bench_keeps_every_drag_clear_of_the_undermining_line():
+    """The board's case (``standard-realistic``'s sealed draw c02213c9a80b, bench sand, cab scan,
+    8 m³): 1.4's plan cut below the tracks' line 7 times on the true ground. Its own grid drifted
+    from the truth — the faces slumped, a harder layer let the bucket fill farther along the drag,
+    the cab could not see the lower bench — so a contact read 0.1 to 0.9 m too high left a cut far
+    deeper than planned. 1.5 models the slump and keeps each drag clear of the line even if the
+    cut reaches the floor (planners/stability.py)."""
+    truth = published_sealed_scenario("realistic/keys/standard-realistic~sealed-c02213c9a80b.key", "bench-sand-cab/s1/v8")
+    v = judge(truth, SinghCannonBackhoe().plan(observe(truth)))
+    assert not [x for x in v.violations if x.rule == "undermining"], v.violations[:3]
+    assert v.valid and v.loaded_volume > 0.8 * truth.task.target_volume

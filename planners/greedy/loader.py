@@ -47,7 +47,7 @@ class GreedyLoader(CyclePlanner):
     """Nearest contour point to the truck, perpendicular entry; see the module docstring."""
 
     name = "greedy-loader"
-    version = "1.2"
+    version = "1.3"
     Config = GreedyLoaderConfig
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:

@@ -36,7 +36,10 @@ name importable from the package as before (issue 52):
 - :class:`CycleBuilder` — turns a ranked list of candidates into charge, reverse out, two arcs
   to the truck, dump, return; the first candidate whose charge, route to the truck and approach
   are all feasible wins; :meth:`CycleBuilder.load_until_target` is the cycle loop both planners
-  run, each with its own choice of dig.
+  run, each with its own choice of dig. On a scan (open loop) no cycle follows one after which
+  the truck may be full (``planners/truck_load.py``: each charge's most by the class's fullest
+  bucket, the truck's room at its largest swell; a charge that is not the last leaves room for
+  the next), so no charge starts with what a full truck left in the bucket.
 
 All moves are sampled finely enough (≤ 0.25 m and ≤ 0.08 rad per step) that the referee's
 chord, speed, yaw-rate and curvature checks see exact arcs, at ``MARGIN`` of every limit.

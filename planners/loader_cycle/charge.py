@@ -13,6 +13,7 @@ from earthbench.rules import wheel_step_excess
 from earthbench.soil import slump
 from earthbench.world import Heightmap, LoaderSpec
 
+from ..truck_load import LoadBound
 from .soil_model import SoilModel
 
 
@@ -45,7 +46,9 @@ class ChargeResult:
     """A simulated charge: its penetration, the model's cut volume, the bank volume the truck is
     expected to get (``delivered``: the cut, but no more than the bucket's nominal fill), the
     grid after the cut and its slump (``z``), the firm ground under it (``firm``: what the
-    wheels stand on, without what slumped) and the loader's pose at the end."""
+    wheels stand on, without what slumped), the loader's pose at the end, and the most the
+    truck may really get from it (``most``, :meth:`LoadBound.most`; ``delivered`` on
+    exact ground)."""
 
     penetration: float
     volume: float
@@ -53,6 +56,7 @@ class ChargeResult:
     end: tuple[float, float, float]
     firm: np.ndarray
     delivered: float
+    most: float
 
 
 def charge_model(
@@ -108,12 +112,14 @@ def simulate_charge(
     soil: SoilModel | None = None,
     step_base: float | None = None,
     overfill_cap: float = math.inf,
+    load: LoadBound | None = None,
 ) -> ChargeResult | None:
     """The longest penetration (≤ ``max_penetration``) whose bucket path holds ≤ ``capacity`` in
     whole cells (cut to the harder layer's levels with ``soil``, and then no more than
     ``overfill_cap`` of the public cut model to the floor), cut with :func:`charge_model`;
     None when it takes (almost) nothing or the wheels' path over the firm ground after the cut
-    would not be traversable with ``step_base`` (default ``base``) as the base level."""
+    would not be traversable with ``step_base`` (default ``base``) as the base level. ``load``
+    bounds what it may really deliver (:meth:`LoadBound.most`; without it, the model's volume)."""
     firm = z if firm is None else firm
     x, y, yaw = entry
     ux, uy = math.cos(yaw), math.sin(yaw)
@@ -159,5 +165,8 @@ def simulate_charge(
     sb = base if step_base is None else step_base
     if wheel_step_excess(terrain, new_firm, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), sb)[0] > -1e-3:
         return None
-    delivered = vol if soil is None else min(vol, soil.fill * spec.bucket_capacity)
-    return ChargeResult(pen, vol, zz, end, new_firm, delivered)
+    if soil is None:
+        return ChargeResult(pen, vol, zz, end, new_firm, vol, vol)
+    delivered = min(vol, soil.fill * spec.bucket_capacity)
+    most = delivered if load is None else load.most(float(public[k]), spec.bucket_capacity)
+    return ChargeResult(pen, vol, zz, end, new_firm, delivered, most)

@@ -14,6 +14,7 @@ from earthbench.planner import Observation, closed_loop_setting
 from earthbench.rules import loader_base_level
 from earthbench.world import LoaderSpec, Pose, Scenario
 
+from ..truck_load import SCAN_ALLOWANCE, LoadBound
 from .charge import ChargeResult, charge_model, entry_for, simulate_charge
 from .contours import zero_contour
 from .routes import MARGIN, Route, RouteOptions, dump_rays, search_dubins, search_routes
@@ -73,12 +74,15 @@ class CycleBuilder:
         self.firm = self.z
         self.step_base = self.base - self.ground.margin
         self.soil = SoilModel.of(scenario.soil, self.z if z0 is None else z0)
+        self.load = LoadBound.of(scenario)
         self.yield_factor = yield_factor
         self.share = cfg.charge_share
         self.t = 0.0
         self.pose = scenario.machines.loader_pose
         self.actions: list = []
         self.loaded = self.loaded0 = 0.0
+        self.most = 0.0
+        self.path_cap = math.inf
         self.rays, self.d_lo, self.d_hi, self.d_target = dump_rays(scenario)
         self.cycles: list[Cycle] = []
         self.tried = 0
@@ -104,6 +108,35 @@ class CycleBuilder:
         self.share = max(self.share - 0.025, 0.6)
         self.step_base = max(self.step_base - 0.01, self.base - self.ground.margin - 0.05)
 
+    @property
+    def room(self) -> float:
+        """The least bank m³ the truck can take from this plan's charges: its loose capacity at
+        the class's largest swell, less what it held when the plan began (exact ground: no
+        bound, the cut model is the referee's)."""
+        return math.inf if self.load is None else self.load.room - self.loaded0
+
+    def truck_took_all(self, most: float) -> bool:
+        """Whether the truck surely took all of charges that delivered at most ``most``: only
+        then does a further charge start with an empty bucket (the ``bucket_not_empty`` rule;
+        a dump into a full truck leaves the rest in the bucket). An open-loop plan cannot see
+        the truck fill, so it bounds what its charges may really deliver
+        (:attr:`ChargeResult.most`) by the class's fullest bucket and its largest swell
+        (:class:`LoadBound`)."""
+        return most <= self.room + 1e-9
+
+    def public_cap(self, most: float, capacity: float, need: float, share: float) -> float:
+        """The most the next charge's path may hold on the public cut model (the overfill rule's
+        ``share`` of the capacity) after charges that delivered at most ``most``, when it is
+        sized ``capacity`` and the truck still needs ``need``: a charge that is not the last
+        (it cannot deliver ``need``) leaves what the truck surely takes for the next one
+        (:meth:`truck_took_all`), unless that is under a quarter of a bucket: then it is a full
+        charge, and the last."""
+        cap = share * self.spec.bucket_capacity
+        if self.load is None or capacity * self.yield_factor >= need:
+            return cap
+        left = self.room - most - SCAN_ALLOWANCE * self.spec.bucket_capacity
+        return cap if left < 0.25 * self.spec.bucket_capacity else min(cap, left)
+
     def charge_capacity(self, need: float) -> float:
         """What a charge's path should hold on the planner's ground when the truck still needs
         ``need`` m³: enough to deliver it (at the nominal fill and the learnt yield), at most
@@ -112,7 +145,8 @@ class CycleBuilder:
 
     def _simulate(self, entry: tuple[float, float, float], capacity: float) -> ChargeResult | None:
         return simulate_charge(self.sc.terrain, self.z, self.spec, entry, capacity, self.cfg.max_penetration, self.level,
-                               self.base, self.firm, self.soil, self.step_base, self.share * self.spec.bucket_capacity)
+                               self.base, self.firm, self.soil, self.step_base,
+                               min(self.share * self.spec.bucket_capacity, self.path_cap), self.load)
 
     def try_candidate(self, M: np.ndarray, h: np.ndarray, capacity: float) -> Cycle | None:
         """Approach, charge and route to the truck for the bucket edge centred at ``M`` heading
@@ -152,7 +186,7 @@ class CycleBuilder:
             vol, zz, firm = charge_model(self.sc.terrain, self.z, self.firm, self.spec, (ex, ey, yaw), ch.penetration, self.level,
                                          capacity, self.soil)
             delivered = vol if self.soil is None else min(vol, self.soil.fill * self.spec.bucket_capacity)
-            ch = ChargeResult(ch.penetration, vol, zz, ch.end, firm, delivered)
+            ch = ChargeResult(ch.penetration, vol, zz, ch.end, firm, delivered, ch.most)
         entry = (ex, ey, yaw)
         charge = Charge("loader", t1, t1 + dur, entry, ch.penetration)
         to_truck = to_truck.shifted(t1 + dur)
@@ -188,6 +222,7 @@ class CycleBuilder:
         self.z = c.charge_result.z
         self.firm = c.charge_result.firm
         self.loaded += c.charge_result.delivered * self.yield_factor
+        self.most += c.charge_result.most
         self.t = c.dump.t_end
         self.pose = c.to_truck.end
         self.cycles.append(c)
@@ -199,21 +234,27 @@ class CycleBuilder:
         for the next cycle given the pile's contours and the bucket's capacity for this cycle
         (never much more than the target still needs), and commit it. ``choose`` returns a
         feasible :class:`Cycle`, or the reason to stop. ``max_dumps`` ends a closed-loop step
-        after that many cycles. Returns why loading stopped."""
+        after that many cycles; no cycle follows one after which the truck may be full
+        (:meth:`truck_took_all`). Returns why loading stopped."""
         target = self.sc.task.target_volume
         while self.loaded < target - 1e-9:
             if len(self.cycles) >= max_cycles:
                 return "max_cycles"
+            if self.cycles and not self.truck_took_all(self.most):
+                return "truck may be full"
             if max_dumps is not None and len(self.cycles) >= max_dumps:
                 return "step done"
             lines = self.contours()
             if not lines:
                 return "no contour left"
             capacity = self.charge_capacity(target - self.loaded)
+            if max_dumps is None or len(self.cycles) + 1 < max_dumps:  # a cycle of this plan may follow
+                self.path_cap = self.public_cap(self.most, capacity, target - self.loaded, self.share)
             chosen = choose(lines, capacity)
             if isinstance(chosen, str) and capacity > 0.5 * self.spec.bucket_capacity:
                 # a smaller charge is a shorter one: its wheels stay off the bank a full one would climb
                 chosen = choose(lines, capacity / 2)
+            self.path_cap = math.inf
             if isinstance(chosen, str):
                 return chosen
             self.commit(chosen)

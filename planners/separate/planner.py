@@ -73,6 +73,7 @@ from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_prob
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner, refuse_other_classes
+from ..truck_load import LoadBound
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
     from ..stl_tamp.model import PhaseNLP
@@ -140,6 +141,23 @@ class _Trace:
     build_time_s: float = 0.0
     fallbacks: int = 0
     areas: list[dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass
+class _Load:
+    """The most this plan's digs may really have delivered (``planners/truck_load.py``): on the
+    realistic track no dig follows a dump after which the truck may be full."""
+
+    bound: LoadBound | None
+    capacity: float
+    most: float = 0.0
+
+    def room(self) -> bool:
+        return self.bound is None or self.bound.took_all(self.most)
+
+    def add(self, volume: float) -> None:
+        if self.bound is not None and volume > 0:
+            self.most += self.bound.most(volume, self.capacity)
 
 
 def area_box(area: Area, side: float) -> tuple[float, float, float, float]:
@@ -283,7 +301,7 @@ class SeparatePlanner(Planner):
     #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.
     #: 0.4.4: stl-tamp 0.10.5's conversion (no truck under the arm, the truck's ground kept; rules
     #: version 2); its pinned plans and those of standard seed 0 are unchanged.
-    version = "0.4.4"
+    version = "0.4.5"
     tracks = ("backhoe",)
     Config = Config
 
@@ -330,6 +348,7 @@ class SeparatePlanner(Planner):
         conv = self._converter(scenario)
         truck_cap = scenario.machines.truck.capacity
         target = scenario.task.target_volume if c.divisions == 0 else truck_cap
+        load = _Load(LoadBound.of(scenario), exc.bucket_capacity)
 
         order = self.areas(scenario)
         queue = list(order)
@@ -337,7 +356,7 @@ class SeparatePlanner(Planner):
         n_areas = 0
         limit = min(c.divisions or math.inf, c.max_areas or math.inf)
         pass_loaded = 0.0
-        while n_areas < limit and target - st.loaded > c.volume_tol and truck_cap - st.loaded > c.volume_tol:
+        while n_areas < limit and target - st.loaded > c.volume_tol and truck_cap - st.loaded > c.volume_tol and load.room():
             if not queue:  # every area dug once: go round again on the lowered grid, if the last round loaded
                 queue = [a for a in self.areas(scenario, st.z)] if pass_loaded > c.volume_tol else []
                 pass_loaded = 0.0
@@ -350,7 +369,7 @@ class SeparatePlanner(Planner):
                 continue
             goal = queue[0].base if queue else area.base
             before = st.loaded
-            joints = self._local(scenario, st, conv, area, digs, goal, target, joints, box, trace)
+            joints = self._local(scenario, st, conv, area, digs, goal, target, joints, box, trace, load)
             pass_loaded += st.loaded - before
             n_areas += 1
         makespan = max((a.t_end for a in st.actions), default=0.0)
@@ -382,7 +401,7 @@ class SeparatePlanner(Planner):
     # -- one local area -------------------------------------------------------------------------
     def _local(self, scenario: Scenario, st: SimState, conv: Converter, area: Area, digs: list[RuleDig],
                goal: tuple[float, float], target: float, joints: tuple[float, float],
-               box: tuple[float, float, float, float], trace: _Trace) -> tuple[float, float]:
+               box: tuple[float, float, float, float], trace: _Trace, load: _Load) -> tuple[float, float]:
         c, exc, trk = self.config, scenario.machines.excavator, scenario.machines.truck
         t_wall = time.perf_counter()
         # fewer rule digs than phases (the area ran out of usable contacts): idle phases, η = 0
@@ -425,7 +444,7 @@ class SeparatePlanner(Planner):
             sol = self._guess_solution(nlp, w0, s0)
             rec["fallback"] = "IK initial guess"
         before = st.loaded
-        self._emit(st, conv, nlp, sol, digs, target)
+        self._emit(st, conv, nlp, sol, digs, target, load)
         rec["loaded"] = st.loaded - before
         rec["wall_s"] = time.perf_counter() - t_wall
         trace.areas.append(rec)
@@ -523,19 +542,20 @@ class SeparatePlanner(Planner):
                         float("nan"), used_fallback=True)
 
     def _emit(self, st: SimState, conv: Converter, nlp: PhaseNLP, sol: Solution, digs: list[RuleDig],
-              target: float) -> None:
-        """The NLP's motions with the rule's digs (each re-checked by the converter)."""
+              target: float, load: _Load) -> None:
+        """The NLP's motions with the rule's digs (each re-checked by the converter), none after
+        a dump that may have filled the truck (:class:`_Load`)."""
         c = self.config
         n, kc = nlp.n, nlp.kc
         dts = np.diff(sol.times)
         U = sol.U
         conv.move_both(st, U[:n, 0], U[:n, 1], U[:n, 5], U[:n, 6], dts[:n])
         for i in range(1, nlp.m1):
-            if target - st.loaded <= c.volume_tol:
+            if target - st.loaded <= c.volume_tol or not load.room():
                 break
             k0 = i * n
             if kc[i] > 0:
                 conv.move_excavator(st, U[k0:k0 + kc[i], 0], U[k0:k0 + kc[i], 1], dts[k0:k0 + kc[i]])
             if i - 1 < len(digs) and digs[i - 1].volume >= c.min_dig_volume:
                 d = digs[i - 1]
-                conv.dig_and_dump(st, d.contact, d.heading, target - st.loaded)
+                load.add(conv.dig_and_dump(st, d.contact, d.heading, target - st.loaded))

@@ -76,13 +76,13 @@ from shapely.geometry import Point, Polygon
 from earthbench.motion import turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
-from earthbench.cut import apply_cut, cut_along, cut_level, footprint, path_cells, path_window
+from earthbench.cut import cut_level, footprint, path_cells
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time
-from earthbench.rules import stroke_start, track_level_and_tilt, undermining_excess
+from earthbench.rules import stroke_start, track_level_and_tilt
 from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from ..backhoe_loop import BackhoeLoopPlanner
-from ..stability import margins
+from ..stability import Stroke, cut_and_slump, margins, path_undermines
 from ..truck_stands import TruckStands
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
 from .truck import TruckMoves
@@ -178,7 +178,7 @@ class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.4"
+    version = "1.5"
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -379,17 +379,11 @@ class Session(TruckMoves):
         if level < self.floor + ABS_TOL:
             return False
         # the referee's undermining rule, on a trial cut made on the planner's grid and put back
-        # (a copy of the whole map per candidate made the cost grow with the map, not the work)
+        # (on the realistic track the whole drag: planners/stability.py)
         track_level = track_level_and_tilt(self.sc, self.z, e, base)[0]
         cells = path_cells(self.terrain, self.z.shape, contact, heading, e.bucket_width, ch.drag)
-        jj, ii, _ = cells
-        window = path_window(self.terrain, self.z.shape, contact, heading, e.bucket_width, ch.drag)
-        saved, before = self.z[window].copy(), self.z[jj, ii]
-        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap, cells)
-        cut = self.z[jj, ii] < before
-        excess = undermining_excess(self.terrain, self.z, e, base, track_level, jj[cut], ii[cut])
-        self.z[window] = saved
-        return excess <= -max(ABS_TOL, self.margins.undermining)
+        stroke = Stroke(contact, heading, ch.drag, level, self.cap, cells, self.floor)
+        return not path_undermines(self.sc, self.z, base, track_level, stroke, max(ABS_TOL, self.margins.undermining))
 
     def best_dig(self, regions: list[Region], start: int, base: Pose, turn: float, v_min: float,
                  serve: bool = False) -> tuple[int, _Choice | None]:
@@ -412,7 +406,8 @@ class Session(TruckMoves):
                                                 self.truck_spec.travel_speed, self.truck_spec.yaw_rate))
         self.pending = None
         level = cut_level(self.terrain, self.z, contact, ch.depth)
-        vol = apply_cut(self.terrain, self.z, contact, heading, e.bucket_width, ch.drag, level, self.cap)
+        below = level < track_level_and_tilt(self.sc, self.z, e, self.base)[0] + self.margins.undermining
+        vol = cut_and_slump(self.sc, self.z, Stroke(contact, heading, ch.drag, level, self.cap, (), self.floor), below)
         duration = max(ch.time, min_dig_time(self.base, self.turn, contact, e)) + _EPS_T
         self.actions.append(Dig("excavator", self.t, self.t + duration, contact, heading, ch.depth, ch.drag))
         self.log.append({

@@ -96,7 +96,7 @@ class SinghCannonLoader(CyclePlanner):
     """Coarse dig region on the zero contour, refined by ξ·ψ·ζ; see the module docstring."""
 
     name = "singh-cannon-loader"
-    version = "1.2"
+    version = "1.3"
     Config = SinghCannonLoaderConfig
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:

@@ -41,7 +41,7 @@ class StripLoader(GreedyLoader):
     """A strip along the pile with the truck beside it; greedy cycles where no strip fits."""
 
     name = "strip-loader"
-    version = "1.0"
+    version = "1.1"
     Config = StripLoaderConfig
 
     def _run(self, b: CycleBuilder, max_dumps: int | None = None) -> Plan:

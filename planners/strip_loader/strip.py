@@ -270,7 +270,7 @@ def _full_charge(b: CycleBuilder, z: np.ndarray, firm: np.ndarray, start: tuple[
     end = (x + pen * math.cos(yaw), y + pen * math.sin(yaw), yaw)
     if wheel_step_excess(t, new_firm, spec, np.array([[0.0, x, y, yaw], [1.0, end[0], end[1], yaw]]), b.step_base)[0] > -1e-3:
         return None
-    return ChargeResult(pen, vol, zz, end, new_firm, vol)
+    return ChargeResult(pen, vol, zz, end, new_firm, vol, vol)
 
 
 def _drifted(b: CycleBuilder, k: int) -> tuple[float, float]:
@@ -283,13 +283,14 @@ def _drifted(b: CycleBuilder, k: int) -> tuple[float, float]:
 
 def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSettings) -> tuple[list[ChargeResult], list]:
     """The charges along the strip from ``entry``, each after a back-off from the last one's end,
-    until the target is expected (empty if one fails first), and where each starts."""
+    until the target is expected or the truck may be full (:meth:`CycleBuilder.truck_took_all`;
+    empty if one fails first), and where each starts."""
     spec, target = b.spec, b.sc.task.target_volume
     u = (math.cos(entry[2]), math.sin(entry[2]))
     z, firm, loaded, pose = b.z, b.firm, b.loaded, entry
     charges: list[ChargeResult] = []
     starts: list[tuple[float, float, float]] = []
-    while loaded < target - 1e-9:
+    while loaded < target - 1e-9 and (not charges or b.truck_took_all(sum(c.most for c in charges))):
         if len(charges) >= b.cfg.max_cycles:
             return [], []
         start = pose if not charges else (pose[0] - s.back_off * u[0], pose[1] - s.back_off * u[1], pose[2])
@@ -298,8 +299,9 @@ def _charges(b: CycleBuilder, entry: tuple[float, float, float], s: StripSetting
         if b.soil is None:
             ch = _full_charge(b, z, firm, start, capacity)
         else:
+            public = b.public_cap(sum(c.most for c in charges), capacity, target - loaded, share)
             ch = simulate_charge(b.sc.terrain, z, spec, start, min(capacity, share * spec.bucket_capacity), b.cfg.max_penetration,
-                                 b.level, b.base, firm, b.soil, step_base, share * spec.bucket_capacity)
+                                 b.level, b.base, firm, b.soil, step_base, public, b.load)
         if ch is None:
             return [], []
         charges.append(ch)

@@ -120,3 +120,13 @@ def case_processes() -> list[int]:
         except psutil.Error:
             continue
     return out
+
+
+def published_sealed_scenario(key_file: str, part: str) -> Scenario:
+    """The scenario whose id ends with ``part`` in the sealed draw of a key published under
+    ``leaderboard/`` (``key_file`` relative to it): a board's own case, regenerated from its key."""
+    from earthbench.results.suite import load_suite, open_sealed
+    from earthbench.seal import SealKey
+
+    key = SealKey.read(Path(__file__).resolve().parents[2] / "leaderboard" / key_file)
+    return next(sc for sc in open_sealed(load_suite(key.suite), key).scenarios if sc.id.endswith(part))
