@@ -186,3 +186,19 @@ def test_a_large_target_opens_from_a_station_with_the_truck_beyond_the_soil(seed
     truck_move = next(a for a in plan.actions if isinstance(a, Move) and a.machine == "truck")
     assert exc_move.path[0][0] == 0.0 and truck_move.path[0][0] < exc_move.path[-1][0]  # both drive at once
     assert np.median(_swings(sc, plan)) <= np.radians(20.0)
+
+
+@pytest.mark.parametrize("target", [6.0, 8.0])
+def test_a_cab_scan_over_a_bench_edge_never_leads_to_undermining_with_the_20t_class(target):
+    """The cab's scan of `standard-20t-realistic`'s bench-sand-cab s1 hides the face below the
+    bench edge and fills it from above, so the true face holds less than the scan shows and a
+    bucket drags on toward the tracks before it fills: greedy 1.4's plans undermined there (0.24
+    and 0.10 m below the line, the referee on the true ground); the whole drag is checked on a scan."""
+    from earthbench.results.suite import load_suite
+    from earthbench.sensing import observe
+
+    truth = next(sc for sc in load_suite("standard-20t-realistic").scenarios
+                 if sc.id == f"standard-20t-realistic/bench-sand-cab/s1/v{target:g}")
+    verdict = judge(truth, GreedyPlanner().plan(observe(truth)))
+    assert verdict.valid, verdict.violations[:3]
+    assert verdict.loaded_volume >= 0.8 * target

@@ -112,7 +112,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.4"
+    version = "1.5"
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -379,7 +379,11 @@ class _Greedy(Moves, Opening):
         e = self.exc
         jj, ii, _ = cells
         before = self.z[jj, ii]
-        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity, cells)
+        # on a scan (the realistic track) the bucket may fill later than planned and drag on toward
+        # the tracks: where the scan hides a face below an edge (a cab's view) it fills it from above,
+        # so the true face holds less than the scan shows; the whole drag is checked there
+        capacity = e.bucket_capacity if self.sc.soil is None else math.inf
+        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, capacity, cells)
         cut = self.z[jj, ii] < before
         excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
         self.z[jj, ii] = before
