@@ -34,6 +34,11 @@ _BUCKETS = 8
 _GAIN, _TRIED, _STANDS = 1.0, 4, 12
 
 
+def _wrap(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-π, π)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
 class Opening:
     """The opening of a :class:`~earthbench_planners.greedy.backhoe._Greedy` session, which holds
     the state it reads and changes."""
@@ -109,7 +114,9 @@ class Opening:
         half = np.arange(bins // 2)
         held = cum[centre[:, None] + half + 1] - cum[centre[:, None] - half] >= need
         spread = np.where(held.any(axis=1), (held.argmax(axis=1) + 0.5) * _BIN, math.pi)
-        est = np.maximum(t_exc + e.min_stroke_time, time) + n * spread / e.swing_rate
+        # the first cycle swings from where the upper body faces on arrival to the truck's bearing at least
+        first = np.abs(_wrap(A - base.yaw - self.turn))
+        est = np.maximum(t_exc + e.min_stroke_time, time) + (n * spread + first) / e.swing_rate
         rank = np.argsort(est, kind="stable")
         rank = rank[est[rank] < beat]
         if not len(rank) or (moved and self.station(base)[1] > e.max_tilt - self.margins.tilt):
