@@ -202,3 +202,17 @@ def test_a_cab_scan_over_a_bench_edge_never_leads_to_undermining_with_the_20t_cl
     verdict = judge(truth, GreedyPlanner().plan(observe(truth)))
     assert verdict.valid, verdict.violations[:3]
     assert verdict.loaded_volume >= 0.8 * target
+
+
+def test_the_opening_prices_the_first_swing_from_where_the_excavator_arrives():
+    """`standard`'s paper-extensive s6 at 7 m³: greedy 1.4's opening weighed the target's swing
+    but not the first cycle's, from where the upper body faces on arrival to the truck's
+    bearing, and drove to a station it then swung away from (1.37 × the target bound); 1.5
+    prices it (1.15)."""
+    sc = rbf(6, 7.0, n_bases=30)
+    plan = GreedyPlanner().plan(sc)
+    verdict = judge(sc, plan)
+    assert verdict.valid, verdict.violations[:3]
+    m = evaluate(sc, plan, verdict)
+    assert m["volume_ratio"] >= 0.99
+    assert m["time_per_target_m3_bound_ratio"] <= 1.20
