@@ -49,13 +49,14 @@ from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
-from ..truck_stands import TruckStands
+from ..truck_stands import TruckStands, arc_times
 from .moves import Moves
 from .opening import Opening
 
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _DRIVE_PAD = 0.5  # metres a dig's arm shadow keeps from where the truck still drives (see still_driving)
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
+_ENOUGH = 4.0  # a relocation counts a station's material up to this many times what is still needed
 PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
 
 
@@ -75,7 +76,8 @@ class GreedyConfig:
     truck_distance: float = 4.6
     """Preferred centre distance (m) from the excavator to the truck at a station."""
     travel_penalty: float = 0.05
-    """m³ of reachable material worth one metre of travel when choosing a station."""
+    """m³ of reachable material worth one metre of travel when choosing a station (the metres the
+    excavator would drive in the time its way there takes, turning included)."""
     max_actions: int = 2000
     closed_loop: bool = closed_loop_setting()
     """Replan after every dump from the observed terrain and truck load."""
@@ -543,7 +545,11 @@ class _Greedy(Moves, Opening):
         bases = np.stack([gx.ravel(), gy.ravel()], axis=1)
         vol = self.station_volumes(bases)
         travel = np.hypot(bases[:, 0] - self.base.x, bases[:, 1] - self.base.y)
-        score = vol - self.cfg.travel_penalty * travel
+        # material beyond a few times what is still needed makes a station no better, only its way
+        # there, priced by the excavator's drive time (its slow turn in place counts) at full speed
+        need = min(self.sc.task.target_volume, self.truck_spec.capacity) - self.loaded
+        ways = self.exc_drive_times(bases) * self.exc.travel_speed
+        score = np.minimum(vol, _ENOUGH * need) - self.cfg.travel_penalty * ways
         for k in np.argsort(-score):
             if vol[k] < self.cfg.min_fill * self.exc.bucket_capacity:
                 return False
@@ -564,6 +570,19 @@ class _Greedy(Moves, Opening):
             self._drive_in_turn(key, *move)
             return True
         return False
+
+    def exc_drive_times(self, xy: np.ndarray) -> np.ndarray:
+        """The excavator's least time (s) from its base to each of ``xy[k, 2]``: turning in place
+        (either way round: it drives forward or back) then straight, or on an arc at full speed
+        and yaw rate then straight (``truck_stands.arc_times``); its slow turn counts."""
+        e, b = self.exc, self.base
+        dx, dy = xy[:, 0] - b.x, xy[:, 1] - b.y
+        turn = np.abs(_wrap(np.arctan2(dy, dx) - b.yaw))
+        turn = np.where(np.hypot(dx, dy) > 1e-6, np.minimum(turn, math.pi - turn), 0.0)
+        time = turn / e.yaw_rate + np.hypot(dx, dy) / e.travel_speed
+        for side in (1, -1):
+            time = np.minimum(time, arc_times(b, xy[:, 0], xy[:, 1], e.travel_speed, e.yaw_rate, side)[0])
+        return time
 
     def reach_window(self, base: Pose) -> tuple[int, int, int, int] | None:
         """The grid's rows ``j0:j1`` and columns ``i0:i1`` within ``reach_max`` of ``base`` along
