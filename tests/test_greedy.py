@@ -216,3 +216,40 @@ def test_the_opening_prices_the_first_swing_from_where_the_excavator_arrives():
     m = evaluate(sc, plan, verdict)
     assert m["volume_ratio"] >= 0.99
     assert m["time_per_target_m3_bound_ratio"] <= 1.20
+
+
+def _standard(sid: str):
+    from earthbench.results.suite import load_suite
+
+    return next(sc for sc in load_suite("standard").scenarios if sc.id == f"standard/{sid}")
+
+
+@pytest.mark.parametrize(("sid", "most"), [("paper-switch.rbf14-local/s7/v0.56", 1.45), ("paper-switch.rbf14-local/s8/v0.56", 1.80)])
+def test_a_small_job_relocates_to_a_near_station_that_holds_it(sid, most):
+    """A 2-bucket job whose window lies out of reach: greedy 1.4 drove to the station with the
+    most material in reach (less 0.05 m³ a metre), which took a long turn in place (1.81 and
+    2.10 × the target bound); 1.5 counts a station's material up to 4 × what is still needed and
+    prices the way by the excavator's drive time (1.35 and 1.68)."""
+    sc = _standard(sid)
+    plan = GreedyPlanner().plan(sc)
+    verdict = judge(sc, plan)
+    assert verdict.valid, verdict.violations[:3]
+    m = evaluate(sc, plan, verdict)
+    assert m["volume_ratio"] >= 0.99
+    assert m["time_per_target_m3_bound_ratio"] <= most
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_the_opening_parks_the_truck_where_its_line_covers_the_soils_bearings(seed):
+    """`standard`'s bench s2 and s5 at 8 m³: greedy 1.4 parked the truck at the stand it reached
+    first, at the edge of dump reach, from where it could hardly slide along the face before
+    leaving reach, and the dumps swung (1.16 × the target bound); 1.5 weighs each stand's line
+    along its heading (the bearings it covers sliding during digs) and parks nearer (1.06),
+    though the truck arrives later."""
+    sc = _standard(f"bench.bench/s{seed}/v8")
+    plan = GreedyPlanner().plan(sc)
+    verdict = judge(sc, plan)
+    assert verdict.valid, verdict.violations[:3]
+    m = evaluate(sc, plan, verdict)
+    assert m["volume_ratio"] >= 0.99
+    assert m["time_per_target_m3_bound_ratio"] <= 1.10
