@@ -32,7 +32,7 @@ _HOLDS, _RADIUS, _NEAR = 1.5, 14.0, 3.0
 _BUCKETS = 8
 #: Seconds the estimate must gain before the excavator drives off; stations tried for the truck's
 #: way there (best first), and stands offered at each.
-_GAIN, _TRIED, _STANDS = 1.0, 4, 12
+_GAIN, _TRIED, _STANDS = 1.0, 4, 24
 #: How far (m) either way, and in what steps, a stand's line along its heading is looked at.
 _SLIDE, _SLIDE_STEP = 6.0, 0.25
 
