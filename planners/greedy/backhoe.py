@@ -49,7 +49,7 @@ from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import margins
-from ..truck_stands import TruckStands, arc_times
+from ..truck_stands import TruckStands
 from .moves import Moves
 from .opening import Opening
 
@@ -545,10 +545,9 @@ class _Greedy(Moves, Opening):
         bases = np.stack([gx.ravel(), gy.ravel()], axis=1)
         vol = self.station_volumes(bases)
         travel = np.hypot(bases[:, 0] - self.base.x, bases[:, 1] - self.base.y)
-        # material beyond a few times what is still needed makes a station no better, only its way
-        # there, priced by the excavator's drive time (its slow turn in place counts) at full speed;
-        # not on a scan (the realistic track), where a near station's tilt, read from the scan, broke
-        # the rule on the true ground (standard-realistic bench-sand-cab s1, closed loop): 1.4's choice
+        # material beyond a few times what is still needed makes a station no better, only its way there
+        # (the excavator's drive time, its slow turn counted); not on a scan, where a near station's tilt
+        # read from it broke the rule on the true ground (standard-realistic bench-sand-cab s1, closed loop)
         if self.sc.soil is None:
             need = min(self.sc.task.target_volume, self.truck_spec.capacity) - self.loaded
             score = np.minimum(vol, _ENOUGH * need) - self.cfg.travel_penalty * self.exc_drive_times(bases) * self.exc.travel_speed
@@ -574,19 +573,6 @@ class _Greedy(Moves, Opening):
             self._drive_in_turn(key, *move)
             return True
         return False
-
-    def exc_drive_times(self, xy: np.ndarray) -> np.ndarray:
-        """The excavator's least time (s) from its base to each of ``xy[k, 2]``: turning in place
-        (either way round: it drives forward or back) then straight, or on an arc at full speed
-        and yaw rate then straight (``truck_stands.arc_times``); its slow turn counts."""
-        e, b = self.exc, self.base
-        dx, dy = xy[:, 0] - b.x, xy[:, 1] - b.y
-        turn = np.abs(_wrap(np.arctan2(dy, dx) - b.yaw))
-        turn = np.where(np.hypot(dx, dy) > 1e-6, np.minimum(turn, math.pi - turn), 0.0)
-        time = turn / e.yaw_rate + np.hypot(dx, dy) / e.travel_speed
-        for side in (1, -1):
-            time = np.minimum(time, arc_times(b, xy[:, 0], xy[:, 1], e.travel_speed, e.yaw_rate, side)[0])
-        return time
 
     def reach_window(self, base: Pose) -> tuple[int, int, int, int] | None:
         """The grid's rows ``j0:j1`` and columns ``i0:i1`` within ``reach_max`` of ``base`` along
