@@ -56,6 +56,7 @@ from .opening import Opening
 _EPS_T = 1e-6  # seconds added to minimum durations so rounding never makes them short
 _DRIVE_PAD = 0.5  # metres a dig's arm shadow keeps from where the truck still drives (see still_driving)
 _BASE_BLOCK = 128  # stations scored together by reachable_volume (see there)
+_ENOUGH = 4.0  # a relocation counts a station's material up to this many times what is still needed
 PathCells = tuple[np.ndarray, np.ndarray, np.ndarray]  # earthbench.cut.path_cells: rows, columns, distance along
 
 
@@ -75,7 +76,8 @@ class GreedyConfig:
     truck_distance: float = 4.6
     """Preferred centre distance (m) from the excavator to the truck at a station."""
     travel_penalty: float = 0.05
-    """m³ of reachable material worth one metre of travel when choosing a station."""
+    """m³ of reachable material worth one metre of travel when choosing a station (the metres the
+    excavator would drive in the time its way there takes, turning included)."""
     max_actions: int = 2000
     closed_loop: bool = closed_loop_setting()
     """Replan after every dump from the observed terrain and truck load."""
@@ -112,7 +114,7 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.4"
+    version = "1.5"
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -379,7 +381,11 @@ class _Greedy(Moves, Opening):
         e = self.exc
         jj, ii, _ = cells
         before = self.z[jj, ii]
-        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, e.bucket_capacity, cells)
+        # on a scan (the realistic track) the bucket may fill later than planned and drag on toward
+        # the tracks: where the scan hides a face below an edge (a cab's view) it fills it from above,
+        # so the true face holds less than the scan shows; the whole drag is checked there
+        capacity = e.bucket_capacity if self.sc.soil is None else math.inf
+        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, capacity, cells)
         cut = self.z[jj, ii] < before
         excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
         self.z[jj, ii] = before
@@ -539,7 +545,14 @@ class _Greedy(Moves, Opening):
         bases = np.stack([gx.ravel(), gy.ravel()], axis=1)
         vol = self.station_volumes(bases)
         travel = np.hypot(bases[:, 0] - self.base.x, bases[:, 1] - self.base.y)
-        score = vol - self.cfg.travel_penalty * travel
+        # material beyond a few times what is still needed makes a station no better, only its way there
+        # (the excavator's drive time, its slow turn counted); not on a scan, where a near station's tilt
+        # read from it broke the rule on the true ground (standard-realistic bench-sand-cab s1, closed loop)
+        if self.sc.soil is None:
+            need = min(self.sc.task.target_volume, self.truck_spec.capacity) - self.loaded
+            score = np.minimum(vol, _ENOUGH * need) - self.cfg.travel_penalty * self.exc_drive_times(bases) * self.exc.travel_speed
+        else:
+            score = vol - self.cfg.travel_penalty * travel
         for k in np.argsort(-score):
             if vol[k] < self.cfg.min_fill * self.exc.bucket_capacity:
                 return False

@@ -15,7 +15,7 @@ from earthbench.motion import poses_at, wrap
 from earthbench.plan import Move
 from earthbench.world import Pose
 
-from ..truck_stands import Sample, drive
+from ..truck_stands import Sample, arc_times, drive
 
 
 class Moves:
@@ -29,6 +29,19 @@ class Moves:
                    else self.material_bearing(base))
         buckets = (self.sc.task.target_volume - self.loaded) / self.exc.bucket_capacity
         return self.stands.parking(base, self.truck, bearing, max(buckets, 1.0), arcs=True)
+
+    def exc_drive_times(self, xy: np.ndarray) -> np.ndarray:
+        """The excavator's least time (s) from its base to each of ``xy[k, 2]``: turning in place
+        (either way round: it drives forward or back) then straight, or on an arc at full speed
+        and yaw rate then straight (``truck_stands.arc_times``); its slow turn counts."""
+        e, b = self.exc, self.base
+        dx, dy = xy[:, 0] - b.x, xy[:, 1] - b.y
+        turn = np.abs((np.arctan2(dy, dx) - b.yaw + math.pi) % (2 * math.pi) - math.pi)
+        turn = np.where(np.hypot(dx, dy) > 1e-6, np.minimum(turn, math.pi - turn), 0.0)
+        time = turn / e.yaw_rate + np.hypot(dx, dy) / e.travel_speed
+        for side in (1, -1):
+            time = np.minimum(time, arc_times(b, xy[:, 0], xy[:, 1], e.travel_speed, e.yaw_rate, side)[0])
+        return time
 
     def _clear(self, path: list[Sample], static: Pose) -> bool:
         """Whether a move's ``path`` keeps out of keep-outs and the clearance from a machine standing at ``static``."""

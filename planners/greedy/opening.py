@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import shapely
+from shapely.geometry import Point
 
 from earthbench.world import Pose
 
@@ -31,7 +32,14 @@ _HOLDS, _RADIUS, _NEAR = 1.5, 14.0, 3.0
 _BUCKETS = 8
 #: Seconds the estimate must gain before the excavator drives off; stations tried for the truck's
 #: way there (best first), and stands offered at each.
-_GAIN, _TRIED, _STANDS = 1.0, 4, 12
+_GAIN, _TRIED, _STANDS = 1.0, 4, 24
+#: How far (m) either way, and in what steps, a stand's line along its heading is looked at.
+_SLIDE, _SLIDE_STEP = 6.0, 0.25
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-π, π)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 class Opening:
@@ -58,12 +66,32 @@ class Opening:
                 found.append((est[0], k, est[1]))
         for _, k, spots in sorted(found, key=lambda f: f[0])[:_TRIED]:
             key = (round(float(bases[k, 0]), 3), round(float(bases[k, 1]), 3))
-            move = self._truck_move(Pose(key[0], key[1], self.base.yaw), spots=spots)
+            move = self._opening_move(Pose(key[0], key[1], self.base.yaw), spots, need, n)
             if move is not None:
                 visited.add(key)
                 self._drive_in_turn(key, *move)
                 return True
         return False
+
+    def _opening_move(self, base: Pose, spots: list[Pose], need: float, n: int) -> tuple[str, Pose] | None:
+        """The machines' moves for a station at ``base`` (:meth:`_truck_move`) with the stand of
+        least estimated time to the target (:meth:`_sliding_order`) among the first few, the
+        order the machines drive in counted (one may have to wait for the other)."""
+        t_exc, cands = self._sliding_order(base, spots, need, n)
+        stroke = self.exc.min_stroke_time
+        best: dict[bool, tuple[float, tuple[str, Pose]]] = {}  # the best with a stand as offered, and turned
+        for swing, t_truck, spot, turned in cands[:_STANDS]:
+            if turned in best and max(t_exc + stroke, t_truck) + swing >= best[turned][0]:
+                continue  # cannot beat the best found, whichever machine drives first
+            move = self._truck_move(base, spots=[spot])
+            if move is None:
+                continue
+            start = {"both": max(t_exc + stroke, t_truck), "excavator": t_exc + max(stroke, t_truck)}.get(move[0], t_truck + t_exc + stroke)
+            if turned not in best or start + swing < best[turned][0]:
+                best[turned] = (start + swing, move)
+        if True in best and (False not in best or best[True][0] < best[False][0] - _GAIN):
+            return best[True][1]  # turned along the edge only when that gains clearly
+        return best[False][1] if False in best else None
 
     def _opening_stations(self, need: float) -> np.ndarray:
         """Here first, then the stations of the relocation grid within ``_RADIUS`` (every other one
@@ -109,7 +137,9 @@ class Opening:
         half = np.arange(bins // 2)
         held = cum[centre[:, None] + half + 1] - cum[centre[:, None] - half] >= need
         spread = np.where(held.any(axis=1), (held.argmax(axis=1) + 0.5) * _BIN, math.pi)
-        est = np.maximum(t_exc + e.min_stroke_time, time) + n * spread / e.swing_rate
+        # the first cycle swings from where the upper body faces on arrival to the truck's bearing at least
+        first = np.abs(_wrap(A - base.yaw - self.turn))
+        est = np.maximum(t_exc + e.min_stroke_time, time) + (n * spread + first) / e.swing_rate
         rank = np.argsort(est, kind="stable")
         rank = rank[est[rank] < beat]
         if not len(rank) or (moved and self.station(base)[1] > e.max_tilt - self.margins.tilt):
@@ -119,6 +149,51 @@ class Opening:
         if not len(good):
             return None
         return float(est[good[0]]), [Pose(float(x[i]), float(y[i]), float(yaw[i])) for i in good]
+
+    def _sliding_order(self, base: Pose, spots: list[Pose], need: float, n: int) -> tuple[float, list[tuple[float, float, Pose, bool]]]:
+        """``spots`` (stands for a station at ``base``) and each turned along the dig area's nearest
+        edge, least estimated time to the target first: the first dump, as the opening estimates
+        it, and the target's swing beyond the bearings the truck covers sliding along its heading
+        (it follows the face during digs, ``truck_stands.TruckStands.line``), so a stand whose
+        line runs along the edge the soil lies behind beats one broadside to the soil's bearing
+        that the edge stops after a step."""
+        e = self.exc
+        path = self._exc_path((base.x, base.y), 0.0)
+        arrive, t_exc = path[-1][3] + self.turn, path[-1][0]
+        theta, w = self._material_bearings(base)
+        edge = self.dig_area.exterior
+        cands = []
+        for sp in spots:
+            d = edge.project(Point(sp.x, sp.y))
+            a, b = edge.interpolate(d - 0.05), edge.interpolate(d + 0.05)
+            cands += [sp, Pose(sp.x, sp.y, math.atan2(b.y - a.y, b.x - a.x))]
+        poses = np.array([[c.x, c.y, c.yaw] for c in cands])
+        time, yaw = self.stands.drive_times(self.truck, poses[:, 0], poses[:, 1], poses[:, 2])
+        offsets = np.arange(-_SLIDE, _SLIDE + 1e-9, _SLIDE_STEP)
+        mid = len(offsets) // 2
+        costs = []
+        for x, y, yw in zip(poses[:, 0], poses[:, 1], yaw):
+            line = np.column_stack([x + offsets * math.cos(yw), y + offsets * math.sin(yw), np.full(len(offsets), yw)])
+            good = self.stands.in_reach(base, line[:, :2])
+            good[good] = self.stands.ground_ok(line[good])
+            if not good[mid]:
+                costs.append(math.inf)
+                continue
+            run = np.zeros(len(offsets), bool)
+            for side in (slice(mid, None), slice(mid, None, -1)):
+                run[side] = np.cumprod(good[side]).astype(bool)
+            centre = math.atan2(y - base.y, x - base.x)
+            rel = _wrap(np.arctan2(line[run, 1] - base.y, line[run, 0] - base.x) - centre)
+            delta = _wrap(theta - centre)
+            beyond = np.maximum.reduce([rel.min() - delta, delta - rel.max(), np.zeros(len(delta))])
+            order = np.argsort(beyond)
+            held = np.searchsorted(np.cumsum(w[order]), need)
+            swing = n * float(beyond[order[min(held, len(order) - 1)]]) if len(order) else n * math.pi
+            first = abs(float(_wrap(np.array(centre - arrive))))
+            costs.append((swing + first) / e.swing_rate)
+        total = np.maximum(t_exc + e.min_stroke_time, time) + np.array(costs)
+        return t_exc, [(costs[i], float(time[i]), Pose(float(poses[i, 0]), float(poses[i, 1]), float(yaw[i])), i % 2 == 1)
+                       for i in np.argsort(total, kind="stable") if math.isfinite(total[i])]
 
     def _material_bearings(self, base: Pose) -> tuple[np.ndarray, np.ndarray]:
         """Bearings from ``base`` and volumes (m³, above the floor, a cut depth deep at most) of
