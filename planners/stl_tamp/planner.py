@@ -171,6 +171,9 @@ class Config(LocalNLPConfig):
     follow_face: bool = field(default=True, metadata=_OMIT)
     keep_base: bool = field(default=True, metadata=_OMIT)
     face_away: bool = field(default=True, metadata=_OMIT)
+    # issue 49 (.stand; measured, not the default: NOTES.md, "0.12.0"): each area faces the side whose
+    # base leaves the truck the least swing, its stand priced over the whole remaining target
+    side_by_swing: bool = field(default=False, metadata=_OMIT)
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -202,10 +205,14 @@ class StlTampPlanner(Planner):
     0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off
     the arm's reach, and the local NLP is bound to it; areas on the truck's side face away from it,
     an area in reach keeps the base, and the truck follows the dig face (``Converter.follow``).
-    The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too."""
+    The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too.
+
+    0.12.0 (issue 48, a sealed draw's `truck_step`): on a scanned site the truck's ground is kept
+    on the scan's envelope over the distance a scan may misplace a face (``convert.ScanStands``,
+    ``planners/stability.face_blur``); the exact track's plans are 0.11.0's."""
 
     name = "stl-tamp"
-    version = "0.11.0"
+    version = "0.12.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
@@ -485,7 +492,7 @@ class StlTampPlanner(Planner):
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
         # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand)
-        area, stand = place(c, conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate))
+        area, stand = place(c, conv, st, area, self._stand_buckets(v_local, remaining, exc))
         truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
@@ -525,6 +532,13 @@ class StlTampPlanner(Planner):
         rec["wall_s"] = time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
+
+    def _stand_buckets(self, v_local: float, remaining: float, exc: ExcavatorSpec) -> float:
+        """The buckets a truck stand's swing is priced over (.stand.place): the whole remaining
+        target's with ``side_by_swing`` (the truck, once there, serves the next areas too), else
+        this area's (0.11.0)."""
+        c = self.config
+        return (remaining if c.side_by_swing else v_local) / (exc.bucket_capacity * c.fill_estimate)
 
     def _solve_local(self, lp: LocalProblem, exc: ExcavatorSpec, area: Area, truck: tuple[float, float],
                      box: tuple[float, float, float, float], w0: np.ndarray,
