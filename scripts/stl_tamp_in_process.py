@@ -25,7 +25,6 @@ import sys
 import time
 from pathlib import Path
 
-from earthbench.cli._common import parse_config
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
 from earthbench.results.records import PlannerRef
@@ -34,6 +33,18 @@ from earthbench.results.suite import load_suite, open_sealed
 from earthbench.running.harness.prepare import find
 from earthbench.seal import SealKey
 from earthbench.sensing import observe
+
+
+def settings(items: list[str]) -> dict[str, object]:
+    """``key=value`` settings of stl-tamp's ``Config``, each value read as JSON (``true``, ``0.5``) or kept as text."""
+    out: dict[str, object] = {}
+    for item in items:
+        key, _, raw = item.partition("=")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
 
 
 def prepared_folder(ref: PlannerRef) -> Path | None:
@@ -55,7 +66,7 @@ def main() -> None:
         suite = open_sealed(suite, SealKey.read(key))
     wanted = {int(s) for s in seeds.split(",")}
     cls = PLANNERS.get("stl-tamp")
-    overrides = parse_config(sys.argv[4:], cls)
+    overrides = settings(sys.argv[4:])
     folder = prepared_folder(PlannerRef.resolve("stl-tamp", overrides))
     invalid = total = 0
     for sc in suite.scenarios:
