@@ -52,7 +52,7 @@ from earthbench.world import Heightmap, Pose, Scenario
 
 from earthbench.soil import slump
 
-from ..stability import margins
+from ..stability import envelope, face_blur, margins
 from ..truck_stands import TruckStands
 
 EPS_T = 1e-6
@@ -168,6 +168,30 @@ def _sampled(a: Path | Pose, b: Path | Pose, step: float, reach_a: float,
     return float(np.min(np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1]))), pa, pb
 
 
+class ScanStands(TruckStands):
+    """The truck's stands on a scan, whose faces may lie ``radius`` cells from where it shows them
+    (:func:`planners.stability.face_blur`): the ground under the truck keeps its limits on the
+    grid and on its envelope over that radius, the lowest and the highest heights near each cell
+    (so a bank or a cut's wall the truck's wheels could meet within the radius is seen)."""
+
+    def __init__(self, sc: Scenario, spec: Any, z: np.ndarray, radius: float):
+        super().__init__(sc, spec, z)
+        self.radius = radius
+        self._bounds: tuple[TruckStands, TruckStands] | None = None
+
+    def ground_kept(self, poses: np.ndarray) -> np.ndarray:
+        p = np.asarray(poses, dtype=float).reshape(-1, 3)
+        ok = super().ground_kept(p)
+        if not ok.any():
+            return ok
+        if self._bounds is None:  # once per grid, when first needed
+            lo, hi = envelope(self.z, self.radius)
+            self._bounds = (TruckStands(self.sc, self.spec, lo), TruckStands(self.sc, self.spec, hi))
+        for bound in self._bounds:
+            ok[ok] = bound.ground_kept(p[ok])
+        return ok
+
+
 class Converter:
     """Emits the actions of solved phases into a :class:`SimState`."""
 
@@ -178,6 +202,7 @@ class Converter:
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
         # the scan's undermining margin and the soil's slump on the realistic track (stl-tamp 0.11.0)
         self.keep_soil, self.under_margin = keep_soil, margins(scenario).undermining if keep_soil else 0.0
+        self.blur = face_blur(scenario) if keep_soil else 0.0  # the scan's misplaced faces (stl-tamp 0.12.0)
         self.sc = scenario
         self.exc_spec = scenario.machines.excavator
         self.truck_spec = scenario.machines.truck
@@ -310,7 +335,10 @@ class Converter:
         return self._blocked()
 
     def stands(self, st: SimState) -> TruckStands:
-        """The truck's stands on the grid as it now is (``planners/truck_stands.py``)."""
+        """The truck's stands on the grid as it now is (``planners/truck_stands.py``); on a scanned
+        site their ground also keeps the truck's limits on the scan's envelope (:class:`ScanStands`)."""
+        if self.blur > 0:
+            return ScanStands(self.sc, self.exc_spec, st.z, self.blur / self.sc.terrain.resolution)
         return TruckStands(self.sc, self.exc_spec, st.z)
 
     def park_truck(self, st: SimState, wanted: Pose, t0: float, exc_path: Any = None) -> bool:

@@ -171,6 +171,7 @@ class Config(LocalNLPConfig):
     follow_face: bool = field(default=True, metadata=_OMIT)
     keep_base: bool = field(default=True, metadata=_OMIT)
     face_away: bool = field(default=True, metadata=_OMIT)
+    side_by_swing: bool = field(default=False, metadata=_OMIT)  # issue 49: measured, off (.stand; NOTES.md, "0.12.0")
 
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
@@ -180,9 +181,9 @@ class Config(LocalNLPConfig):
 class StlTampPlanner(Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
 
-    0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the
-    same values to the bit, so the same plans, in less CPU), and an area tiling that tolerates
-    rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of tiles).
+    0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the same values to the bit, so the same plans,
+    in less CPU), and an area tiling that tolerates rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of
+    tiles).
 
     0.10.3: closed loop (:mod:`.receding`) keeps the first step's sides and asks for the missing
     volume over the yield the truck has reported. Open-loop plans are 0.10.2's.
@@ -193,19 +194,20 @@ class StlTampPlanner(Planner):
     0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
     model (digs under the arm skipped or repaired, truck moves over rough ground replaced).
 
-    Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash
-    the same): ``solver="fatrop"`` writes every NLP stage by stage too (:mod:`.staged`, the same
-    problem with its phase variables carried as states) and solves it by FATROP, IPOPT on the
-    classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``).
-    Measured slower than IPOPT on these NLPs, so an option (planners/stl_tamp/NOTES.md).
+    Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash the same): ``solver="fatrop"`` writes
+    every NLP stage by stage too (:mod:`.staged`, the same problem with its phase variables carried as states) and solves it by FATROP,
+    IPOPT on the classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``). Measured slower than IPOPT on
+    these NLPs, so an option (planners/stl_tamp/NOTES.md).
 
-    0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off
-    the arm's reach, and the local NLP is bound to it; areas on the truck's side face away from it,
-    an area in reach keeps the base, and the truck follows the dig face (``Converter.follow``).
-    The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too."""
+    0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off the arm's reach, and the local
+    NLP is bound to it; areas on the truck's side face away from it, an area in reach keeps the base, and the truck follows
+    the dig face (``Converter.follow``). The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too.
+
+    0.12.0 (issue 48): on a scanned site the truck's ground keeps a margin for a face the scan misplaces
+    (``convert.ScanStands``, ``planners/stability.face_blur``); the exact track's plans are 0.11.0's."""
 
     name = "stl-tamp"
-    version = "0.11.0"
+    version = "0.12.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
@@ -484,8 +486,8 @@ class StlTampPlanner(Planner):
         nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand)
-        area, stand = place(c, conv, st, area, v_local / (exc.bucket_capacity * c.fill_estimate))
+        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand; side_by_swing: priced over all that is left)
+        area, stand = place(c, conv, st, area, (remaining if c.side_by_swing else v_local) / (exc.bucket_capacity * c.fill_estimate))
         truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)

@@ -29,7 +29,7 @@ from earthbench.world import Pose, Scenario
 
 from ..truck_stands import GAP
 from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
-from .hierarchy import Area, Layout, candidate_areas
+from .hierarchy import Area, Layout, candidate_areas, level_stand, site_layout
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
 #: shadow and the gap) and under its dump reach, for an area to face away from the truck.
@@ -107,11 +107,69 @@ def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, 
     """The candidate areas of the planner's configuration ``c`` (:func:`.hierarchy.candidate_areas`);
     with ``c.face_away``, those whose base beyond them from the truck leaves the truck a stand on
     their far side, off the dig area and in dump reach (the dig area's row on the truck's side),
-    face that way, the tile facing the truck kept as ``Area.toward``."""
+    face that way, the tile facing the truck kept as ``Area.toward``; with ``c.side_by_swing``,
+    each area faces the side (toward the truck, away, or either way across) whose base leaves the
+    truck a stand with the least swing (:func:`least_swing`), the others kept as fallbacks."""
     m = scenario.machines
     away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
-    return candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
-                           layout, away)
+    areas = candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
+                            layout, away)
+    if not c.side_by_swing or len(areas) < 2:
+        return areas
+    lay = layout or site_layout(scenario)
+    dig = Polygon(scenario.site.dig_area)
+    shapely.prepare(dig)
+    return [_least_swing_side(scenario, z, dig, a, lay, c.base_offset, side) for a in areas]
+
+
+def _across(scenario: Scenario, z: np.ndarray, area: Area, toward: tuple[float, float], base_offset: float,
+            side: float) -> Area | None:
+    """``area``'s tile with its base ``base_offset`` toward ``toward`` (a level stand), or None."""
+    base = level_stand(scenario, z, area.centre, toward, base_offset, side)
+    if base is None:
+        return None
+    cx, cy = area.centre
+    off = (area.truck[0] - area.base[0], area.truck[1] - area.base[1])
+    return dataclasses.replace(area, px=cx - toward[0] * side / 2, py=cy - toward[1] * side / 2,
+                               psi=math.atan2(toward[1], toward[0]), base=base, truck=(base[0] + off[0], base[1] + off[1]),
+                               toward=None)
+
+
+def _least_swing_side(scenario: Scenario, z: np.ndarray, dig: Polygon, area: Area, lay: Layout, base_offset: float,
+                      side: float) -> Area:
+    """``area``'s tiles (facing the truck, away from it, and either way across the loading axis)
+    whose base leaves the truck less swing than the tile facing the truck (:func:`least_swing`),
+    least first, chained as fallbacks (``Area.toward``) that end at the tile facing the truck."""
+    tx, ty = lay.toward_start
+    paper = area.toward if area.toward is not None else area  # facing the truck: the last fallback
+    tiles = [area] if area.toward is not None else []
+    tiles += [t for t in (_across(scenario, z, area, (tx, ty), base_offset, side),
+                          _across(scenario, z, area, (-tx, -ty), base_offset, side)) if t is not None]
+    costs = [least_swing(scenario, dig, t) for t in tiles]
+    paper_cost = least_swing(scenario, dig, paper)
+    chain = dataclasses.replace(paper, toward=None)
+    for k in sorted(range(len(tiles)), key=lambda k: (round(costs[k], 3), k), reverse=True):
+        if costs[k] < paper_cost - 1e-3:
+            chain = dataclasses.replace(tiles[k], toward=chain)
+    return chain
+
+
+def least_swing(scenario: Scenario, dig: Polygon, area: Area) -> float:
+    """The least swing (rad) from ``area``'s centre to a truck in dump reach of its base, the
+    truck's body (its half width and the gap) off the dig area and clear of the area's digs
+    (:func:`area_shadow`); π when there is none. An estimate for choosing the side an area faces."""
+    e, t = scenario.machines.excavator, scenario.machines.truck
+    bx, by = area.base
+    rad = np.arange(e.clearance + 0.3, e.reach_max + t.loading_radius - 0.3, 0.3)
+    ang = np.radians(np.arange(-180.0, 180.0, 5.0))
+    r, a = np.meshgrid(rad, ang)
+    pts = shapely.points(bx + r.ravel() * np.cos(a.ravel()), by + r.ravel() * np.sin(a.ravel()))
+    keep = t.width / 2 + GAP
+    ok = (shapely.distance(dig, pts) >= keep) & (shapely.distance(area_shadow(area, e.bucket_width), pts) >= keep)
+    if not ok.any():
+        return math.pi
+    bearing = math.atan2(area.centre[1] - by, area.centre[0] - bx)
+    return float(np.min(np.abs((a.ravel()[ok] - bearing + math.pi) % (2 * math.pi) - math.pi)))
 
 
 def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> tuple[Area, Pose | None]:
@@ -119,11 +177,11 @@ def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> 
     where it stands, ``c.keep_base``) and the truck's stand (``c.place_truck``; None: the NLP
     places the truck). An area facing away from the truck falls back to its tile facing the
     truck (``Area.toward``) when the truck has no stand beyond it."""
-    stand = None
-    for tile in (area, area.toward):
-        if tile is not None and stand is None:
-            area = kept_base(conv, st, tile) if c.keep_base else tile
-            stand = truck_stand(conv, st, area, buckets) if c.place_truck else None
+    stand, tile = None, area
+    while tile is not None and stand is None:
+        area = kept_base(conv, st, tile) if c.keep_base else tile
+        stand = truck_stand(conv, st, area, buckets) if c.place_truck else None
+        tile = tile.toward
     return area, stand
 
 
