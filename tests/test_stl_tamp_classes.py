@@ -60,15 +60,19 @@ def test_the_sized_settings_are_the_ones_in_metres_and_cubic_metres():
 
 
 def test_the_preparation_compiles_every_class_s_nlps_of_the_paper_s_sizes():
-    """Each class with an excavator gets its local NLP and its one-window global NLPs; spacings and
-    extents scale together, so the lattices (the NLPs' sizes) are the compact class's."""
+    """Each class with an excavator gets its local NLP and its windowed sites' global NLP (the
+    compact class also the other phase counts, for sites the window's size); spacings and extents
+    scale together, so the lattices (the NLPs' sizes) are the compact class's."""
     shapes = StlTampPlanner().prepared_shapes()
-    by_class = {name: [s for label, s, exc, truck in shapes if label.split()[0] == name] for name in EXCAVATOR_CLASSES}
-    assert all(len(v) == len(by_class["compact"]) for v in by_class.values())
+    by_class = {name: [(label.split(" ", 1)[1], s) for label, s, exc, truck in shapes if label.split()[0] == name]
+                for name in EXCAVATOR_CLASSES}
+    assert [label for label, _ in by_class["compact"]] == ["local"] + [f"global {m}" for m in range(8, 1, -1)]
     for name, got in by_class.items():
         exc = machine_class(name).excavator
-        assert [s.terrain_shape for s in got] == [s.terrain_shape for s in by_class["compact"]]
-        assert got[0].vmax == exc.bucket_capacity
+        if name != "compact":
+            assert [label for label, _ in got] == ["local", "global 8"]
+        assert [s.terrain_shape for _, s in got] == [s.terrain_shape for _, s in by_class["compact"][:len(got)]]
+        assert got[0][1].vmax == exc.bucket_capacity
         c = sized(StlTampConfig(), exc)
         assert global_lattice(c.global_window, c.global_fit_spacing) == global_lattice((12.0, 6.0), 1.0)
     compact = [(label, exc) for label, _, exc, _ in shapes if label.startswith("compact")]

@@ -259,10 +259,10 @@ class StlTampPlanner(Planner):
     # -- preparation (docs/DESIGN.md §6 "Preparation") -----------------------------------------
     def prepared_shapes(self) -> list[tuple[str, Shape, ExcavatorSpec, TruckSpec]]:
         """The NLPs :meth:`prepare` compiles, per machine class with an excavator (its sizes:
-        :mod:`.sizes`), from the class and this configuration alone: the local NLP, and the global
-        NLP of one window (``global_window``: every windowed site's lattice) with 2 to
-        ``block_phases`` phases. A plan on another shape loads its NLP from the disk cache
-        (:mod:`.nlp_cache`): the same plan, uncompiled."""
+        :mod:`.sizes`), from the class and this configuration alone: the local NLP and the global
+        NLP of one window (``global_window``'s lattice) with ``block_phases`` phases, every windowed
+        site's; for the compact class also 2 to ``block_phases`` - 1 phases (a site the window's
+        size, the paper's maps). Another shape loads from the disk cache (:mod:`.nlp_cache`)."""
         from earthbench.classes import machine_class, machine_classes
 
         out = []
@@ -276,9 +276,9 @@ class StlTampPlanner(Planner):
             lattice = global_lattice(c.global_window, c.global_fit_spacing)
             sigma = c.global_fit_spacing  # fit_rbf's width: one lattice step (sigma_factor 1)
             out.append((f"{name} local", planner._local_shape(exc), exc, truck))
-            if c.global_layer:
-                out += [(f"{name} global {m}", planner._global_shape(exc, m, side, lattice, c.global_fit_spacing, sigma),
-                         exc, truck) for m in range(c.block_phases, 1, -1)]
+            phases = range(c.block_phases, 1 if factors(exc).unit else c.block_phases - 1, -1) if c.global_layer else ()
+            out += [(f"{name} global {m}", planner._global_shape(exc, m, side, lattice, c.global_fit_spacing, sigma),
+                     exc, truck) for m in phases]
         return out
 
     def prepare(self, folder: Path, jobs: int = 1) -> dict[str, Any]:
