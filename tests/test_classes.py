@@ -98,17 +98,6 @@ def test_the_calibration_s_figures_are_the_referee_s_and_a_slower_machine_leaves
     assert main(["calibration"]) == 1
 
 
-@pytest.mark.parametrize("name", ["stl-tamp", "separate"])
-def test_the_optimisation_planners_refuse_another_class_at_once(name):
-    """Their NLPs and sizes are the compact machines' (on the 20-t class stl-tamp loaded nothing)."""
-    from earthbench.errors import EarthbenchError
-    from earthbench.registry import PLANNERS
-
-    big = fit(rbf(0, 4.0 / 3.375, n_bases=30), machine_class("20t"), 4.0)
-    with pytest.raises(EarthbenchError, match="compact machine class only.*'20t'"):
-        PLANNERS.get(name)().plan(big)
-
-
 def test_production_is_bank_m3_an_hour_and_the_stamp_names_the_class_s_band():
     from earthbench.results.aggregate import production
     from earthbench.publishing.board.tables import production_note

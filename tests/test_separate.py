@@ -226,7 +226,7 @@ def test_tour_and_rule_are_the_same_on_a_turned_or_mirrored_site():
 def test_open_loop_digs_no_more_after_a_dump_that_may_have_filled_the_truck():
     """The board's case (``standard-realistic``'s sealed draw b31d5ba6fff0, bench loam, survey
     scan, 8 m³): the compact truck's 10 loose m³ hold 7.7 to 8.3 bank m³ of loam, and 0.4.4 dug
-    on after the truck was full (``bucket_not_empty``: the dump left soil in the bucket). 0.4.5
+    on after the truck was full (``bucket_not_empty``: the dump left soil in the bucket). 0.5.0
     bounds what its digs may really deliver by the class's fullest bucket and the truck's room by
     the class's largest swell (planners/truck_load.py), and stops there."""
     truth = published_sealed_scenario("realistic/keys/standard-realistic~sealed-b31d5ba6fff0.key", "bench-loam-survey/s2/v8")

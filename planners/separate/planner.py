@@ -54,11 +54,12 @@ volume, Fig. 7a); the truck's capacity still caps what is loaded. Run it with
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -66,13 +67,14 @@ from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.cut import apply_cut, cut_level
-from earthbench.world import Heightmap, Scenario
+from earthbench.world import ExcavatorSpec, Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts, truck_side
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
-from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner, refuse_other_classes
+from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
+from ..stl_tamp.sizes import sized
 from ..truck_load import LoadBound
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
@@ -115,6 +117,12 @@ class Config(LocalNLPConfig):
     mu_strategy: str = "adaptive"
     max_areas: int = 0  # a ceiling on the local areas (0: none; the loop ends when the target is met or no area loads)
     volume_tol: float = 1e-4
+
+    #: The settings in metres and in m³: the compact excavator's, scaled for another (stl_tamp/sizes.py).
+    LENGTHS: ClassVar[tuple[str, ...]] = LocalNLPConfig.LENGTHS + (
+        "w_local", "drag_length", "local_fit_spacing", "local_fit_half", "base_offset", "truck_offset", "reach_margin",
+        "trust_radius")
+    VOLUMES: ClassVar[tuple[str, ...]] = LocalNLPConfig.VOLUMES + ("min_model_volume", "min_dig_volume")
 
     def __post_init__(self) -> None:
         if self.divisions < 0:
@@ -301,9 +309,25 @@ class SeparatePlanner(Planner):
     #: suites' layout (truck toward +y, excavator toward +x) are unchanged, bench's may move.
     #: 0.4.4: stl-tamp 0.10.5's conversion (no truck under the arm, the truck's ground kept; rules
     #: version 2); its pinned plans and those of standard seed 0 are unchanged.
-    version = "0.4.5"
+    #: 0.5.0 (issues 48, 51): no dig after a dump that may have filled the truck (planners/truck_load.py);
+    #: every machine class, its sizes scaled with the excavator (stl_tamp/sizes.py); the compact exact
+    #: track's plans are 0.4.4's.
+    version = "0.5.0"
     tracks = ("backhoe",)
     Config = Config
+
+    def __init__(self, config: Any = None, **overrides: Any):
+        super().__init__(config, **overrides)
+        self.given = self.config  # the compact excavator's sizes; ``config`` may be another's
+
+    def sized_for(self, exc: ExcavatorSpec) -> SeparatePlanner:
+        """This planner with its sizes for ``exc`` (stl_tamp/sizes.py): itself on the compact excavator."""
+        config = sized(self.given, exc)
+        if config == self.config:
+            return self
+        out = copy.copy(self)
+        out.config = config
+        return out
 
     def _stl_config(self) -> StlTampConfig:
         """The ``stl-tamp`` settings that fix the shared NLP's shape (same shape → same NLP)."""
@@ -336,12 +360,13 @@ class SeparatePlanner(Planner):
 
     # -- the plan -------------------------------------------------------------------------------
     def plan(self, scenario: Scenario) -> Plan:
-        refuse_other_classes(scenario, self.name)
-        t_start = time.perf_counter()
-        c = self.config
         exc = scenario.machines.excavator
         if exc is None:
             raise EarthbenchError("separate plans for a backhoe excavator; this scenario has none")
+        if (planner := self.sized_for(exc)) is not self:
+            return planner.plan(scenario)
+        t_start = time.perf_counter()
+        c = self.config
         trace = _Trace()
         st = SimState.start(scenario)
         box = site_box(scenario)

@@ -409,6 +409,8 @@ class Converter:
         fp = footprint(contact, heading, es.bucket_width, es.max_drag_length)
         if not st.dig_area.contains(fp):
             return "outside_dig_area"
+        if fp.intersection(Polygon(es.body(st.exc.x, st.exc.y, st.exc.yaw)[0])).area > 0.0:
+            return "under_machine"  # a drag across the arm's bearing near reach_min (the 20-t class's tracks)
         for ko in self.sc.site.keep_outs:
             if fp.intersects(Polygon(ko)):
                 return "keep_out"

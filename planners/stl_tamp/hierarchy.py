@@ -148,7 +148,7 @@ def global_blocks(box: tuple[float, float, float, float], window: tuple[float, f
 def global_lattice(window: tuple[float, float], spacing: float) -> tuple[int, int]:
     """(ny, nx) of the global surface over one window: the lattice ``fit_rbf`` gives a window
     of that size with its default margin, fixed so that every window shares one NLP."""
-    return (math.ceil(window[1] / spacing) + 3, math.ceil(window[0] / spacing) + 3)
+    return (math.ceil(round(window[1] / spacing, 9)) + 3, math.ceil(round(window[0] / spacing, 9)) + 3)
 
 
 def in_box(pt: tuple[float, float], box: tuple[float, float, float, float]) -> bool:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import itertools
+import copy
 import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
+from .sizes import factors, sized
 from .stand import candidate_areas_for, place, to_stand
 
 
@@ -68,17 +69,9 @@ class LocalNLPConfig:
     alpha_t: float = 1.0
     alpha_term: float = 0.2
 
-
-def refuse_other_classes(scenario: Scenario, name: str) -> None:
-    """Refuse a scenario of another machine class than ``compact`` (docs/machine-classes.md): the
-    NLPs the preparation compiles are built for the compact machines, and the configuration's
-    sizes in metres and m³ (areas of ``area_vmax`` = 1 m³, ``base_offset``, ``truck_offset``,
-    the fit windows, ``global_window``) are the STL-TAMP paper's machine's. On the 20-t class it
-    loaded nothing (issue 51), so it says so at once instead of returning an empty plan."""
-    cls = scenario.machines.machine_class
-    if cls != "compact":
-        raise EarthbenchError(f"{name} plans for the compact machine class only (its NLPs and its sizes in metres are the "
-                              f"STL-TAMP paper's machine's); this scenario's class is {cls!r} (docs/machine-classes.md)")
+    #: The settings in metres and in m³: the compact excavator's, scaled for another (.sizes).
+    LENGTHS: ClassVar[tuple[str, ...]] = ("dig_depth", "eps_d")
+    VOLUMES: ClassVar[tuple[str, ...]] = ("eps_v",)
 
 
 _OMIT = {"omit_default": True}  # a setting left out of the configuration's hash at its default
@@ -173,6 +166,10 @@ class Config(LocalNLPConfig):
     face_away: bool = field(default=True, metadata=_OMIT)
     side_by_swing: bool = field(default=False, metadata=_OMIT)  # issue 49: measured, off (.stand; NOTES.md, "0.12.0")
 
+    LENGTHS = LocalNLPConfig.LENGTHS + ("stand_tol", "base_offset", "truck_offset", "local_fit_spacing",
+                                        "local_fit_half", "global_fit_spacing", "global_window", "repair")
+    VOLUMES = LocalNLPConfig.VOLUMES + ("area_vmax", "min_dig_volume")
+
     def __post_init__(self) -> None:
         if self.solver not in ("fatrop", "ipopt"):
             raise ValueError(f"solver must be 'fatrop' or 'ipopt', got {self.solver!r}")
@@ -187,10 +184,8 @@ class StlTampPlanner(Planner):
 
     0.10.3: closed loop (:mod:`.receding`) keeps the first step's sides and asks for the missing
     volume over the yield the truck has reported. Open-loop plans are 0.10.2's.
-
     0.10.4: an NLP's key leaves out the truck's capacity (:func:`.model.nlp_truck`): the same
     plans, the prepared NLPs now serving the ``scale`` ladder's larger trucks.
-
     0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
     model (digs under the arm skipped or repaired, truck moves over rough ground replaced).
 
@@ -203,14 +198,28 @@ class StlTampPlanner(Planner):
     NLP is bound to it; areas on the truck's side face away from it, an area in reach keeps the base, and the truck follows
     the dig face (``Converter.follow``). The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too.
 
-    0.12.0 (issue 48): on a scanned site the truck's ground keeps a margin for a face the scan misplaces
-    (``convert.ScanStands``, ``planners/stability.face_blur``); the exact track's plans are 0.11.0's."""
+    0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
+    ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
+    (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's."""
 
     name = "stl-tamp"
     version = "0.12.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
+
+    def __init__(self, config: Any = None, **overrides: Any):
+        super().__init__(config, **overrides)
+        self.given = self.config  # the compact excavator's sizes (.sizes); ``config`` may be another's
+
+    def sized_for(self, exc: ExcavatorSpec) -> StlTampPlanner:
+        """This planner with its sizes for ``exc`` (:mod:`.sizes`): itself on the compact excavator."""
+        config = sized(self.given, exc)
+        if config == self.config:
+            return self
+        out = copy.copy(self)
+        out.config = config
+        return out
 
     # -- shapes ---------------------------------------------------------------------------------
     def local_shape(self, scenario: Scenario) -> Shape:
@@ -224,7 +233,7 @@ class StlTampPlanner(Planner):
                      work_time=e.min_stroke_time + e.min_dump_time, terrain_shape=(nt, nt),
                      terrain_spacing=c.local_fit_spacing, terrain_sigma=c.local_fit_spacing, sigmoid_k=c.sigmoid_k,
                      widen=c.quad_widen, eps_eta=c.eps_eta, eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta,
-                     dtm_max=c.dtm_max, hold_base=True)
+                     dtm_max=c.dtm_max, dtw_max=Shape.dtw_max * factors(e).work_time, hold_base=True)
 
     def area_side(self, scenario: Scenario) -> float:
         """√S_l, or less where the dig area is narrower (paper-switch's 2.0 × 1.75 m area is one
@@ -244,52 +253,40 @@ class StlTampPlanner(Planner):
                      unit_depth=c.dig_depth, vmax=c.area_vmax,
                      work_time=c.area_vmax / cap * (exc.min_stroke_time + exc.min_dump_time + 2.0),
                      terrain_shape=lattice, terrain_spacing=spacing, terrain_sigma=sigma, quad=(3, 3),
-                     dtm_max=6.0, dtw_max=15.0, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
+                     dtm_max=6.0, dtw_max=15.0 * factors(exc).work_time, sigmoid_k=c.sigmoid_k, widen=c.quad_widen, eps_eta=c.eps_eta,
                      eps_v=c.eps_v, eps_d=c.eps_d, beta=c.beta)
 
     # -- preparation (docs/DESIGN.md §6 "Preparation") -----------------------------------------
     def prepared_shapes(self) -> list[tuple[str, Shape, ExcavatorSpec, TruckSpec]]:
-        """The NLPs :meth:`prepare` compiles, from the benchmark's machines and this configuration
-        alone (no scenario): the local NLP, and the global NLP of one window (``global_window``,
-        the lattice every windowed site and a site of the window's size share) with 2 to
-        ``block_phases`` phases (a plan's global problem has min(need + 1, areas) phases, at most
-        ``block_phases`` on a windowed site). A plan on any other shape loads that NLP from the
-        disk cache as before (:mod:`.nlp_cache`): the same plan, uncompiled."""
-        c = self.config
-        exc, truck = ExcavatorSpec(), TruckSpec()
-        side = math.sqrt(c.area_buckets * exc.bucket_width * exc.max_drag_length)
-        lattice = global_lattice(c.global_window, c.global_fit_spacing)
-        sigma = c.global_fit_spacing  # fit_rbf's width: one lattice step (sigma_factor 1)
-        out = [("local", self._local_shape(exc), exc, truck)]
-        if c.global_layer:
-            out += [(f"global {m}", self._global_shape(exc, m, side, lattice, c.global_fit_spacing, sigma), exc, truck)
-                    for m in range(c.block_phases, 1, -1)]
+        """The NLPs :meth:`prepare` compiles, per machine class with an excavator (its sizes:
+        :mod:`.sizes`), from the class and this configuration alone: the local NLP and the global
+        NLP of one window (``global_window``'s lattice) with ``block_phases`` phases, every windowed
+        site's; for the compact class also 2 to ``block_phases`` - 1 phases (a site the window's
+        size, the paper's maps). Another shape loads from the disk cache (:mod:`.nlp_cache`)."""
+        from earthbench.classes import machine_class, machine_classes
+
+        out = []
+        for name in machine_classes():
+            exc, truck = machine_class(name).excavator, machine_class(name).truck
+            if exc is None:
+                continue
+            planner = self.sized_for(exc)
+            c = planner.config
+            side = math.sqrt(c.area_buckets * exc.bucket_width * exc.max_drag_length)
+            lattice = global_lattice(c.global_window, c.global_fit_spacing)
+            sigma = c.global_fit_spacing  # fit_rbf's width: one lattice step (sigma_factor 1)
+            out.append((f"{name} local", planner._local_shape(exc), exc, truck))
+            phases = range(c.block_phases, 1 if factors(exc).unit else c.block_phases - 1, -1) if c.global_layer else ()
+            out += [(f"{name} global {m}", planner._global_shape(exc, m, side, lattice, c.global_fit_spacing, sigma),
+                     exc, truck) for m in phases]
         return out
 
     def prepare(self, folder: Path, jobs: int = 1) -> dict[str, Any]:
         """Compile the NLPs of :meth:`prepared_shapes` into ``folder`` (:mod:`.compiled`), the
         compilers ``jobs`` at a time; returns what was compiled and how long it took."""
-        from . import compiled
-        from .model import build_functions
+        from .preparation import compile_nlps
 
-        out: dict[str, Any] = {"compiler": compiled.compiler_version(), "nlps": {}}
-        if compiled.compiler() is None:  # nothing to compile with: cases load their NLPs as before
-            out["note"] = "no C compiler: the NLPs stay uncompiled (the same plans, solved more slowly)"
-            return out
-        # with FATROP, each NLP twice: stage by stage for FATROP, classic for IPOPT's fallback
-        layouts = (False, True) if self.config.solver == "fatrop" else (False,)
-        builds = list(itertools.product(self.prepared_shapes(), layouts))
-        for i, ((label, shape, exc, truck), staged_layout) in enumerate(builds):
-            label += " staged" if staged_layout else ""
-            self.report_progress(i, len(builds), f"NLP {label}: building and compiling")
-            t0 = time.perf_counter()
-            name, fns = build_functions(shape, exc, truck, staged_layout)
-            t_build = time.perf_counter() - t0
-            took = compiled.build(fns, folder, name, jobs=jobs, log=lambda m: print(m, flush=True), staged=staged_layout)
-            out["nlps"][label] = {"key": name, "build_s": round(t_build, 2), "compile_s": {k: round(v, 2) for k, v in took.items()}}
-            print(f"{label}: built in {t_build:.1f} s, compiled in {sum(took.values()):.1f} s of compiler time", flush=True)
-        self.report_progress(len(builds), len(builds), "done")
-        return out
+        return compile_nlps(self, folder, jobs)
 
     def _use_prepared(self) -> None:
         from .model import use_prepared
@@ -302,13 +299,16 @@ class StlTampPlanner(Planner):
         from .receding import Horizon, step
 
         if observation.step == 0:
-            refuse_other_classes(observation.scenario, self.name)
             self._use_prepared()
             self._horizon = Horizon()
-        return step(self, observation, self._horizon)
+            exc = observation.scenario.machines.excavator
+            self._sized = self if exc is None else self.sized_for(exc)
+        return step(self._sized, observation, self._horizon)
 
     def plan(self, scenario: Scenario) -> Plan:
-        refuse_other_classes(scenario, self.name)
+        exc = scenario.machines.excavator
+        if exc is not None and (planner := self.sized_for(exc)) is not self:
+            return planner.plan(scenario)
         t_start = time.perf_counter()
         self._use_prepared()
         c = self.config
