@@ -54,7 +54,6 @@ volume, Fig. 7a); the truck's capacity still caps what is loaded. Run it with
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import time
@@ -67,14 +66,14 @@ from earthbench.errors import EarthbenchError
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Planner
 from earthbench.cut import apply_cut, cut_level
-from earthbench.world import ExcavatorSpec, Heightmap, Scenario
+from earthbench.world import Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts, truck_side
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
-from ..stl_tamp.sizes import sized
+from ..stl_tamp.sizes import Sized
 from ..truck_load import LoadBound
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
@@ -299,7 +298,7 @@ def site_frame(scenario: Scenario) -> Frame:
     return (tx, ty), (ux, uy)
 
 
-class SeparatePlanner(Planner):
+class SeparatePlanner(Sized, Planner):
     """Rule-chosen tasks (Fig. 5b), motions and times by the STL-TAMP local NLP (Eq. (25))."""
 
     name = "separate"
@@ -315,19 +314,6 @@ class SeparatePlanner(Planner):
     version = "0.5.0"
     tracks = ("backhoe",)
     Config = Config
-
-    def __init__(self, config: Any = None, **overrides: Any):
-        super().__init__(config, **overrides)
-        self.given = self.config  # the compact excavator's sizes; ``config`` may be another's
-
-    def sized_for(self, exc: ExcavatorSpec) -> SeparatePlanner:
-        """This planner with its sizes for ``exc`` (stl_tamp/sizes.py): itself on the compact excavator."""
-        config = sized(self.given, exc)
-        if config == self.config:
-            return self
-        out = copy.copy(self)
-        out.config = config
-        return out
 
     def _stl_config(self) -> StlTampConfig:
         """The ``stl-tamp`` settings that fix the shared NLP's shape (same shape → same NLP)."""

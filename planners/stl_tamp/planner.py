@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -41,7 +40,7 @@ from .hierarchy import (
     solve_counts,
 )
 from .problem import Shape, Solution
-from .sizes import factors, sized
+from .sizes import Sized, factors
 from .stand import candidate_areas_for, place, to_stand
 
 
@@ -175,7 +174,7 @@ class Config(LocalNLPConfig):
             raise ValueError(f"solver must be 'fatrop' or 'ipopt', got {self.solver!r}")
 
 
-class StlTampPlanner(Planner):
+class StlTampPlanner(Sized, Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
 
     0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the same values to the bit, so the same plans,
@@ -207,19 +206,6 @@ class StlTampPlanner(Planner):
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
-
-    def __init__(self, config: Any = None, **overrides: Any):
-        super().__init__(config, **overrides)
-        self.given = self.config  # the compact excavator's sizes (.sizes); ``config`` may be another's
-
-    def sized_for(self, exc: ExcavatorSpec) -> StlTampPlanner:
-        """This planner with its sizes for ``exc`` (:mod:`.sizes`): itself on the compact excavator."""
-        config = sized(self.given, exc)
-        if config == self.config:
-            return self
-        out = copy.copy(self)
-        out.config = config
-        return out
 
     # -- shapes ---------------------------------------------------------------------------------
     def local_shape(self, scenario: Scenario) -> Shape:

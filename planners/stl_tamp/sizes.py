@@ -18,6 +18,7 @@ its plans are those of the versions before the rule.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -28,6 +29,7 @@ from earthbench.world import ExcavatorSpec
 REFERENCE = ExcavatorSpec()
 
 C = TypeVar("C")
+P = TypeVar("P", bound="Sized")
 
 
 @dataclass(frozen=True)
@@ -64,3 +66,23 @@ def sized(config: C, exc: ExcavatorSpec) -> C:
     changes = {name: _scaled(getattr(config, name), f.length) for name in getattr(config, "LENGTHS", ())}
     changes.update({name: _scaled(getattr(config, name), f.volume) for name in getattr(config, "VOLUMES", ())})
     return dataclasses.replace(config, **changes)  # type: ignore[type-var]
+
+
+class Sized:
+    """A planner whose configuration is given in the compact excavator's sizes and planned with
+    those of the scenario's excavator (mixed in before :class:`earthbench.planner.Planner`)."""
+
+    config: Any
+
+    def __init__(self, config: Any = None, **overrides: Any):
+        super().__init__(config, **overrides)  # type: ignore[call-arg]
+        self.given = self.config  # the compact excavator's sizes; ``config`` may be another's
+
+    def sized_for(self: P, exc: ExcavatorSpec) -> P:
+        """This planner with its sizes for ``exc``: itself on the compact excavator."""
+        config = sized(self.given, exc)
+        if config == self.config:
+            return self
+        out = copy.copy(self)
+        out.config = config
+        return out
