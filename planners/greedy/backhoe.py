@@ -43,12 +43,12 @@ from earthbench.cut import apply_cut, cut_along, path_cells, path_window
 from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
-from earthbench.rules import track_level_and_tilt, undermining_excess
+from earthbench.rules import track_level_and_tilt
 from earthbench.soil import slump
 from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 
 from ..backhoe_loop import BackhoeLoopPlanner
-from ..stability import margins
+from ..stability import Stroke, margins, path_undermines
 from ..truck_stands import TruckStands
 from .moves import Moves
 from .opening import Opening
@@ -378,18 +378,13 @@ class _Greedy(Moves, Opening):
         margin = self.margins.undermining
         if level >= track_level + margin:
             return False  # nothing is cut below the tracks' ground
-        e = self.exc
-        jj, ii, _ = cells
-        before = self.z[jj, ii]
         # on a scan (the realistic track) the bucket may fill later than planned and drag on toward
         # the tracks: where the scan hides a face below an edge (a cab's view) it fills it from above,
-        # so the true face holds less than the scan shows; the whole drag is checked there
-        capacity = e.bucket_capacity if self.sc.soil is None else math.inf
-        cut_along(self.terrain, self.z, contact, heading, e.bucket_width, e.max_drag_length, level, capacity, cells)
-        cut = self.z[jj, ii] < before
-        excess = undermining_excess(self.terrain, self.z, e, self.base, track_level, jj[cut], ii[cut])
-        self.z[jj, ii] = before
-        return excess > -max(ABS_TOL, margin)
+        # so the true face holds less than the scan shows; the whole drag is checked there, cut to
+        # greedy's own level (``lowest``), not to the floor as singh-cannon-backhoe assumes
+        e = self.exc
+        stroke = Stroke(contact, heading, e.max_drag_length, level, e.bucket_capacity, cells, level)
+        return path_undermines(self.sc, self.z, self.base, track_level, stroke, max(ABS_TOL, margin))
 
     def _window(self, contact: tuple[float, float], heading: float) -> tuple[slice, slice]:
         """Rows and columns of the grid holding every cell a stroke from ``contact`` may cut."""
