@@ -122,7 +122,7 @@ class CycleBuilder:
         the truck fill, so it bounds what its charges may really deliver
         (:attr:`ChargeResult.most`) by the class's fullest bucket and its largest swell
         (:class:`LoadBound`)."""
-        return most <= self.room + 1e-9
+        return self.load is None or self.load.took_all(most, self.loaded0)
 
     def public_cap(self, most: float, capacity: float, need: float, share: float) -> float:
         """The most the next charge's path may hold on the public cut model (the overfill rule's
