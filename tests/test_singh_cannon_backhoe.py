@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import signal
 from collections import defaultdict
 
 import numpy as np
@@ -15,7 +16,8 @@ from earthbench.cut import apply_cut, cut_level, footprint
 from earthbench.sensing import observe
 from earthbench.world import Site
 from earthbench.results.scoring import evaluate
-from earthbench_planners.singh_cannon.backhoe import SinghCannonBackhoe
+from earthbench.results.suite import load_suite
+from earthbench_planners.singh_cannon.backhoe import IDLE_MOVES, SinghCannonBackhoe
 from earthbench_planners.singh_cannon.backhoe_model import ForwardModel, SoilModel, candidate_grid, evaluate as forward, falling, xi_volume
 from earthbench_terrains.bench import bench
 from earthbench_terrains.dem import dem
@@ -245,6 +247,31 @@ def test_fig11_digs_move_down_the_face_and_the_machine_moves_when_nothing_is_lef
     station = type(ses.base)(end[1], end[2], end[3])
     assert ses.best_dig(ses.coarse_plan(station, ses.v_min), 0, station, 0.0, ses.v_min)[1] is not None
     assert len(digs) > sum(1 for d in digs if d["station"] == 0)
+
+
+def test_stations_the_truck_cannot_serve_end_in_a_relaxed_fill_not_endless_creeping():
+    """On this `scale` site 1.5 found a dig from each new station that the truck could not then
+    serve, and crept on to the next station for ever (its case timed out at 600 s)."""
+    sc = next(s for s in load_suite("scale").scenarios if s.id == "scale/rbf24x12/s4/v16")
+
+    def hung(signum, frame):  # the old loop never returns: fail instead of hanging the suite
+        raise AssertionError("the planner is still moving from station to station")
+
+    old = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(300)
+    try:
+        plan = SinghCannonBackhoe().plan(sc)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    verdict = judge(sc, plan)
+    assert verdict.valid, verdict.violations[:3]
+    assert evaluate(sc, plan, verdict)["volume_ratio"] >= 0.9
+    in_a_row = longest = 0
+    for a in sorted((a for a in plan.actions if a.machine == "excavator"), key=lambda a: a.t_start):
+        in_a_row = in_a_row + 1 if isinstance(a, Move) else 0
+        longest = max(longest, in_a_row)
+    assert 1 <= longest <= IDLE_MOVES
 
 
 def test_station_convolution_is_the_direct_sum():

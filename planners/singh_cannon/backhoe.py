@@ -101,6 +101,12 @@ def _convolve_full(blocks: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return out
 
 
+IDLE_MOVES = 3
+"""Stations tried in a row without a dig before V_min is relaxed. A station chosen for a dig
+the truck then cannot serve leads to another like it; without this cap the excavator creeps
+from one to the next for ever (a `scale` site at 16 m³ timed out so)."""
+
+
 @dataclass(frozen=True)
 class SinghCannonBackhoeConfig:
     n_d: int = 20
@@ -178,7 +184,7 @@ class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.5"
+    version = "1.6"
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -538,7 +544,7 @@ class Session(TruckMoves):
         self.regions = self.coarse_plan(self.base, self.v_min)
         self.ptr = 0
         status = "target reached"
-        digs, parked = 0, False
+        digs, parked, idle_moves = 0, False, 0
         while self.loaded < target - 1e-9:
             if self.loaded >= self.truck_spec.capacity - 1e-9:
                 status = "truck full"
@@ -571,8 +577,10 @@ class Session(TruckMoves):
                 self.events.append({"event": "exhausted", "t": self.t, "station": self.station, "v_min": self.v_min})
                 dist = np.hypot(self.X - self.base.x, self.Y - self.base.y)
                 self.depleted |= (dist >= self.spec.reach_min) & (dist <= self.spec.reach_max)
-                if self.relocate(self.v_min):
+                if idle_moves < IDLE_MOVES and self.relocate(self.v_min):
+                    idle_moves += 1
                     continue
+                idle_moves = 0
                 level += 1
                 if level >= len(fills):
                     status = "no feasible dig left"
@@ -581,7 +589,7 @@ class Session(TruckMoves):
                 self.regions, self.ptr = self.coarse_plan(self.base, self.v_min), 0
                 continue
             vol = self.do_dig(ch)
-            digs += 1
+            digs, idle_moves = digs + 1, 0
             self.do_dump(vol)
             if max_dumps is not None and digs >= max_dumps:
                 status = "step done"
