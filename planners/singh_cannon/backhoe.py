@@ -102,9 +102,7 @@ def _convolve_full(blocks: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 
 
 IDLE_MOVES = 3
-"""Stations tried in a row without a dig before V_min is relaxed. A station chosen for a dig
-the truck then cannot serve leads to another like it; without this cap the excavator creeps
-from one to the next for ever (a `scale` site at 16 m³ timed out so)."""
+"""Stations tried in a row without a dig before V_min is relaxed: else one the truck cannot serve from leads to the next for ever."""
 
 
 @dataclass(frozen=True)
@@ -580,8 +578,7 @@ class Session(TruckMoves):
                 if idle_moves < IDLE_MOVES and self.relocate(self.v_min):
                     idle_moves += 1
                     continue
-                idle_moves = 0
-                level += 1
+                level, idle_moves = level + 1, 0
                 if level >= len(fills):
                     status = "no feasible dig left"
                     break
