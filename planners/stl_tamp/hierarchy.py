@@ -116,9 +116,20 @@ class Trace:
     locals_: list[dict[str, Any]] = field(default_factory=list)
     fallbacks: int = 0
     regenerated: int = 0
+    # visits to areas without a truck stand (.stand.place) that dug and that dug nothing, and such areas
+    # passed over (not solved, or not given to a window's global problem): none, and the plan is 0.12.0's
+    standless_dug: int = 0
+    standless_fruitless: int = 0
+    standless_passed: int = 0
     nlp_cache: dict[str, int] = field(default_factory=dict)  # NLPs loaded ("hit") or built ("miss", "off")
     # solves by FATROP and by IPOPT, and FATROP's failures IPOPT solved again ("fallback")
     solvers: dict[str, int] = field(default_factory=lambda: {"fatrop": 0, "ipopt": 0, "fallback": 0})
+
+    def standless_hopeless(self, tries: int) -> bool:
+        """Whether areas without a truck stand are passed over: ``tries`` of them dug nothing for
+        each that dug, and one more (on a site larger than the truck's reach nearly all are beyond
+        dump reach; on a small one the NLP's truck often serves them, so they are tried first)."""
+        return tries > 0 and self.standless_fruitless >= tries * (self.standless_dug + 1)
 
     def add_build(self, nlp: PhaseNLP) -> None:
         """Count the NLP's construction seconds not yet reported and, once, how it was made."""

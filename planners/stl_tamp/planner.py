@@ -41,7 +41,7 @@ from .hierarchy import (
 )
 from .problem import Shape, Solution
 from .sizes import Sized, factors
-from .stand import candidate_areas_for, place, to_stand
+from .stand import candidate_areas_for, place, served, to_stand
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -164,6 +164,7 @@ class Config(LocalNLPConfig):
     keep_base: bool = field(default=True, metadata=_OMIT)
     face_away: bool = field(default=True, metadata=_OMIT)
     side_by_swing: bool = field(default=False, metadata=_OMIT)  # issue 49: measured, off (.stand; NOTES.md, "0.12.0")
+    standless_tries: int = field(default=3, metadata=_OMIT)  # 0.12.1: standless areas tried before passed over (0: never)
 
     LENGTHS = LocalNLPConfig.LENGTHS + ("stand_tol", "base_offset", "truck_offset", "local_fit_spacing",
                                         "local_fit_half", "global_fit_spacing", "global_window", "repair")
@@ -325,6 +326,10 @@ class StlTampPlanner(Sized, Planner):
         while remaining > c.volume_tol and left:
             block = nearest_block(blocks, left, (st.exc.x, st.exc.y))
             in_block = [a for a in left if in_box(a.centre, block)]
+            if len(blocks) > 1 and trace.standless_hopeless(c.standless_tries):  # no global solve over areas no stand serves
+                kept = served(c, conv, st, in_block, min(remaining, vmax) / (exc.bucket_capacity * c.fill_estimate))
+                trace.standless_passed += len(in_block) - len(kept)
+                in_block = kept
             v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
                                                              (c.block_phases - 1) * c.area_vmax)
             tour = greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3)
@@ -350,7 +355,8 @@ class StlTampPlanner(Sized, Planner):
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
                 "fit_time_s": trace.fit_time_s, "build_time_s": trace.build_time_s, "nlp_cache": trace.nlp_cache,
                 "fallbacks": trace.fallbacks, "local_solves": solve_counts(trace.locals_), "skipped": dict(conv.skips),
-                "solvers": dict(trace.solvers),
+                "standless": {"dug": trace.standless_dug, "fruitless": trace.standless_fruitless,
+                              "passed_over": trace.standless_passed}, "solvers": dict(trace.solvers),
                 "global": trace.global_, "local": trace.locals_, "plan_time_s": time.perf_counter() - t_start}
         return Plan(actions=tuple(st.actions),
                     predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)), info=info)
@@ -465,6 +471,12 @@ class StlTampPlanner(Sized, Planner):
         # a small remainder is still planned as (at least) a bucket of work: the conversion then
         # bisects the real dig's depth to take exactly what is missing
         v_local = min(max(remaining, c.min_local_target * exc.bucket_capacity), vmax)
+        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand; side_by_swing: priced over all that is left)
+        placed, stand = place(c, conv, st, area, (remaining if c.side_by_swing else v_local) / (exc.bucket_capacity * c.fill_estimate))
+        standless = stand is None and c.place_truck
+        if standless and trace.standless_hopeless(c.standless_tries):
+            trace.standless_passed += 1  # such areas have only failed on this site: neither solved nor driven to
+            return 0.0, 0.0, joints
         # terrain parameter: a fit of the current grid around the area (the digs so far included)
         lp = local_problem(scenario, st, area, shape, box, joints, fit_spacing=c.local_fit_spacing, fit_half=c.local_fit_half,
                            fit_solver=c.local_fit_solver, vt=v_local,
@@ -472,8 +484,7 @@ class StlTampPlanner(Sized, Planner):
         nlp, surf, floor, s0, params = lp.nlp, lp.surf, lp.floor, lp.s0, lp.params
         trace.fit_time_s += lp.fit_time_s
         cx, cy = area.centre
-        # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand; side_by_swing: priced over all that is left)
-        area, stand = place(c, conv, st, area, (remaining if c.side_by_swing else v_local) / (exc.bucket_capacity * c.fill_estimate))
+        area = placed
         truck = (stand.x, stand.y) if stand is not None else area.truck
         k_active = min(c.m_local, max(1, int(math.ceil(v_local / (exc.bucket_capacity * c.fill_estimate)))))
         seeds = local_seeds(area, k_active, c.m_local, exc.bucket_width, exc.max_drag_length, surf, c.eta_init, truck)
@@ -508,9 +519,12 @@ class StlTampPlanner(Sized, Planner):
         if c.as_planned:  # the NLP's own depth: its contact height less max(floor, that − d_dig)
             pz = nlp.evaluate(sol.info["w"], params)["contact_heights"]
             depths = np.clip(pz - np.maximum(floor, pz - shape.unit_depth), 0.0, shape.unit_depth)
+        digs = st.digs
         got = self._emit(st, conv, nlp, sol, remaining, depths, stand)
-        rec["loaded"] = got
-        rec["wall_s"] = time.perf_counter() - t_wall
+        if standless:
+            trace.standless_dug += st.digs > digs
+            trace.standless_fruitless += st.digs == digs
+        rec["loaded"], rec["wall_s"] = got, time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))
 

@@ -127,10 +127,14 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
         chosen, _ = planner._global(sc, st, surf, tour, v_block, side, box, block, len(blocks) > 1, h.trace)
     else:
         chosen = tour
-    got, h.ahead = 0.0, []
-    for k, area in enumerate(chosen[:TRIES]):  # an area that yields nothing: on to the next the solution chose
+    got, h.ahead, solved = 0.0, [], 0
+    for k, area in enumerate(chosen):  # an area that yields nothing: on to the next the solution chose
+        if solved == TRIES:  # an area passed over for want of a truck stand (0.12.1) is not a try
+            break
         nxt = chosen[k + 1].base if k + 1 < len(chosen) else area.base
+        passed = h.trace.standless_passed
         got, _, h.joints = planner._local(sc, st, conv, area, nxt, remaining, vmax, h.joints, box, h.trace)
+        solved += h.trace.standless_passed == passed
         if got > c.volume_tol:
             h.ahead = chosen[k + 1:]
             break

@@ -185,6 +185,12 @@ def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> 
     return area, stand
 
 
+def served(c: Any, conv: Converter, st: SimState, areas: list[Area], buckets: float) -> list[Area]:
+    """The ``areas`` for which :func:`place` finds the truck a stand: what a window's global problem
+    is given once areas without one have proved hopeless (``Trace.standless_hopeless``)."""
+    return [a for a in areas if place(c, conv, st, a, buckets)[1] is not None]
+
+
 def to_stand(conv: Converter, st: SimState, ve: np.ndarray, we: np.ndarray, dts: np.ndarray, stand: Pose) -> str | None:
     """Phase 0 with the truck's stand chosen: the excavator along the NLP's controls and the
     truck straight to ``stand`` (turn, drive, turn; the NLP's truck ends within ``stand_tol``
