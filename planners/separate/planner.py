@@ -69,11 +69,13 @@ from earthbench.cut import apply_cut, cut_level
 from earthbench.world import Heightmap, Scenario
 from ..stl_tamp.convert import Converter, SimState
 from ..stl_tamp.guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from ..stl_tamp.hierarchy import Area, candidate_areas, fitting_side, local_problem, site_box, solve_counts, truck_side
+from ..stl_tamp.hierarchy import (Area, Standless, candidate_areas, fitting_side, local_problem, site_box, solve_counts,
+                                  truck_side)
 from ..stl_tamp.problem import Solution, quantize
 from ..stl_tamp.planner import Config as StlTampConfig
 from ..stl_tamp.planner import LocalNLPConfig, StlTampPlanner
 from ..stl_tamp.sizes import Sized
+from ..stl_tamp.stand import truck_stand
 from ..truck_load import LoadBound
 
 if TYPE_CHECKING:  # CasADi loads with the first NLP, not with the planner (stl_tamp/problem.py)
@@ -114,6 +116,7 @@ class Config(LocalNLPConfig):
     trust_rounds: int = 2
     max_iter: int = 250  # an iteration cap only (no CPU-time cap: load must not change a plan)
     mu_strategy: str = "adaptive"
+    standless_tries: int = field(default=3, metadata={"omit_default": True})  # 0.5.1: as stl-tamp's (0: never)
     max_areas: int = 0  # a ceiling on the local areas (0: none; the loop ends when the target is met or no area loads)
     volume_tol: float = 1e-4
 
@@ -148,6 +151,7 @@ class _Trace:
     build_time_s: float = 0.0
     fallbacks: int = 0
     areas: list[dict[str, Any]] = field(default_factory=list)
+    standless: Standless = field(default_factory=Standless)
 
 
 @dataclass
@@ -311,7 +315,8 @@ class SeparatePlanner(Sized, Planner):
     #: 0.5.0 (issues 48, 51): no dig after a dump that may have filled the truck (planners/truck_load.py);
     #: every machine class, its sizes scaled with the excavator (stl_tamp/sizes.py); the compact exact
     #: track's plans are 0.4.4's.
-    version = "0.5.0"
+    #: 0.5.1 (``scale``): areas without a truck stand are passed over once they proved hopeless (as stl-tamp 0.12.1).
+    version = "0.5.1"
     tracks = ("backhoe",)
     Config = Config
 
@@ -374,13 +379,21 @@ class SeparatePlanner(Sized, Planner):
                 if not queue:
                     break
             area = queue.pop(0)
+            # an area for which the truck has no stand is passed over once such areas proved hopeless (0.5.1)
+            standless = c.standless_tries > 0 and truck_stand(conv, st, area, c.m_local) is None
+            if standless and trace.standless.hopeless(c.standless_tries):
+                trace.standless.passed += 1
+                trace.areas.append({"area": list(area.centre), "skipped": "no truck stand, and such areas dug nothing here"})
+                continue
             digs = self.rule(scenario, st.z, area)
             if not any(d.volume >= c.min_dig_volume for d in digs):
                 trace.areas.append({"area": list(area.centre), "skipped": "no material the rule can reach"})
                 continue
             goal = queue[0].base if queue else area.base
-            before = st.loaded
+            before, dug = st.loaded, st.digs
             joints = self._local(scenario, st, conv, area, digs, goal, target, joints, box, trace, load)
+            if standless:
+                trace.standless.visited(st.digs > dug)
             pass_loaded += st.loaded - before
             n_areas += 1
         makespan = max((a.t_end for a in st.actions), default=0.0)
@@ -397,6 +410,7 @@ class SeparatePlanner(Sized, Planner):
                 "fallbacks": trace.fallbacks,
                 "local_solves": solve_counts([r for r in trace.areas if "status" in r]),
                 "skipped": dict(conv.skips),
+                "standless": trace.standless.record(),
                 "local": trace.areas,
                 "plan_time_s": time.perf_counter() - t_start,
             },

@@ -107,6 +107,30 @@ class Area:
 
 
 @dataclass
+class Standless:
+    """Visits to areas for which the truck has no stand (:func:`.stand.truck_stand`) that dug and
+    that dug nothing, and such areas passed over once they proved hopeless on the site (stl-tamp
+    0.12.1, separate 0.5.1): on a site larger than the truck's reach nearly all of them lie beyond
+    dump reach, each costing a local solve and a drive for nothing; on a small site the NLP's truck
+    often serves them. No area passed over: the plan is the one of the versions before."""
+
+    dug: int = 0
+    fruitless: int = 0
+    passed: int = 0
+
+    def hopeless(self, tries: int) -> bool:
+        """``tries`` fruitless visits for each that dug, and one more (``tries`` 0: never)."""
+        return tries > 0 and self.fruitless >= tries * (self.dug + 1)
+
+    def visited(self, dug: bool) -> None:
+        self.dug += dug
+        self.fruitless += not dug
+
+    def record(self) -> dict[str, int]:
+        return {"dug": self.dug, "fruitless": self.fruitless, "passed_over": self.passed}
+
+
+@dataclass
 class Trace:
     """What happened, for ``plan.info`` and the report."""
 
@@ -116,20 +140,10 @@ class Trace:
     locals_: list[dict[str, Any]] = field(default_factory=list)
     fallbacks: int = 0
     regenerated: int = 0
-    # visits to areas without a truck stand (.stand.place) that dug and that dug nothing, and such areas
-    # passed over (not solved, or not given to a window's global problem): none, and the plan is 0.12.0's
-    standless_dug: int = 0
-    standless_fruitless: int = 0
-    standless_passed: int = 0
+    standless: Standless = field(default_factory=Standless)  # areas without a truck stand (0.12.1)
     nlp_cache: dict[str, int] = field(default_factory=dict)  # NLPs loaded ("hit") or built ("miss", "off")
     # solves by FATROP and by IPOPT, and FATROP's failures IPOPT solved again ("fallback")
     solvers: dict[str, int] = field(default_factory=lambda: {"fatrop": 0, "ipopt": 0, "fallback": 0})
-
-    def standless_hopeless(self, tries: int) -> bool:
-        """Whether areas without a truck stand are passed over: ``tries`` of them dug nothing for
-        each that dug, and one more (on a site larger than the truck's reach nearly all are beyond
-        dump reach; on a small one the NLP's truck often serves them, so they are tried first)."""
-        return tries > 0 and self.standless_fruitless >= tries * (self.standless_dug + 1)
 
     def add_build(self, nlp: PhaseNLP) -> None:
         """Count the NLP's construction seconds not yet reported and, once, how it was made."""

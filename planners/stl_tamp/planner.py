@@ -200,10 +200,11 @@ class StlTampPlanner(Sized, Planner):
 
     0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
     ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
-    (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's."""
+    (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
+    0.12.1 (``scale``): areas without a truck stand are passed over once they proved hopeless on the site (``standless_tries``)."""
 
     name = "stl-tamp"
-    version = "0.12.0"
+    version = "0.12.1"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
@@ -326,9 +327,9 @@ class StlTampPlanner(Sized, Planner):
         while remaining > c.volume_tol and left:
             block = nearest_block(blocks, left, (st.exc.x, st.exc.y))
             in_block = [a for a in left if in_box(a.centre, block)]
-            if len(blocks) > 1 and trace.standless_hopeless(c.standless_tries):  # no global solve over areas no stand serves
+            if len(blocks) > 1 and trace.standless.hopeless(c.standless_tries):  # no global solve over areas no stand serves
                 kept = served(c, conv, st, in_block, min(remaining, vmax) / (exc.bucket_capacity * c.fill_estimate))
-                trace.standless_passed += len(in_block) - len(kept)
+                trace.standless.passed += len(in_block) - len(kept)
                 in_block = kept
             v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
                                                              (c.block_phases - 1) * c.area_vmax)
@@ -355,8 +356,7 @@ class StlTampPlanner(Sized, Planner):
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
                 "fit_time_s": trace.fit_time_s, "build_time_s": trace.build_time_s, "nlp_cache": trace.nlp_cache,
                 "fallbacks": trace.fallbacks, "local_solves": solve_counts(trace.locals_), "skipped": dict(conv.skips),
-                "standless": {"dug": trace.standless_dug, "fruitless": trace.standless_fruitless,
-                              "passed_over": trace.standless_passed}, "solvers": dict(trace.solvers),
+                "standless": trace.standless.record(), "solvers": dict(trace.solvers),
                 "global": trace.global_, "local": trace.locals_, "plan_time_s": time.perf_counter() - t_start}
         return Plan(actions=tuple(st.actions),
                     predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)), info=info)
@@ -474,8 +474,8 @@ class StlTampPlanner(Sized, Planner):
         # phase 0: the base to the area's (or where it stands), the truck to its stand (.stand; side_by_swing: priced over all that is left)
         placed, stand = place(c, conv, st, area, (remaining if c.side_by_swing else v_local) / (exc.bucket_capacity * c.fill_estimate))
         standless = stand is None and c.place_truck
-        if standless and trace.standless_hopeless(c.standless_tries):
-            trace.standless_passed += 1  # such areas have only failed on this site: neither solved nor driven to
+        if standless and trace.standless.hopeless(c.standless_tries):
+            trace.standless.passed += 1  # such areas have only failed on this site: neither solved nor driven to
             return 0.0, 0.0, joints
         # terrain parameter: a fit of the current grid around the area (the digs so far included)
         lp = local_problem(scenario, st, area, shape, box, joints, fit_spacing=c.local_fit_spacing, fit_half=c.local_fit_half,
@@ -522,8 +522,7 @@ class StlTampPlanner(Sized, Planner):
         digs = st.digs
         got = self._emit(st, conv, nlp, sol, remaining, depths, stand)
         if standless:
-            trace.standless_dug += st.digs > digs
-            trace.standless_fruitless += st.digs == digs
+            trace.standless.visited(st.digs > digs)
         rec["loaded"], rec["wall_s"] = got, time.perf_counter() - t_wall
         trace.locals_.append(rec)
         return got, float(np.sum(sol.V)), (float(sol.X[-1, 4]), float(sol.X[-1, 5]))

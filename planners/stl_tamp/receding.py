@@ -132,9 +132,9 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
         if solved == TRIES:  # an area passed over for want of a truck stand (0.12.1) is not a try
             break
         nxt = chosen[k + 1].base if k + 1 < len(chosen) else area.base
-        passed = h.trace.standless_passed
+        passed = h.trace.standless.passed
         got, _, h.joints = planner._local(sc, st, conv, area, nxt, remaining, vmax, h.joints, box, h.trace)
-        solved += h.trace.standless_passed == passed
+        solved += h.trace.standless.passed == passed
         if got > c.volume_tol:
             h.ahead = chosen[k + 1:]
             break

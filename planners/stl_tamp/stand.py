@@ -187,7 +187,7 @@ def place(c: Any, conv: Converter, st: SimState, area: Area, buckets: float) -> 
 
 def served(c: Any, conv: Converter, st: SimState, areas: list[Area], buckets: float) -> list[Area]:
     """The ``areas`` for which :func:`place` finds the truck a stand: what a window's global problem
-    is given once areas without one have proved hopeless (``Trace.standless_hopeless``)."""
+    is given once areas without one have proved hopeless (:meth:`.hierarchy.Standless.hopeless`)."""
     return [a for a in areas if place(c, conv, st, a, buckets)[1] is not None]
 
 

@@ -1,14 +1,15 @@
-"""stl-tamp's areas without a truck stand, scenario by scenario (planners/stl_tamp/NOTES.md, "0.12.1").
+"""Areas without a truck stand, scenario by scenario: stl-tamp 0.12.1 and separate 0.5.1 pass them
+over once they prove hopeless on a site (planners/stl_tamp/NOTES.md, "0.12.1").
 
-Plans every scenario of SUITE whose family contains FAMILY (and whose seed is in SEEDS), open loop,
-with stl-tamp's default settings and, with ``--both``, with ``standless_tries=0`` (0.12.0's
-behaviour) beside it, each judged by the referee. One JSON line per plan: the visits to areas
+Plans every backhoe scenario of SUITE whose family contains FAMILY (and whose seed is in SEEDS),
+open loop, with the planner's default settings and, with ``--both``, with ``standless_tries=0`` (the
+versions before) beside it, each judged by the referee. One JSON line per plan: the visits to areas
 without a stand that dug and that dug nothing, the areas passed over (none: the plan is 0.12.0's),
 whether such areas were given up on the site (``hopeless``), CPU
 (``time.process_time`` around ``plan()``), time per target m³, validity and the excavator's travel.
 
-    python scripts/stl_tamp_standless.py standard                 # which plans the setting touches
-    python scripts/stl_tamp_standless.py scale rbf48x24 0 --both  # its effect, side by side
+    python scripts/standless.py standard                            # which stl-tamp plans it touches
+    python scripts/standless.py scale rbf48x24 0 --both --planner separate   # its effect, side by side
 """
 
 from __future__ import annotations
@@ -25,7 +26,10 @@ from earthbench.referee import judge
 from earthbench.results.scoring import evaluate
 from earthbench.results.suite import load_suite
 from earthbench.sensing import observe
+from earthbench_planners.separate.planner import SeparatePlanner
 from earthbench_planners.stl_tamp import StlTampPlanner
+
+PLANNERS = {"stl-tamp": StlTampPlanner, "separate": SeparatePlanner}
 
 
 def prepared() -> Path | None:
@@ -36,8 +40,9 @@ def prepared() -> Path | None:
     return max(found, key=lambda p: p.stat().st_mtime) if found else None
 
 
-def one(sc, tries: int | None) -> dict:
-    planner = StlTampPlanner() if tries is None else StlTampPlanner(StlTampPlanner.Config(standless_tries=tries))
+def one(sc, tries: int | None, name: str = "stl-tamp") -> dict:
+    cls = PLANNERS[name]
+    planner = cls() if tries is None else cls(cls.Config(standless_tries=tries))
     planner.prepared = prepared()
     t0 = time.process_time()
     plan = planner.plan(observe(sc))
@@ -46,7 +51,7 @@ def one(sc, tries: int | None) -> dict:
     m = evaluate(sc, plan, v, 0.9)
     s = plan.info["standless"]
     tries_used = planner.config.standless_tries
-    return {"sc": sc.id, "tries": tries_used, **s,
+    return {"sc": sc.id, "planner": f"{name} {planner.version}", "tries": tries_used, **s,
             "hopeless": tries_used > 0 and s["fruitless"] >= tries_used * (s["dug"] + 1),
             "valid": v.valid, "cpu": round(cpu, 1), "tpm3": round(m.get("time_per_target_m3", float("nan")), 2),
             "ratio": round(m.get("volume_ratio", 0.0), 3), "exc_m": round(v.travel.get("excavator", 0.0), 1)}
@@ -57,7 +62,8 @@ def main() -> None:
     ap.add_argument("suite")
     ap.add_argument("family", nargs="?", default="")
     ap.add_argument("seeds", nargs="?", default=None, help="comma-separated seeds (default: all)")
-    ap.add_argument("--both", action="store_true", help="also plan with standless_tries=0 (0.12.0's behaviour)")
+    ap.add_argument("--planner", choices=sorted(PLANNERS), default="stl-tamp")
+    ap.add_argument("--both", action="store_true", help="also plan with standless_tries=0 (the versions before)")
     a = ap.parse_args()
     seeds = None if a.seeds is None else {int(s) for s in a.seeds.split(",")}
     n = touched = 0
@@ -66,14 +72,15 @@ def main() -> None:
             continue
         for tries in ((None, 0) if a.both else (None,)):
             try:
-                r = one(sc, tries)
+                r = one(sc, tries, a.planner)
             except EarthbenchError as e:  # a planner's refusal is a row, not the end of the survey
                 r = {"sc": sc.id, "tries": tries, "error": f"{type(e).__name__}: {e}"}
             print(json.dumps(r), flush=True)
             if tries is None:
                 n += 1
                 touched += r.get("passed_over", 0) > 0
-    print(f"{a.suite}: {n} plans, {touched} passed over areas without a stand (the others are 0.12.0's plans)")
+    print(f"{a.suite}, {a.planner}: {n} plans, {touched} passed over areas without a stand (the others are the plans "
+          "of the version before)")
 
 
 if __name__ == "__main__":
