@@ -116,7 +116,7 @@ class Config(LocalNLPConfig):
     trust_rounds: int = 2
     max_iter: int = 250  # an iteration cap only (no CPU-time cap: load must not change a plan)
     mu_strategy: str = "adaptive"
-    standless_tries: int = field(default=3, metadata={"omit_default": True})  # 0.5.1: as stl-tamp's (0: never)
+    standless_tries: int = field(default=8, metadata={"omit_default": True})  # 0.5.1: as stl-tamp's (0: never)
     max_areas: int = 0  # a ceiling on the local areas (0: none; the loop ends when the target is met or no area loads)
     volume_tol: float = 1e-4
 

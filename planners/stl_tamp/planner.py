@@ -164,7 +164,7 @@ class Config(LocalNLPConfig):
     keep_base: bool = field(default=True, metadata=_OMIT)
     face_away: bool = field(default=True, metadata=_OMIT)
     side_by_swing: bool = field(default=False, metadata=_OMIT)  # issue 49: measured, off (.stand; NOTES.md, "0.12.0")
-    standless_tries: int = field(default=3, metadata=_OMIT)  # 0.12.1: standless areas tried before passed over (0: never)
+    standless_tries: int = field(default=8, metadata=_OMIT)  # 0.12.1: standless areas tried before passed over (0: never)
 
     LENGTHS = LocalNLPConfig.LENGTHS + ("stand_tol", "base_offset", "truck_offset", "local_fit_spacing",
                                         "local_fit_half", "global_fit_spacing", "global_window", "repair")
