@@ -4,7 +4,7 @@ over once they prove hopeless on a site (planners/stl_tamp/NOTES.md, "0.12.1").
 Plans every backhoe scenario of SUITE whose family contains FAMILY (and whose seed is in SEEDS),
 open loop, with the planner's default settings and, with ``--both``, with ``standless_tries=0`` (the
 versions before) beside it, each judged by the referee. One JSON line per plan: the visits to areas
-without a stand that dug and that dug nothing, the areas passed over (none: the plan is 0.12.0's),
+without a stand that dug and that dug nothing, the areas passed over (none: the plan is the version before's),
 whether such areas were given up on the site (``hopeless``), CPU
 (``time.process_time`` around ``plan()``), time per target m³, validity and the excavator's travel.
 
@@ -41,6 +41,7 @@ def prepared() -> Path | None:
 
 
 def one(sc, tries: int | None, name: str = "stl-tamp") -> dict:
+    """Plan ``sc`` with ``standless_tries=tries`` (None: the default) and judge it."""
     cls = PLANNERS[name]
     planner = cls() if tries is None else cls(cls.Config(standless_tries=tries))
     planner.prepared = prepared()
@@ -64,19 +65,20 @@ def main() -> None:
     ap.add_argument("seeds", nargs="?", default=None, help="comma-separated seeds (default: all)")
     ap.add_argument("--planner", choices=sorted(PLANNERS), default="stl-tamp")
     ap.add_argument("--both", action="store_true", help="also plan with standless_tries=0 (the versions before)")
+    ap.add_argument("--tries", type=int, default=None, help="standless_tries of the new side (default: the planner's)")
     a = ap.parse_args()
     seeds = None if a.seeds is None else {int(s) for s in a.seeds.split(",")}
     n = touched = 0
     for sc in load_suite(a.suite).scenarios:
         if sc.track != "backhoe" or a.family not in sc.meta["family"] or (seeds and int(sc.meta["seed"]) not in seeds):
             continue
-        for tries in ((None, 0) if a.both else (None,)):
+        for tries in ((a.tries, 0) if a.both else (a.tries,)):
             try:
                 r = one(sc, tries, a.planner)
             except EarthbenchError as e:  # a planner's refusal is a row, not the end of the survey
                 r = {"sc": sc.id, "tries": tries, "error": f"{type(e).__name__}: {e}"}
             print(json.dumps(r), flush=True)
-            if tries is None:
+            if tries == a.tries:
                 n += 1
                 touched += r.get("passed_over", 0) > 0
     print(f"{a.suite}, {a.planner}: {n} plans, {touched} passed over areas without a stand (the others are the plans "
