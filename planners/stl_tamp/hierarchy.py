@@ -119,7 +119,7 @@ class Standless:
     passed: int = 0
 
     def hopeless(self, tries: int) -> bool:
-        """``tries`` fruitless visits for each that dug, and one more (``tries`` 0: never)."""
+        """At least ``tries`` × (1 + the visits that dug) fruitless visits (``tries`` 0: never)."""
         return tries > 0 and self.fruitless >= tries * (self.dug + 1)
 
     def visited(self, dug: bool) -> None:
