@@ -44,8 +44,8 @@ def test_areas_without_a_truck_stand_are_passed_over_once_they_have_failed(large
 
 
 def test_a_site_where_areas_without_a_stand_dig_is_never_given_up():
-    """Tries per visit that dug, and one more: a site where the NLP's truck serves such areas
-    keeps solving them (the 20-t class's small sites load from them)."""
+    """Hopeless at ``tries`` × (1 + the visits that dug) fruitless visits: a site where the NLP's
+    truck serves such areas keeps solving them (the 20-t class's sites load from them)."""
     from earthbench_planners.stl_tamp.hierarchy import Standless
 
     s = Standless(fruitless=5, dug=1)
