@@ -141,15 +141,9 @@ class Trace:
     fallbacks: int = 0
     regenerated: int = 0
     standless: Standless = field(default_factory=Standless)  # areas without a truck stand (0.12.1)
-    undug_in_a_row: int = 0  # local solves in a row that failed past the fallback limit (the area left undug)
     nlp_cache: dict[str, int] = field(default_factory=dict)  # NLPs loaded ("hit") or built ("miss", "off")
     # solves by FATROP and by IPOPT, and FATROP's failures IPOPT solved again ("fallback")
     solvers: dict[str, int] = field(default_factory=lambda: {"fatrop": 0, "ipopt": 0, "fallback": 0})
-
-    def gave_up(self, after: int) -> bool:
-        """Whether ``after`` areas in a row were left undug for failed solves (0: never give up): on
-        `scale/rbf48x24/s8/v64` 0.12.1 as first built went on through 724 such areas, every one infeasible, and dug nothing more."""
-        return after > 0 and self.undug_in_a_row >= after
 
     def add_build(self, nlp: PhaseNLP) -> None:
         """Count the NLP's construction seconds not yet reported and, once, how it was made."""

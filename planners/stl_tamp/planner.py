@@ -18,9 +18,27 @@ from .surface import fit_rbf
 
 from .convert import Converter, SimState
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
-from .hierarchy import (Area, StlTampSolveError, Trace, diggable_volume, fitting_side, get_nlp, global_blocks, global_lattice, greedy_tour,
-                         in_box, level_stand, Layout, LocalProblem, local_problem, local_seeds, nearest_block, shared_truck_stand, site_box,
-                         solve_counts)
+from .hierarchy import (
+    Area,
+    StlTampSolveError,
+    Trace,
+    diggable_volume,
+    fitting_side,
+    get_nlp,
+    global_blocks,
+    global_lattice,
+    greedy_tour,
+    in_box,
+    level_stand,
+    Layout,
+    LocalProblem,
+    local_problem,
+    local_seeds,
+    nearest_block,
+    shared_truck_stand,
+    site_box,
+    solve_counts,
+)
 from .problem import Shape, Solution
 from .sizes import Sized, factors
 from .stand import candidate_areas_for, place, served, to_stand
@@ -123,7 +141,6 @@ class Config(LocalNLPConfig):
     on_failure: str = "fallback"  # "fallback" (bounded by max_fallbacks; past it the area is left undug) or "raise"
     max_fallbacks: int = 6  # at least this many, or max_fallback_share of the local solves so far (large sites)
     max_fallback_share: float = 0.05
-    give_up_after: int = field(default=20, metadata=_OMIT)  # 0.12.1: areas undug in a row past max_fallbacks end the plan (0: never)
     volume_tol: float = 1e-4
     min_local_target: float = 0.8  # in buckets
     reseed: bool = True
@@ -307,7 +324,7 @@ class StlTampPlanner(Sized, Planner):
         # Algorithm 1 over groups of areas: the global problem of one window of the site (the
         # whole site when it fits, as on the paper's map), then its local problems; then the
         # window nearest to where the excavator stands, until the target is met
-        while remaining > c.volume_tol and left and not trace.gave_up(c.give_up_after):
+        while remaining > c.volume_tol and left:
             block = nearest_block(blocks, left, (st.exc.x, st.exc.y))
             in_block = [a for a in left if in_box(a.centre, block)]
             if len(blocks) > 1 and trace.standless.hopeless(c.standless_tries):  # no global solve over areas no stand serves
@@ -320,7 +337,7 @@ class StlTampPlanner(Sized, Planner):
             chosen = self._choose(scenario, st, tour, v_block, side, box, block, len(blocks) > 1, trace)
             queue = list(chosen) + [a for a in tour if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
             got_block = 0.0
-            while queue and remaining > c.volume_tol and got_block < v_block - c.volume_tol and not trace.gave_up(c.give_up_after):
+            while queue and remaining > c.volume_tol and got_block < v_block - c.volume_tol:
                 area = queue.pop(0)
                 left = [a for a in left if math.dist(a.centre, area.centre) > side / 2]
                 nxt = queue[0].base if queue else area.base
@@ -339,7 +356,7 @@ class StlTampPlanner(Sized, Planner):
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
                 "fit_time_s": trace.fit_time_s, "build_time_s": trace.build_time_s, "nlp_cache": trace.nlp_cache,
                 "fallbacks": trace.fallbacks, "local_solves": solve_counts(trace.locals_), "skipped": dict(conv.skips),
-                "standless": trace.standless.record(), "gave_up": trace.gave_up(c.give_up_after), "solvers": dict(trace.solvers),
+                "standless": trace.standless.record(), "solvers": dict(trace.solvers),
                 "global": trace.global_, "local": trace.locals_, "plan_time_s": time.perf_counter() - t_start}
         return Plan(actions=tuple(st.actions),
                     predicted=Prediction(volume=st.loaded, makespan=max((a.t_end for a in st.actions), default=0.0)), info=info)
@@ -492,14 +509,12 @@ class StlTampPlanner(Sized, Planner):
                 # past the bound on executed guesses the area is left undug (the tour goes on to
                 # the next one): a large site no longer ends in an error for one hard area
                 rec["skipped"] = f"fallback limit ({trace.fallbacks} of {allowed} used)"
-                trace.undug_in_a_row += 1
                 rec["loaded"], rec["wall_s"] = 0.0, time.perf_counter() - t_wall
                 trace.locals_.append(rec)
                 return 0.0, 0.0, joints
             trace.fallbacks += 1
             sol = nlp._solution(w0, params, False, "fallback: IK initial guess", 0, 0.0, float("nan"), {})
             rec["fallback"] = "IK initial guess"
-        trace.undug_in_a_row = 0
         depths = None
         if c.as_planned:  # the NLP's own depth: its contact height less max(floor, that − d_dig)
             pz = nlp.evaluate(sol.info["w"], params)["contact_heights"]
