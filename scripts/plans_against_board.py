@@ -39,9 +39,9 @@ def latest(runs: pd.DataFrame) -> pd.DataFrame:
 def same(a: pd.Series, b: pd.Series) -> pd.Series:
     """Element-wise agreement, numeric figures to RTOL."""
     x, y = pd.to_numeric(a, errors="coerce"), pd.to_numeric(b, errors="coerce")
-    if x.notna().all() and y.notna().all():
-        return pd.Series(np.isclose(x.to_numpy(float), y.to_numpy(float), rtol=RTOL, atol=1e-12), index=a.index)
-    return a.astype(str).str.lower() == b.astype(str).str.lower()
+    numeric = x.notna() & y.notna()  # per element: a timed-out run's missing figures must not turn 17 into "17.0"
+    close = pd.Series(np.isclose(x.fillna(0).to_numpy(float), y.fillna(0).to_numpy(float), rtol=RTOL, atol=1e-12), index=a.index)
+    return close.where(numeric, a.astype(str).str.lower() == b.astype(str).str.lower())
 
 
 def main(argv: list[str] | None = None) -> int:
