@@ -22,8 +22,8 @@ def large_site():
 
 @pytest.mark.slow
 def test_areas_without_a_truck_stand_are_passed_over_once_they_have_failed(large_site):
-    """With ``standless_tries=3`` (the default, 8, binds on larger sites: it is a bound, not a
-    guess, for the 20-t class's sites where such areas do load), three such areas dig nothing,
+    """With ``standless_tries=3`` (the default, 8, leaves room for the 20-t class's sites, where
+    such areas load after up to seven fruitless visits, and does not bind on a case this small), three such areas dig nothing,
     then the rest are passed over unsolved and undriven to: the plan keeps every rule, reaches the
     target and drives the excavator less. 0.12.0's behaviour (``standless_tries=0``) keeps solving
     them and driving there for nothing."""
