@@ -15,29 +15,31 @@ whether such areas were given up on the site (``hopeless``), CPU
 from __future__ import annotations
 
 import argparse
-import glob
 import json
-import os
 import time
+from functools import cache
 from pathlib import Path
 
 from earthbench.errors import EarthbenchError
 from earthbench.referee import judge
+from earthbench.results.records import PlannerRef
 from earthbench.results.scoring import evaluate
 from earthbench.results.suite import load_suite
+from earthbench.running.harness.prepare import find
 from earthbench.sensing import observe
 from earthbench_planners.separate.planner import SeparatePlanner
 from earthbench_planners.stl_tamp import StlTampPlanner
+from earthbench_planners.stl_tamp.hierarchy import Standless
 
 PLANNERS = {"stl-tamp": StlTampPlanner, "separate": SeparatePlanner}
 
 
+@cache
 def prepared() -> Path | None:
-    """The newest preparation of stl-tamp on this machine (``PREPARED`` overrides): its compiled NLPs."""
-    if os.environ.get("PREPARED"):
-        return Path(os.environ["PREPARED"])
-    found = [Path(m).parent for m in glob.glob(os.path.expanduser("~/.cache/earthbench/prepared/stl-tamp-*/prepare.json"))]
-    return max(found, key=lambda p: p.stat().st_mtime) if found else None
+    """stl-tamp's preparation at its default settings on this machine (``earthbench prepare stl-tamp``):
+    its compiled NLPs serve both sides and separate too, since ``standless_tries`` changes no NLP."""
+    found = find(PlannerRef.resolve("stl-tamp"))
+    return None if found is None else Path(found.path)
 
 
 def one(sc, tries: int | None, name: str = "stl-tamp") -> dict:
@@ -53,7 +55,7 @@ def one(sc, tries: int | None, name: str = "stl-tamp") -> dict:
     s = plan.info["standless"]
     tries_used = planner.config.standless_tries
     return {"sc": sc.id, "planner": f"{name} {planner.version}", "tries": tries_used, **s,
-            "hopeless": tries_used > 0 and s["fruitless"] >= tries_used * (s["dug"] + 1),
+            "hopeless": Standless(dug=s["dug"], fruitless=s["fruitless"]).hopeless(tries_used),
             "valid": v.valid, "cpu": round(cpu, 1), "tpm3": round(m.get("time_per_target_m3", float("nan")), 2),
             "ratio": round(m.get("volume_ratio", 0.0), 3), "exc_m": round(v.travel.get("excavator", 0.0), 1)}
 
