@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .sensing import observe
     from .world import Budget, ExcavatorSpec, Heightmap, LoaderSpec, Machines, Pose, Scenario, Sensing, Site, Soil, Task, TruckSpec
 
-__version__ = "0.5.4"
+__version__ = "0.5.5"
 
 __getattr__ = lazy_getattr(globals())
 compat.install()  # the old paths of the modules that moved (earthbench.compat.MOVED_MODULES)

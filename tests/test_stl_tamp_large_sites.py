@@ -1,5 +1,6 @@
-"""stl-tamp 0.12.1 on a site larger than the truck's reach (planners/stl_tamp/NOTES.md, "0.12.1"):
-areas without a truck stand are passed over once they have proved hopeless, on a real solve."""
+"""stl-tamp on sites where its NLPs met states they could not start from (planners/stl_tamp/NOTES.md):
+areas without a truck stand passed over once hopeless (0.12.1), and a truck nearer the base than the
+NLP's clearance seen beyond it (0.12.2), on real solves."""
 
 from __future__ import annotations
 
@@ -53,3 +54,49 @@ def test_a_site_where_areas_without_a_stand_dig_is_never_given_up():
     s.visited(dug=False)
     assert s.hopeless(3)
     assert not s.hopeless(0)
+
+
+
+def test_a_truck_inside_the_nlps_clearance_is_seen_beyond_it():
+    """The NLP's first node is fixed, so a truck the referee lets stand nearer the base than
+    Eq. (23)'s clearance plus ``col_margin`` would make its clearance row infeasible: the NLP sees
+    it a centimetre beyond that distance, on the same bearing. Within the tolerance (where IPOPT's
+    own solutions leave trucks) and beyond, the NLP gets the state as it is."""
+    import math
+
+    from earthbench.world import Pose
+    from earthbench_planners.stl_tamp.convert import SimState
+    from earthbench_planners.stl_tamp.hierarchy import NODE0_PUSH, NODE0_TOLERANCE, nlp_start
+
+    sc = next(s for s in load_suite("standard").scenarios if s.id == "standard/paper-extensive.rbf30/s6/v7")
+    exc = sc.machines.excavator
+    shape = StlTampPlanner()._local_shape(exc)
+    lcol = exc.clearance + shape.col_margin
+    st = SimState.start(sc)
+    inside = lcol - NODE0_TOLERANCE / 2
+    for d, seen in ((lcol - 0.2, lcol + NODE0_PUSH), (inside, inside), (lcol + 1.0, lcol + 1.0)):
+        st.truck = Pose(st.exc.x + d * math.cos(0.7), st.exc.y + d * math.sin(0.7), 0.2)
+        s0 = nlp_start(st, shape, exc)
+        assert math.hypot(s0[6] - s0[0], s0[7] - s0[1]) == pytest.approx(seen, abs=1e-9)
+        assert math.atan2(s0[7] - s0[1], s0[6] - s0[0]) == pytest.approx(0.7)
+        assert s0[8] == 0.2 and (s0[:6] == st.s0[:6]).all()
+
+
+def test_a_local_problem_from_a_truck_inside_the_nlps_clearance_solves(monkeypatch):
+    """``standard/paper-extensive.rbf30/s6/v7``: 0.12.0's plan leaves the truck 3.61 m from the base
+    (the referee's 3.5 m allow it; the NLP's 3.8 m do not), so the next local problem was
+    infeasible and its area went to the fallback. Seen beyond the distance, it solves: no
+    fallback, the target reached sooner. With the tolerance made infinite (0.12.1's NLP), the
+    fallback returns."""
+    import earthbench_planners.stl_tamp.hierarchy as hierarchy
+
+    sc = next(s for s in load_suite("standard").scenarios if s.id == "standard/paper-extensive.rbf30/s6/v7")
+    plans = {}
+    for label, tolerance in (("now", hierarchy.NODE0_TOLERANCE), ("before", float("inf"))):
+        monkeypatch.setattr(hierarchy, "NODE0_TOLERANCE", tolerance)
+        plan = StlTampPlanner().plan(sc)
+        v = judge(sc, plan)
+        assert v.valid and v.loaded_volume >= sc.task.target_volume - 1e-6, label
+        plans[label] = (plan.info["fallbacks"], max(a.t_end for a in plan.actions))
+    assert plans["now"][0] == 0 and plans["before"][0] == 1
+    assert plans["now"][1] < plans["before"][1]

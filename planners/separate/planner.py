@@ -316,7 +316,8 @@ class SeparatePlanner(Sized, Planner):
     #: every machine class, its sizes scaled with the excavator (stl_tamp/sizes.py); the compact exact
     #: track's plans are 0.4.4's.
     #: 0.5.1 (``scale``): areas without a truck stand are passed over once they proved hopeless (as stl-tamp 0.12.1).
-    version = "0.5.1"
+    #: 0.5.2 (``scale``): a truck nearer the base than the NLP's clearance is seen beyond it (as stl-tamp 0.12.2).
+    version = "0.5.2"
     tracks = ("backhoe",)
     Config = Config
 

@@ -35,6 +35,7 @@ from .hierarchy import (
     local_problem,
     local_seeds,
     nearest_block,
+    nlp_start,
     shared_truck_stand,
     site_box,
     solve_counts,
@@ -201,10 +202,11 @@ class StlTampPlanner(Sized, Planner):
     0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
     ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
     (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
-    0.12.1 (``scale``): areas without a truck stand are passed over once they proved hopeless on the site (``standless_tries``)."""
+    0.12.1 (``scale``): areas without a truck stand are passed over once they proved hopeless on the site (``standless_tries``).
+    0.12.2 (``scale``): a truck nearer the base than the NLP's clearance is seen beyond it (:func:`.hierarchy.nlp_start`)."""
 
     name = "stl-tamp"
-    version = "0.12.1"
+    version = "0.12.2"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
@@ -425,7 +427,7 @@ class StlTampPlanner(Sized, Planner):
                                    exc.clearance + shape.col_margin)
         seeds = [PhaseSeed(a.px, a.py, a.psi, c.eta_init if j < need else 0.0, a.base, truck,
                            float(surf(a.px, a.py))) for j, a in enumerate(tour[:m_g])]
-        s0 = st.s0
+        s0 = nlp_start(st, shape, exc)
         params = nlp.pack_p(w=surf.weights.reshape(-1), o=(surf.x0, surf.y0), s0=s0, vt=target,
                             alpha=(c.alpha_u, c.alpha_t, c.alpha_v / 10, c.alpha_eta, 0.0), goal=(s0[0], s0[1]), floor=floor)
         w0 = fill_volumes(nlp, build_guess(nlp, s0, seeds, floor), params, [a.estimate for a in tour[:m_g]])
