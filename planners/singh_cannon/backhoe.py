@@ -26,8 +26,10 @@ Coarse planner (:meth:`Session.coarse_plan`)
     ``station_buckets`` buckets)) minus ``travel_value`` per second of travel, and drives
     (``earthbench.motion.turn_drive_turn``) to the best station, among those whose path keeps
     the clearance from the truck, from which the refined planner finds a feasible dig; a new
-    coarse plan is made there. The truck is parked for the new station toward the coarse plan's
-    material (``planners/truck_stands.py``: off the dig area, on ground within its limits, the
+    coarse plan is made there. (When no station will do even at the lowest V_min, the stations
+    in dump reach of the truck's line are tried before giving up: :meth:`Session.relocate_further`.)
+    The truck is parked for the new station toward the coarse plan's material
+    (``planners/truck_stands.py``: off the dig area, on ground within its limits, the
     cheapest stand in travel and swing, broadside so it can slide along the face), clear of the
     excavator by the clearance along its whole path (detouring round the excavator if
     necessary). Both drive at once only when a dense check (every 0.05 s) keeps them the
@@ -83,7 +85,7 @@ from earthbench.world import ExcavatorSpec, Pose, Scenario
 
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import Stroke, cut_and_slump, margins, path_undermines
-from ..truck_stands import TruckStands
+from ..truck_stands import SPAN, TruckStands
 from .backhoe_model import ForwardModel, RadialLine, SoilModel, candidate_grid, evaluate
 from .truck import TruckMoves
 
@@ -100,6 +102,9 @@ def _convolve_full(blocks: np.ndarray, kernel: np.ndarray) -> np.ndarray:
         out[a:a + ny, b:b + nx] += blocks
     return out
 
+
+FURTHER_STATIONS = 40
+"""Stations tried in the last search, where 1.6 gave up (1.7: :meth:`Session.relocate_further`)."""
 
 IDLE_MOVES = 3
 """Stations tried in a row without a dig before V_min is relaxed: else one the truck cannot serve from leads to the next for ever."""
@@ -182,7 +187,7 @@ class SinghCannonBackhoe(BackhoeLoopPlanner["Session", "tuple[float, np.ndarray]
     """Singh & Cannon's coarse-to-fine bench-loading planner (section 3.1)."""
 
     name = "singh-cannon-backhoe"
-    version = "1.6"
+    version = "1.7"
     Config = SinghCannonBackhoeConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -470,7 +475,8 @@ class Session(TruckMoves):
         GX, GY = np.meshgrid(gx, gy)
         return np.stack([GX.ravel(), GY.ravel()], axis=1), reach.ravel()
 
-    def relocate(self, v_min: float) -> bool:
+    def ranked(self, v_min: float) -> tuple[np.ndarray, list[int]]:
+        """The candidate stations (:meth:`stations`) and the indices of those worth trying, best first."""
         e = self.spec
         st, reach = self.stations()
         need = max(1.5 * (self.sc.task.target_volume - self.loaded), self.cfg.station_buckets * self.cap)
@@ -488,7 +494,11 @@ class Session(TruckMoves):
         inside = shapely.contains_xy(self.area, st[:, 0], st[:, 1])
         score = np.minimum(reach, need) - self.cfg.travel_value * (travel + truck_extra + 10.0 * inside)
         ok = (reach >= v_min) & (dist > 0.3) & (tdist >= e.clearance + 0.2)
-        order = [k for k in np.argsort(-score) if ok[k]]
+        return st, [k for k in np.argsort(-score) if ok[k]]
+
+    def relocate(self, v_min: float) -> bool:
+        e = self.spec
+        st, order = self.ranked(v_min)
         tried = 0
         here = (self.base.x, self.base.y)
         for k in order:
@@ -511,24 +521,81 @@ class Session(TruckMoves):
             found = self.truck_route(pose, self.material_bearing(regions, pose), force=True)
             if found is None:
                 continue
-            route, yaw = found
-            # the truck drives at the same time when the two stay the clearance apart throughout,
-            # else once the excavator has arrived (its route keeps clear of the new station)
-            t0 = max(self.t, self.truck_ready)
-            epath = turn_drive_turn(self.base, goal, t0, e.travel_speed, e.yaw_rate)
-            tpath = self.truck_path(route, t0, yaw) if route else []
-            if tpath and not self.apart(epath, tpath):
-                tpath = self.truck_path(route, epath[-1][0], yaw)
-            if len(epath) > 1:
-                self.actions.append(Move("excavator", tuple(epath)))
-                self.base = Pose(epath[-1][1], epath[-1][2], epath[-1][3])  # ``turn`` is relative
-            self.events.append({"event": "move", "t": t0, "to": list(goal), "regions": len(regions)})
-            self.t = epath[-1][0]
-            self.station += 1
-            self.add_truck_path(tpath)
-            self.regions, self.ptr = regions, idx
+            self.move_to(goal, found, regions, idx)
             return True
         return False
+
+    def relocate_further(self, v_min: float) -> bool:
+        """A last station search (1.7), where 1.6 gave up: no station of the best
+        ``stations_tried`` would do, even with V_min relaxed to the last of ``relax_fills``. On a
+        large site those stations are often all out of the truck's way: it stands off the dig
+        area and drives only straight lines, so it cannot get round the site's corner to a stand
+        serving them (or they are too tilted for the tracks). Here only the stations within dump
+        reach of the truck's own line are tried (where it can slide to along its heading,
+        :data:`..truck_stands.SPAN` either way), best score first, at most
+        ``FURTHER_STATIONS``; the first with a feasible dig and a truck route is taken. Once it
+        has moved the excavator, it is tried before V_min is relaxed as well. A plan that never
+        ended "no feasible dig left" is 1.6's, action for action."""
+        e, t = self.spec, self.truck
+        st, order = self.ranked(v_min)
+        if not order:
+            return False
+        cand = st[order]
+        ux, uy = math.cos(t.yaw), math.sin(t.yaw)
+        s = np.clip((cand[:, 0] - t.x) * ux + (cand[:, 1] - t.y) * uy, -SPAN, SPAN)
+        gap = np.hypot(cand[:, 0] - (t.x + s * ux), cand[:, 1] - (t.y + s * uy))
+        near = gap - self.truck_spec.loading_radius <= e.reach_max - 0.05
+        here = (self.base.x, self.base.y)
+        tried = 0
+        for k in np.asarray(order)[near]:
+            if tried >= FURTHER_STATIONS:
+                break
+            goal = (float(st[k, 0]), float(st[k, 1]))
+            if any(ko.buffer(0.5).contains(Point(goal)) for ko in self.keep_outs):
+                continue
+            if not self.clear(here, goal, (t.x, t.y)):
+                continue
+            tried += 1
+            path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
+            pose = Pose(path[-1][1], path[-1][2], path[-1][3])
+            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - self.margins.tilt:
+                continue
+            regions = self.coarse_plan(pose, v_min)
+            if not regions:
+                continue
+            found = self.truck_route(pose, self.material_bearing(regions, pose), force=True)
+            if found is None:
+                continue
+            idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
+            if ch is None:
+                continue
+            self.move_to(goal, found, regions, idx, further=tried)
+            return True
+        return False
+
+    def move_to(self, goal: tuple[float, float], found: tuple[list[tuple[float, float]], float | None],
+                regions: list[Region], idx: int, further: int | None = None) -> None:
+        """Drive the excavator to the station ``goal`` and the truck by ``found``'s route."""
+        e = self.spec
+        route, yaw = found
+        # the truck drives at the same time when the two stay the clearance apart throughout,
+        # else once the excavator has arrived (its route keeps clear of the new station)
+        t0 = max(self.t, self.truck_ready)
+        epath = turn_drive_turn(self.base, goal, t0, e.travel_speed, e.yaw_rate)
+        tpath = self.truck_path(route, t0, yaw) if route else []
+        if tpath and not self.apart(epath, tpath):
+            tpath = self.truck_path(route, epath[-1][0], yaw)
+        if len(epath) > 1:
+            self.actions.append(Move("excavator", tuple(epath)))
+            self.base = Pose(epath[-1][1], epath[-1][2], epath[-1][3])  # ``turn`` is relative
+        event = {"event": "move", "t": t0, "to": list(goal), "regions": len(regions)}
+        if further is not None:
+            event["further"] = further
+        self.events.append(event)
+        self.t = epath[-1][0]
+        self.station += 1
+        self.add_truck_path(tpath)
+        self.regions, self.ptr = regions, idx
 
     # -- the loop -----------------------------------------------------------------------------------
     def run(self, max_dumps: int | None = None) -> Plan:
@@ -542,7 +609,7 @@ class Session(TruckMoves):
         self.regions = self.coarse_plan(self.base, self.v_min)
         self.ptr = 0
         status = "target reached"
-        digs, parked, idle_moves = 0, False, 0
+        digs, parked, idle_moves, further, went_further = 0, False, 0, 0, False
         while self.loaded < target - 1e-9:
             if self.loaded >= self.truck_spec.capacity - 1e-9:
                 status = "truck full"
@@ -579,6 +646,13 @@ class Session(TruckMoves):
                     idle_moves += 1
                     continue
                 level, idle_moves = level + 1, 0
+                if (level >= len(fills) or went_further) and further < IDLE_MOVES \
+                        and self.relocate_further(fills[0] * self.cap):
+                    # 1.7: a station the truck can get to, where 1.6 gave up (and, from then on,
+                    # before V_min is relaxed); V_min starts again
+                    level, further, went_further = 0, further + 1, True
+                    self.v_min = fills[0] * self.cap
+                    continue
                 if level >= len(fills):
                     status = "no feasible dig left"
                     break
@@ -586,7 +660,7 @@ class Session(TruckMoves):
                 self.regions, self.ptr = self.coarse_plan(self.base, self.v_min), 0
                 continue
             vol = self.do_dig(ch)
-            digs, idle_moves = digs + 1, 0
+            digs, idle_moves, further = digs + 1, 0, 0
             self.do_dump(vol)
             if max_dumps is not None and digs >= max_dumps:
                 status = "step done"
