@@ -497,12 +497,40 @@ class Session(TruckMoves):
         return st, [k for k in np.argsort(-score) if ok[k]]
 
     def relocate(self, v_min: float) -> bool:
-        e = self.spec
         st, order = self.ranked(v_min)
+        return self.first_station(st, order, v_min, self.cfg.stations_tried)
+
+    def relocate_further(self, v_min: float) -> bool:
+        """A last station search (1.7), where 1.6 gave up: no station of the best
+        ``stations_tried`` would do, even with V_min relaxed to the last of ``relax_fills``. On a
+        large site those stations are often all out of the truck's way: it stands off the dig
+        area and drives only straight lines, so it cannot get round the site's corner to a stand
+        serving them (or they are too tilted for the tracks). Here only the stations within dump
+        reach of the truck's own line are tried (where it can slide to along its heading,
+        :data:`..truck_stands.SPAN` either way), best score first, at most
+        ``FURTHER_STATIONS``; the first with a feasible dig and a truck route is taken. Once it
+        has moved the excavator, it is tried before V_min is relaxed as well. A plan that never
+        ended "no feasible dig left" is 1.6's, action for action."""
+        t = self.truck
+        st, order = self.ranked(v_min)
+        if not order:
+            return False
+        cand = st[order]
+        ux, uy = math.cos(t.yaw), math.sin(t.yaw)
+        s = np.clip((cand[:, 0] - t.x) * ux + (cand[:, 1] - t.y) * uy, -SPAN, SPAN)
+        gap = np.hypot(cand[:, 0] - (t.x + s * ux), cand[:, 1] - (t.y + s * uy))
+        near = gap - self.truck_spec.loading_radius <= self.spec.reach_max - 0.05
+        return self.first_station(st, list(np.asarray(order)[near]), v_min, FURTHER_STATIONS, further=True)
+
+    def first_station(self, st: np.ndarray, order: list[int], v_min: float, limit: int, further: bool = False) -> bool:
+        """Move to the first of ``st[order]`` (at most ``limit`` tried: those off keep-outs whose
+        way keeps clear of the truck) that is level enough for the tracks and has a feasible dig
+        and a truck route; False when none does."""
+        e = self.spec
         tried = 0
         here = (self.base.x, self.base.y)
         for k in order:
-            if tried >= self.cfg.stations_tried:
+            if tried >= limit:
                 break
             goal = (float(st[k, 0]), float(st[k, 1]))
             if any(ko.buffer(0.5).contains(Point(goal)) for ko in self.keep_outs):
@@ -521,55 +549,7 @@ class Session(TruckMoves):
             found = self.truck_route(pose, self.material_bearing(regions, pose), force=True)
             if found is None:
                 continue
-            self.move_to(goal, found, regions, idx)
-            return True
-        return False
-
-    def relocate_further(self, v_min: float) -> bool:
-        """A last station search (1.7), where 1.6 gave up: no station of the best
-        ``stations_tried`` would do, even with V_min relaxed to the last of ``relax_fills``. On a
-        large site those stations are often all out of the truck's way: it stands off the dig
-        area and drives only straight lines, so it cannot get round the site's corner to a stand
-        serving them (or they are too tilted for the tracks). Here only the stations within dump
-        reach of the truck's own line are tried (where it can slide to along its heading,
-        :data:`..truck_stands.SPAN` either way), best score first, at most
-        ``FURTHER_STATIONS``; the first with a feasible dig and a truck route is taken. Once it
-        has moved the excavator, it is tried before V_min is relaxed as well. A plan that never
-        ended "no feasible dig left" is 1.6's, action for action."""
-        e, t = self.spec, self.truck
-        st, order = self.ranked(v_min)
-        if not order:
-            return False
-        cand = st[order]
-        ux, uy = math.cos(t.yaw), math.sin(t.yaw)
-        s = np.clip((cand[:, 0] - t.x) * ux + (cand[:, 1] - t.y) * uy, -SPAN, SPAN)
-        gap = np.hypot(cand[:, 0] - (t.x + s * ux), cand[:, 1] - (t.y + s * uy))
-        near = gap - self.truck_spec.loading_radius <= e.reach_max - 0.05
-        here = (self.base.x, self.base.y)
-        tried = 0
-        for k in np.asarray(order)[near]:
-            if tried >= FURTHER_STATIONS:
-                break
-            goal = (float(st[k, 0]), float(st[k, 1]))
-            if any(ko.buffer(0.5).contains(Point(goal)) for ko in self.keep_outs):
-                continue
-            if not self.clear(here, goal, (t.x, t.y)):
-                continue
-            tried += 1
-            path = turn_drive_turn(self.base, goal, 0.0, e.travel_speed, e.yaw_rate)
-            pose = Pose(path[-1][1], path[-1][2], path[-1][3])
-            if track_level_and_tilt(self.sc, self.z, e, pose)[1] > e.max_tilt - self.margins.tilt:
-                continue
-            regions = self.coarse_plan(pose, v_min)
-            if not regions:
-                continue
-            found = self.truck_route(pose, self.material_bearing(regions, pose), force=True)
-            if found is None:
-                continue
-            idx, ch = self.best_dig(regions, 0, pose, self.turn, v_min)
-            if ch is None:
-                continue
-            self.move_to(goal, found, regions, idx, further=tried)
+            self.move_to(goal, found, regions, idx, further=tried if further else None)
             return True
         return False
 
