@@ -12,9 +12,9 @@ before's, action for action. This lists the plans that are: only they need plann
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
-import sys
 
 from earthbench.results.store import Store, load_runs
 from earthbench_planners.stl_tamp.hierarchy import NODE0_TOLERANCE
@@ -57,8 +57,13 @@ def nearest_state(plan: dict, exc: tuple[float, float], truck: tuple[float, floa
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("stores", nargs="+")
+    ap.add_argument("--tolerance", type=float, default=NODE0_TOLERANCE,
+                    help=f"m inside the distance that counts (default: nlp_start's, {NODE0_TOLERANCE}; 0: any state inside it)")
+    a = ap.parse_args()
     margin = Shape.__dataclass_fields__["col_margin"].default
-    for db in sys.argv[1:]:
+    for db in a.stores:
         runs = load_runs(db)
         store = Store(db, create=False)
         runs = runs[runs["planner"].isin(["stl-tamp", "separate"])]
@@ -72,7 +77,7 @@ def main() -> None:
                 m = store.scenario(digest).machines
                 e, t = m.excavator_pose, m.truck_pose
                 d = nearest_state(json.loads(text), (e.x, e.y), (t.x, t.y))
-                if d < m.excavator.clearance + margin - NODE0_TOLERANCE + 1e-6:
+                if d < m.excavator.clearance + margin - a.tolerance + 1e-6:
                     near.append(f"{sid} ({d:.6f} m)")
             print(f"{db}: {planner} {version}: {kept} plans, {len(near)} with the truck within the NLP's clearance"
                   f"{': ' + ', '.join(near) if near else ''}")
