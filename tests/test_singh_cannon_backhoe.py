@@ -276,7 +276,7 @@ def test_stations_the_truck_cannot_serve_end_in_a_relaxed_fill_not_endless_creep
 
 def test_station_convolution_is_the_direct_sum():
     """The stations' reach scores: every output cell is the sum of the blocks under the kernel."""
-    from earthbench_planners.singh_cannon.backhoe import _convolve_full
+    from earthbench_planners.singh_cannon.stations import _convolve_full
 
     rng = np.random.default_rng(5)
     blocks = rng.uniform(0.0, 1.0, (7, 11))

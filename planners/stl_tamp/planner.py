@@ -202,8 +202,7 @@ class StlTampPlanner(Sized, Planner):
     0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
     ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
     (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
-    0.12.1 (``scale``): areas without a truck stand are passed over once they proved hopeless on the site (``standless_tries``).
-    0.12.2 (``scale``): a truck nearer the base than the NLP's clearance is seen beyond it (:func:`.hierarchy.nlp_start`)."""
+    0.12.1, 0.12.2 (``scale``): standless areas passed over once hopeless; a truck inside the NLPs' clearance seen beyond it."""
 
     name = "stl-tamp"
     version = "0.12.2"
