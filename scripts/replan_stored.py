@@ -24,6 +24,7 @@ import numpy as np
 from earthbench.plan import Plan
 from earthbench.referee import judge
 from earthbench.registry import PLANNERS
+from earthbench.results.aggregate import version_key
 from earthbench.results.records import PlannerRef
 from earthbench.results.scoring import evaluate
 from earthbench.results.store import Store, load_runs
@@ -60,11 +61,12 @@ def main() -> None:
     store = Store(a.db, create=False)
     runs = load_runs(a.db)
     runs = runs[runs["planner"] == a.planner]
-    version = a.version or max(runs["planner_version"].astype(str), key=lambda v: tuple(int(p) for p in v.split(".")))
+    version = a.version or max(runs["planner_version"].astype(str), key=version_key)
     runs = runs[runs["planner_version"].astype(str) == version]
     if a.scenarios:
         runs = runs[runs["scenario_id"].isin(a.scenarios)]
     klass = PLANNERS.get(a.planner)
+    default = json.loads(json.dumps(dataclasses.asdict(klass.Config())))
     n = same = 0
     for rid, digest, sid, cfg, threshold in zip(runs["id"], runs["scenario_digest"], runs["scenario_id"], runs["config"],
                                                 runs["threshold"]):
@@ -72,7 +74,6 @@ def main() -> None:
         closed = bool(config.get("closed_loop"))
         if a.closed_loop != "both" and closed != (a.closed_loop == "yes"):
             continue
-        default = json.loads(json.dumps(dataclasses.asdict(klass.Config())))
         known = {k: tuple(v) if isinstance(v, list) else v for k, v in config.items()
                  if k in default and v != default[k]}  # the run's overrides, as the harness passes them
         planner = klass(**known)

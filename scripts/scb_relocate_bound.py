@@ -6,9 +6,7 @@ left" (and from then on, in the same plan, before V_min is relaxed). Every actio
 point is 1.6's, so a plan with any other status is 1.6's, action for action. This reads the
 plans a store keeps (``info["status"]`` and ``info["events"]``; closed-loop plans keep neither,
 so they are counted apart) and lists those that gave up: only they, and the closed-loop ones,
-need planning again (``scripts/replan_stored.py``). It also counts the plans where a station
-search of 1.6 failed (an ``exhausted`` event not followed at once by a ``move``), which an
-earlier draft of 1.7 acted on.
+need planning again (``scripts/replan_stored.py``).
 
     python scripts/scb_relocate_bound.py leaderboard/standard.db leaderboard/20t/board-20t.db
 """
@@ -24,12 +22,6 @@ PLANNER = "singh-cannon-backhoe"
 GAVE_UP = "no feasible dig left"
 
 
-def failed_searches(events: list[dict]) -> int:
-    """``exhausted`` events not followed at once by a ``move``: searches that may have failed."""
-    return sum(1 for k, ev in enumerate(events)
-               if ev.get("event") == "exhausted" and (k + 1 == len(events) or events[k + 1].get("event") != "move"))
-
-
 def main() -> None:
     for db in sys.argv[1:]:
         runs = load_runs(db)
@@ -39,7 +31,7 @@ def main() -> None:
             print(f"{db}: no {PLANNER} runs")
             continue
         for version, group in runs.groupby("planner_version"):
-            kept, closed, candidates, failed = 0, [], [], 0
+            kept, closed, candidates = 0, [], []
             for rid, sid, cfg in zip(group["id"], group["scenario_id"], group["config"]):
                 text = store.plan_json(int(rid))
                 info = json.loads(text).get("info", {}) if text else {}
@@ -48,11 +40,10 @@ def main() -> None:
                     closed.append(f"{sid}{' (closed loop)' if json.loads(cfg).get('closed_loop') else ''}")
                     continue
                 kept += 1
-                failed += failed_searches(events) > 0
                 if info.get("status") == GAVE_UP:
                     candidates.append(sid)
             loops = sum("(closed loop)" in c for c in closed)
-            print(f"{db}: {PLANNER} {version}: {kept} plans with events ({failed} with a station search of 1.6 that failed), "
+            print(f"{db}: {PLANNER} {version}: {kept} plans with events, "
                   f"{len(candidates)} that ended {GAVE_UP!r}{': ' + ', '.join(candidates) if candidates else ''}; "
                   f"{len(closed)} without events{f' (closed loop: {loops})' if closed else ''}")
 
