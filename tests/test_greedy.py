@@ -13,7 +13,7 @@ from earthbench.motion import ABS_TOL
 from earthbench.rules import undermining_excess
 from earthbench.results.scoring import evaluate
 from earthbench_metrics import lower_bound_time_per_m3
-from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, _Greedy
+from earthbench_planners.greedy.backhoe import GreedyConfig, GreedyPlanner, GreedySession
 from earthbench_terrains.rbf import rbf
 
 
@@ -75,7 +75,7 @@ def test_heights_at_is_height_at_for_every_point(points):
 @settings(max_examples=25, deadline=None)
 @given(st.lists(st.tuples(st.floats(-4.0, 16.0), st.floats(-4.0, 10.0)), min_size=1, max_size=8), st.integers(0, 4))
 def test_station_volumes_are_the_direct_sum_over_the_annulus(bases, seed):
-    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    g = GreedySession(rbf(seed, 1.0, n_bases=30), GreedyConfig())
     e = g.exc
     excess = np.where(g.in_area, np.clip(g.z - g.floor, 0.0, e.max_cut_depth * 2), 0.0)
     w = np.where(excess > 1e-3, excess, 0.0) * g.terrain.cell_area
@@ -88,7 +88,7 @@ def test_station_volumes_are_the_direct_sum_over_the_annulus(bases, seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
-    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    g = GreedySession(rbf(seed, 1.0, n_bases=30), GreedyConfig())
     g.base = g.base.__class__(6.0, 3.0, 0.0)  # a station in the middle of the map
     p, h, _, level, _ = g.candidates()
     before = g.z.copy()
@@ -104,7 +104,7 @@ def test_trial_cuts_are_the_referees_cut_and_leave_the_grid_as_it_was(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_the_undermining_check_agrees_with_the_referees_on_the_cut_map(seed):
-    g = _Greedy(rbf(seed, 1.0, n_bases=30), GreedyConfig())
+    g = GreedySession(rbf(seed, 1.0, n_bases=30), GreedyConfig())
     g.base = g.base.__class__(6.0, 3.0, 0.0)
     p, h, _, level, _ = g.candidates()
     track, e, before = g.station()[0], g.exc, g.z.copy()

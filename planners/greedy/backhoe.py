@@ -110,7 +110,7 @@ class _Dig:
     arrive: float
 
 
-class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
+class GreedyPlanner(BackhoeLoopPlanner["GreedySession", set[tuple[float, float]]]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
@@ -118,19 +118,21 @@ class GreedyPlanner(BackhoeLoopPlanner["_Greedy", set[tuple[float, float]]]):
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
-        return _Greedy(scenario, self.config).run()
+        return GreedySession(scenario, self.config).run()
 
-    def session(self, scenario: Scenario) -> _Greedy:
-        return _Greedy(scenario, self.config)
+    def session(self, scenario: Scenario) -> GreedySession:
+        return GreedySession(scenario, self.config)
 
-    def _carry(self, session: _Greedy) -> set[tuple[float, float]]:
+    def _carry(self, session: GreedySession) -> set[tuple[float, float]]:
         return set()  # the stations visited
 
-    def _one_dump(self, session: _Greedy, carried: set[tuple[float, float]]) -> Plan:
+    def _one_dump(self, session: GreedySession, carried: set[tuple[float, float]]) -> Plan:
         return session.run(carried, max_dumps=1)
 
 
-class _Greedy(Moves, Opening):
+class GreedySession(Moves, Opening):
+    """One greedy plan in the making: the site as dug so far, the machines, the clock and the load."""
+
     def __init__(self, sc: Scenario, cfg: GreedyConfig):
         self.sc, self.cfg = sc, cfg
         self.exc: ExcavatorSpec = sc.machines.excavator  # type: ignore[assignment]

@@ -19,7 +19,7 @@ from ..truck_stands import Sample, arc_times, drive
 
 
 class Moves:
-    """The machines' moves of the greedy backhoe's session (``_Greedy`` in
+    """The machines' moves of the greedy backhoe's session (``GreedySession`` in
     :mod:`earthbench_planners.greedy.backhoe`), which holds the state they read and change."""
 
     def _truck_spots(self, base: Pose, toward: tuple[float, float] | None = None) -> Iterator[Pose]:

@@ -43,7 +43,7 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 
 
 class Opening:
-    """The opening of a :class:`~earthbench_planners.greedy.backhoe._Greedy` session, which holds
+    """The opening of a :class:`~earthbench_planners.greedy.backhoe.GreedySession` session, which holds
     the state it reads and changes."""
 
     def opening(self, visited: set[tuple[float, float]]) -> bool:
