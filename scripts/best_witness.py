@@ -7,6 +7,10 @@ some scenarios reaches it. A best known plan is any valid plan anyone has produc
 
 ``truth``    a registered planner plans each scenario of a suite from the scenario itself (its true
              terrain and soil, no scan), open loop.
+``closed``   the same in closed loop (``run_closed_loop``): each step sees the ground exactly as the
+             referee's replay has left it and the load the truck really holds — what a planner
+             needs on the realistic track, where the soil's fill factor, hard layer and slump
+             make any open-loop plan stop short.
 ``rollout``  greedy with its opening and relocations chosen by rollouts
              (``planners/greedy/rollout.py``: never later to the target than greedy), given the
              truth too.
@@ -30,6 +34,7 @@ from earthbench.referee import judge
 from earthbench.registry import PLANNERS
 from earthbench.results.scoring import evaluate
 from earthbench.results.suite import load_suite, parse_seed_range
+from earthbench.running.harness.steps import run_closed_loop
 from earthbench.sensing import ANONYMOUS_ID
 from earthbench.world import Scenario
 from earthbench_planners.greedy import rollout
@@ -44,8 +49,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("suite")
     ap.add_argument("--out", required=True, help="folder for the candidate files")
-    ap.add_argument("--kind", choices=("truth", "rollout"), default="truth")
-    ap.add_argument("--planner", default="greedy", help="the planner of --kind truth")
+    ap.add_argument("--kind", choices=("truth", "closed", "rollout"), default="truth")
+    ap.add_argument("--planner", default="greedy", help="the planner of --kind truth or closed")
     ap.add_argument("--config", action="append", default=[], help="KEY=VALUE for the planner of --kind truth (JSON values)")
     ap.add_argument("--seeds", default="", help="only these seeds (e.g. 0-2)")
     ap.add_argument("--family", default="", help="only scenarios of families whose name contains this")
@@ -60,13 +65,15 @@ def main() -> None:
                     "config": {"opening_stations": rollout.OPENING_STATIONS, "opening_stands": rollout.OPENING_STANDS,
                                "relocations": rollout.RELOCATIONS}}
     else:
-        producer = {"kind": "witness", "name": f"scripts/best_witness.py --kind truth --planner {a.planner}", "config": config}
+        producer = {"kind": "witness", "name": f"scripts/best_witness.py --kind {a.kind} --planner {a.planner}", "config": config}
     for sc in scenarios:
         if a.family not in sc.id:
             continue
         t0 = time.process_time()
         if a.kind == "rollout":
             plan, rollouts = rollout.rollout_plan(truth(sc))
+        elif a.kind == "closed":
+            plan, rollouts = run_closed_loop(PLANNERS.get(a.planner)(**config), truth(sc)), 0
         else:
             plan, rollouts = PLANNERS.get(a.planner)(**config).plan(truth(sc)), 0
         cpu = time.process_time() - t0
