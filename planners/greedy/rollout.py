@@ -19,7 +19,6 @@ import math
 from collections.abc import Callable
 
 from earthbench.plan import Plan
-from earthbench.results.scoring import time_to_target
 from earthbench.world import Pose, Scenario
 
 from .backhoe import GreedyConfig, GreedySession
@@ -48,7 +47,7 @@ class RolloutSession(GreedySession):
     def outcome(self) -> tuple[float, float]:
         """Time to the target by the session's own model (inf when short of it), then the shortfall."""
         goal = min(self.sc.task.target_volume, self.truck_spec.capacity)
-        return time_to_target(self.curve, goal), -self.loaded
+        return next((t for t, load in self.curve if load >= goal - 1e-9), math.inf), -self.loaded
 
     def opening(self, visited: Visited) -> bool:
         if self.inner:
