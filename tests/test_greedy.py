@@ -253,3 +253,31 @@ def test_the_opening_parks_the_truck_where_its_line_covers_the_soils_bearings(se
     m = evaluate(sc, plan, verdict)
     assert m["volume_ratio"] >= 0.99
     assert m["time_per_target_m3_bound_ratio"] <= 1.10
+
+
+def test_closed_loop_marks_a_contact_barren_when_the_truck_load_shows_its_dig_came_back_empty():
+    from earthbench_planners.greedy.closed_loop import BARREN_SHARE, Carried
+    from earthbench.plan import Dig, Plan
+
+    c = Carried()
+    c.remember(Plan((Dig("excavator", 0.0, 3.0, (1.0, 2.0), 0.0, 0.3, 1.0),)), cut=0.28, before=1.0)
+    c.judge_last(1.0 + BARREN_SHARE * 0.28 + 1e-6)  # loaded about what a quarter bucket holds: not barren
+    assert c.barren == [] and c.last is None
+    c.remember(Plan((Dig("excavator", 0.0, 3.0, (1.0, 2.0), 0.0, 0.3, 1.0),)), cut=0.28, before=1.0)
+    c.judge_last(1.01)
+    assert c.barren == [(1.0, 2.0)]
+
+
+def test_closed_loop_on_a_hard_scan_reaches_the_target_instead_of_digging_the_same_contact():
+    """standard-20t-realistic jacksboro-clay-cab s5 at 6 m³: the scan shows soil where the hard layer
+    stops the cut; greedy 1.5 dug that contact again at every step until the harness's step cap
+    (1,000 steps, 0.92 of the target); 1.5.1 marks it barren after one empty dump."""
+    from earthbench.results.suite import load_suite
+    from earthbench.running.harness.steps import run_closed_loop
+
+    sc = next(s for s in load_suite("standard-20t-realistic").scenarios if s.id == "standard-20t-realistic/jacksboro-clay-cab/s5/v6")
+    plan = run_closed_loop(GreedyPlanner(), sc)
+    v = judge(sc, plan)
+    m = evaluate(sc, plan, v)
+    assert v.valid and m["loaded_volume"] >= sc.task.target_volume
+    assert len(plan.info["steps"]) < 60

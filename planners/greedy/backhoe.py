@@ -18,16 +18,16 @@ the planner's predicted volume equals the referee's.
 Closed loop (``closed_loop = true``, docs/DESIGN.md §6): each step plans from the observation
 (the terrain as it now is, the machines where they stand, the load the truck reports) up to
 and including the next dump, so the planner digs on until the truck really holds the target.
-The stations it has visited are remembered from step to step.
+The stations it has visited, and (1.5.1) the contacts whose dig the truck's load showed came back
+empty, are remembered from step to step (``closed_loop.Carried``).
 
-Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array
-operations (heights looked up for all contacts at once; only the strokes whose cut level or
-points a dig has changed estimated again; a stroke's path cells found once, its trial cut
-measured without applying it and the undermining check applying it and putting the path's
-cells back, never a copy of the map), and a relocation scores the stations, in blocks of 128,
-from row-wise prefix sums of the material, one interval sum per grid row a station reaches,
-again only the stations within reach of what was dug since the last relocation; the truck's
-way to a station is tested before the tilt, as most rejected stations fail the truck.
+Cost is linear in the work: a dig scores the ~1,000 strokes around the base with array operations (heights looked
+up for all contacts at once; only the strokes whose cut level or points a dig has changed estimated again; a
+stroke's path cells found once, its trial cut measured without applying it and the undermining check applying it
+and putting the path's cells back, never a copy of the map), and a relocation scores the stations, in blocks of
+128, from row-wise prefix sums of the material, one interval sum per grid row a station reaches, again only the
+stations within reach of what was dug since the last relocation; the truck's way to a station is tested before
+the tilt, as most rejected stations fail the truck.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from earthbench.cut import apply_cut, cut_along, path_cells, path_window
-from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn
+from earthbench.motion import ABS_TOL, min_dig_time, min_dump_time, turn_drive_turn, wrap
 from earthbench.plan import Dig, Dump, Move, Plan, Prediction
 from earthbench.planner import closed_loop_setting
 from earthbench.rules import track_level_and_tilt
@@ -50,6 +50,7 @@ from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario, TruckSpec
 from ..backhoe_loop import BackhoeLoopPlanner
 from ..stability import Stroke, margins, path_undermines
 from ..truck_stands import TruckStands
+from .closed_loop import Carried, away_from
 from .moves import Moves
 from .opening import Opening
 
@@ -92,11 +93,6 @@ def _referee_order(a: Dig | Dump | Move) -> tuple[float, int]:
     return (a.path[0][0], 1) if isinstance(a, Move) else (a.t_start, 0)
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-π, π)."""
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 @dataclass(frozen=True)
 class _Dig:
     """A chosen stroke and the stand the truck takes for its dump."""
@@ -110,11 +106,11 @@ class _Dig:
     arrive: float
 
 
-class GreedyPlanner(BackhoeLoopPlanner["GreedySession", set[tuple[float, float]]]):
+class GreedyPlanner(BackhoeLoopPlanner["GreedySession", Carried]):
     """Fullest reachable bucket first; relocate when nothing in reach is worth a dig."""
 
     name = "greedy"
-    version = "1.5"
+    version = "1.5.1"
     Config = GreedyConfig
 
     def plan(self, scenario: Scenario) -> Plan:
@@ -123,11 +119,15 @@ class GreedyPlanner(BackhoeLoopPlanner["GreedySession", set[tuple[float, float]]
     def session(self, scenario: Scenario) -> GreedySession:
         return GreedySession(scenario, self.config)
 
-    def _carry(self, session: GreedySession) -> set[tuple[float, float]]:
-        return set()  # the stations visited
+    def _carry(self, session: GreedySession) -> Carried:
+        return Carried()
 
-    def _one_dump(self, session: GreedySession, carried: set[tuple[float, float]]) -> Plan:
-        return session.run(carried, max_dumps=1)
+    def _one_dump(self, session: GreedySession, carried: Carried) -> Plan:
+        carried.judge_last(session.loaded)
+        session.barren, before = carried.barren, session.loaded
+        plan = session.run(carried.visited, max_dumps=1)
+        carried.remember(plan, session.bucket, before)
+        return plan
 
 
 class GreedySession(Moves, Opening):
@@ -150,7 +150,8 @@ class GreedySession(Moves, Opening):
         self.t = 0.0
         self.truck_ready = 0.0  # when the truck stands still where it is going
         self.truck_path: list[tuple[float, float, float, float]] = []  # its last move (samples)
-        self.loaded = 0.0
+        self.loaded, self.bucket = 0.0, 0.0  # the truck's load; the last dig's volume
+        self.barren: list[tuple[float, float]] = []  # contacts not to dig again (closed loop: Carried)
         self.actions: list = []
         self.stands = TruckStands(sc, self.exc, self.z)
         self._line: tuple[tuple[Pose, Pose], tuple[np.ndarray, np.ndarray]] | None = None
@@ -259,6 +260,7 @@ class GreedySession(Moves, Opening):
         level = zc - depth
         est = self.estimate(cells, box, level)
         good = depth > 0.02
+        good &= away_from(p, self.barren, self.exc.bucket_width)  # closed loop: not where a dig came back empty
         return p[good], h[good], depth[good], level[good], est[good]
 
     def estimate(self, cells: np.ndarray, box: np.ndarray, level: np.ndarray) -> np.ndarray:
@@ -300,7 +302,7 @@ class GreedySession(Moves, Opening):
         fill = np.minimum(est, want * 1.05)
         bearing = np.arctan2(p[:, 1] - self.base.y, p[:, 0] - self.base.x)
         to_truck = math.atan2(self.truck.y - self.base.y, self.truck.x - self.base.x)
-        swing = (np.abs(_wrap(bearing - self.base.yaw - self.turn)) + np.abs(_wrap(bearing - to_truck))) / e.swing_rate
+        swing = (np.abs(wrap(bearing - self.base.yaw - self.turn)) + np.abs(wrap(bearing - to_truck))) / e.swing_rate
         rate = np.where(fill >= threshold - 1e-9, fill, 0.0) / (e.min_stroke_time + e.min_dump_time + swing)
         order = list(dict.fromkeys([*np.argsort(-fill)[:6].tolist(), *np.argsort(-rate)[:10].tolist()]))
         best: _Dig | None = None
@@ -333,7 +335,7 @@ class GreedySession(Moves, Opening):
             return None, fullest
         bearings = np.arctan2(stands[0][:, 1] - self.base.y, stands[0][:, 0] - self.base.x)
         for i, c in enumerate(confirmed):
-            least = float(np.abs(_wrap(bearings - math.atan2(c[2][1] - self.base.y, c[2][0] - self.base.x))).min())
+            least = float(np.abs(wrap(bearings - math.atan2(c[2][1] - self.base.y, c[2][0] - self.base.x))).min())
             confirmed[i] = (min(c[1], want) / (c[5] + e.min_dump_time + least / e.swing_rate), *c[1:])
         pending = self.still_driving()
         for bound, vol, contact, heading, k, dur in sorted(confirmed, key=lambda c: -c[0]):
