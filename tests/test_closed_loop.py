@@ -169,6 +169,21 @@ def test_stl_tamp_in_receding_horizon():
 
 
 @pytest.mark.slow
+def test_stl_tamp_in_receding_horizon_goes_on_past_a_global_solution_whose_areas_yield_nothing():
+    """standard-20t-realistic bench-clay-cab s5 at 8 m³: the scan shows soil where the first
+    steps' areas yield nothing; 0.12.2 ended the run there with nothing loaded, 0.12.3 goes on over
+    the other tiles without the global problem (planners/stl_tamp/receding.py) and reaches the target."""
+    from earthbench.running.harness.steps import run_closed_loop
+    from earthbench.registry import PLANNERS
+    from earthbench.results.suite import load_suite
+
+    sc = next(s for s in load_suite("standard-20t-realistic").scenarios if s.id == "standard-20t-realistic/bench-clay-cab/s5/v8")
+    plan = run_closed_loop(PLANNERS.get("stl-tamp")(closed_loop=True), sc)
+    verdict = judge(sc, plan)
+    assert verdict.valid and verdict.loaded_volume >= sc.task.target_volume
+
+
+@pytest.mark.slow
 def test_stl_tamp_in_receding_horizon_keeps_its_sides_when_the_truck_moves():
     """A later step faces the loading side of the first, wherever the truck now stands: read
     again from the truck's new stand, the areas turned to the far side of the site (0.10.2)."""
