@@ -202,8 +202,7 @@ class StlTampPlanner(Sized, Planner):
     0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
     ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
     (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
-    0.12.1–0.12.3: standless areas passed over once hopeless; a truck inside the NLPs' clearance seen beyond it (``scale``);
-    closed loop going on over the other tiles when the global problem's areas yield nothing (:mod:`.receding`)."""
+    0.12.1–0.12.3: hopeless standless areas passed over; a truck in the NLPs' clearance seen beyond it; closed loop past fruitless areas."""
 
     name = "stl-tamp"
     version = "0.12.3"
