@@ -8,7 +8,9 @@ reported load, not the model's), the first area it chooses gets its local proble
 one, up to :data:`TRIES`, when it yields nothing), and that area's actions are the step. The
 next step re-solves the remaining areas on the terrain the referee left, warm-started from the
 previous solution: the areas it chose and did not dig yet lead the new tour, in its order, so
-the global problem's initial guess is the previous plan's tail. Areas that yielded nothing are not chosen again.
+the global problem's initial guess is the previous plan's tail. Areas that yielded nothing are not chosen again;
+when every area a solution chose yielded nothing, the step goes on over the other tiles without
+the global problem (0.12.3, :func:`step`).
 The areas face the sides of the first step (:class:`~.hierarchy.Layout`) in every step, as the
 open-loop plan's face the scenario's: read again from where the truck stands after each area,
 they turned to another side of the site and sent the excavator around it (0.10.2).
@@ -97,8 +99,8 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
     global problem's pass gives nothing (its areas yield nothing and are marked, ``Horizon.done``,
     or it chooses none), the step goes on over the other tiles in the greedy tour's order, up to
     :data:`TRIES` local solves a pass, without the global problem, whose continuous areas can
-    settle back on the fruitless ground (0.12.3: 0.12.2 ended the run there, at 0.40 of the target on one ``standard-realistic``
-    scan and with nothing loaded on four 20t ones)."""
+    settle back on the fruitless ground (0.12.3: 0.12.2 ended the run there, at 0.40 of the
+    target on one ``standard-realistic`` scan and with nothing loaded on four 20t ones)."""
     if observation.remaining <= 0.0 or observation.truck_full or room(observation) < ASK_MIN:
         return None
     first = True
