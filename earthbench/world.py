@@ -344,6 +344,12 @@ class Scenario:
         return self.track == "backhoe"
 
     @property
+    def truck_holds(self) -> float:
+        """Bank m³ the truck holds: its capacity counts loose m³, so with soil it is divided by the swell."""
+        capacity = self.machines.truck.capacity
+        return capacity if self.soil is None else capacity / self.soil.swell
+
+    @property
     def outside_level(self) -> float:
         """Height of the open ground beyond the map: the floor, or the map's lowest cell."""
         return self.site.floor if self.site.floor is not None else float(self.terrain.z.min())

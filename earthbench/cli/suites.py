@@ -22,8 +22,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  planners {', '.join(s.planners) if s.planners else '(every planner of the track)'}")
         print(f"  digest {s.digest}")
         for sc in s.scenarios:
-            holds = sc.machines.truck.capacity / (sc.soil.swell if sc.soil is not None else 1.0)  # bank m³
-            over = f"  (the truck holds {holds:.2f}: no plan reaches it)" if holds < sc.task.target_volume else ""
+            over = f"  (the truck holds {sc.truck_holds:.2f}: no plan reaches it)" if sc.truck_holds < sc.task.target_volume else ""
             print(f"  {sc.id:<40} {sc.digest[:12]}  target {sc.task.target_volume:g} m³{over}")
         return 0
     suites = known_suites()

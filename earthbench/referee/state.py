@@ -227,8 +227,7 @@ class Replay:
         self.station: tuple[Pose, float, float] | None = None  # excavator: pose, track level, tilt
         self.memo: dict[Any, Any] = {}  # what a rule computes once per judgement (e.g. the cells under a parked truck)
         self.soil = scenario.soil
-        #: bank m³ the truck holds: its capacity counts loose m³ (``Soil.swell``)
-        self.truck_capacity = m.truck.capacity if self.soil is None else m.truck.capacity / self.soil.swell
+        self.truck_capacity = scenario.truck_holds  # bank m³
         #: the last cut's slump window, the cells it lowered and the most it lowered one, until it settles
         self.unsettled: tuple[tuple[int, int, int, int], np.ndarray, np.ndarray, float] | None = None
         #: with soil and a loader, the firm ground: the heights less the loose material slumping left on
