@@ -29,6 +29,7 @@ OPENING_STATIONS, OPENING_STANDS, RELOCATIONS = 8, 4, 4
 
 Visited = set[tuple[float, float]]
 Act = Callable[["RolloutSession", Visited], bool]
+Tried = tuple[Act, "RolloutSession", Visited]  # a candidate, a copy with it done, the copy's visited set
 
 
 class RolloutSession(GreedySession):
@@ -65,41 +66,40 @@ class RolloutSession(GreedySession):
             key = (round(float(bases[k, 0]), 3), round(float(bases[k, 1]), 3))
             for _, _, spot, _ in self._sliding_order(Pose(*key, self.base.yaw), spots, need, n)[1][:OPENING_STANDS]:
                 acts.append(lambda s, v, key=key, spot=spot: _open_at(s, v, key, spot))
-        return self._take(visited, acts)
+        tried = [(act, *got) for act in acts if (got := self._tried(act, visited)) is not None]
+        return self._take(visited, tried)
 
     def relocate(self, visited: Visited, stay: bool = False, toward: tuple[float, float] | None = None) -> bool:
         if self.inner or stay:
             return super().relocate(visited, stay, toward)
-        acts: list[Act] = []
-        passed: Visited = set()  # the stations of the candidates before
+        tried: list[Tried] = []
+        passed: frozenset[tuple[float, float]] = frozenset()  # the stations of the candidates before
         for _ in range(RELOCATIONS):
-            probe = self._copy()
-            if not GreedySession.relocate(probe, visited | passed):
+            act: Act = lambda s, v, skip=passed: _relocate_past(s, v, skip)  # noqa: E731
+            got = self._tried(act, visited)
+            if got is None:
                 break
-            acts.append(lambda s, v, skip=frozenset(passed): _relocate_past(s, v, skip))
-            passed.add((round(probe.base.x, 3), round(probe.base.y, 3)))
-        return self._take(visited, acts) if acts else False
+            tried.append((act, *got))
+            passed |= {(round(got[0].base.x, 3), round(got[0].base.y, 3))}
+        return self._take(visited, tried) if tried else False
 
-    def _copy(self) -> RolloutSession:
+    def _tried(self, act: Act, visited: Visited) -> tuple[RolloutSession, Visited] | None:
+        """A copy with ``act`` done and its visited set, for greedy to play out (None: ``act`` finds no move)."""
         s = copy.deepcopy(self, {id(self.sc): self.sc})  # the scenario is never changed: shared
-        s.inner = True
-        return s
+        s.inner, v = True, set(visited)
+        return (s, v) if act(s, v) else None
 
-    def _take(self, visited: Visited, acts: list[Act]) -> bool:
-        """Play every candidate out on a copy; do the one that reaches the target soonest (the first on ties)."""
-        best: tuple[tuple[float, float], int] | None = None
-        for k, act in enumerate(acts):
-            s, v = self._copy(), set(visited)
-            if not act(s, v):
-                continue
+    def _take(self, visited: Visited, tried: list[Tried]) -> bool:
+        """Play every tried candidate out; do the one that reaches the target soonest (the first on ties)."""
+        if not tried:
+            return False
+        outcomes = []
+        for _, s, v in tried:
             s.run(v)
             self.rollouts += 1
-            if best is None or s.outcome() < best[0]:
-                best = (s.outcome(), k)
-        if best is None:
-            return False
+            outcomes.append(s.outcome())
         v = set(visited)
-        moved = acts[best[1]](self, v)
+        moved = tried[outcomes.index(min(outcomes))][0](self, v)
         visited |= v
         return moved
 
