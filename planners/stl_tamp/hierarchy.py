@@ -125,6 +125,7 @@ class Area:
     centre: tuple[float, float]
     source: str = "tour"
     toward: Area | None = None  # facing away from the truck: the same tile facing it (the fallback)
+    swing: float = 0.0  # the least swing (rad) a dump from it costs, the truck off the dig area (.stand.least_swing)
 
 
 @dataclass
@@ -289,14 +290,16 @@ TILE_TOL = 1e-9
 
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
                     truck_offset: float, truck_angle: float = 0.0, layout: Layout | None = None,
-                    facing_away: float | None = None) -> list[Area]:
+                    facing_away: float | None = None, away_turns: tuple[float, ...] = ()) -> list[Area]:
     """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
 
     The base sits ``base_offset`` beyond the area's centre toward the truck's side; the truck
     ``truck_offset`` from the base, turned by ``truck_angle`` from straight behind it toward the
     excavator's starting side (π/2: beside the base, a quarter swing from the area instead of a
     half swing; the excavator tours away from its start, so the truck stays out of its way).
-    ``layout``: the sides to face (default: :func:`site_layout` of ``scenario``)."""
+    ``layout``: the sides to face (default: :func:`site_layout` of ``scenario``). A tile within
+    ``facing_away`` of the truck's side also faces away from it (the base beyond it), its stand
+    turned by each of ``away_turns`` (rad) in turn when the straight one is too steep."""
     t = scenario.terrain
     xmin, xmax, ymin, ymax = site_box(scenario)
     lay = layout or site_layout(scenario)
@@ -333,8 +336,13 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
             sides = [(ux, uy)]
             if facing_away is not None and (edge - (cx * ux + cy * uy)) + base_offset <= facing_away:
                 sides.append((-ux, -uy))  # the base beyond the area from the truck: the truck may stand on the dig's bearing
-            for sx, sy in sides:
+            for k, (sx, sy) in enumerate(sides):
                 base = level_stand(scenario, z, (cx, cy), (sx, sy), base_offset, side)
+                for turn in away_turns if base is None and k == 1 else ():
+                    d = (math.cos(turn) * sx - math.sin(turn) * sy, math.sin(turn) * sx + math.cos(turn) * sy)
+                    if (base := level_stand(scenario, z, (cx, cy), d, base_offset, side)) is not None:
+                        sx, sy = d
+                        break
                 if base is None:
                     continue  # no stand in reach of this area is level enough for the referee's tilt rule
                 truck = (base[0] + dx_t * truck_offset, base[1] + dy_t * truck_offset)
@@ -374,15 +382,16 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
 
 
 def greedy_tour(areas: list[Area], start: tuple[float, float], target: float, speed: float, work_per_m3: float,
-                reserve: float = 1.3) -> list[Area]:
-    """Areas in visiting order: best volume per second of travel and work, until ``reserve × target``."""
+                reserve: float = 1.3, swing_per_m3: float = 0.0) -> list[Area]:
+    """Areas in visiting order: best volume per second of travel and work, until ``reserve × target``;
+    an area's work counts ``swing_per_m3`` seconds a m³ for each radian of its swing (``Area.swing``)."""
     left = list(areas)
     tour: list[Area] = []
     pos, got = start, 0.0
     while left and got < reserve * target:
         def score(a: Area, pos: tuple[float, float] = pos) -> float:
             travel = math.hypot(a.base[0] - pos[0], a.base[1] - pos[1]) / speed
-            return a.estimate / (travel + work_per_m3 * a.estimate + 1.0)
+            return a.estimate / (travel + (work_per_m3 + swing_per_m3 * a.swing) * a.estimate + 1.0)
 
         best = max(left, key=score)
         left.remove(best)

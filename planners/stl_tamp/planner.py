@@ -27,7 +27,6 @@ from .hierarchy import (
     get_nlp,
     global_blocks,
     global_lattice,
-    greedy_tour,
     in_box,
     level_stand,
     Layout,
@@ -42,7 +41,7 @@ from .hierarchy import (
 )
 from .problem import Shape, Solution
 from .sizes import Sized, factors
-from .stand import candidate_areas_for, place, served, to_stand
+from .stand import candidate_areas_for, place, served, to_stand, tour
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -164,6 +163,8 @@ class Config(LocalNLPConfig):
     follow_face: bool = field(default=True, metadata=_OMIT)
     keep_base: bool = field(default=True, metadata=_OMIT)
     face_away: bool = field(default=True, metadata=_OMIT)
+    # 0.13.0 (issue 49; .stand.tour): the tiles the truck serves beyond them first, every area's swing priced
+    swing_first: bool = field(default=True, metadata=_OMIT)
     side_by_swing: bool = field(default=False, metadata=_OMIT)  # issue 49: measured, off (.stand; NOTES.md, "0.12.0")
     standless_tries: int = field(default=8, metadata=_OMIT)  # 0.12.1: standless areas tried before passed over (0: never)
 
@@ -311,7 +312,6 @@ class StlTampPlanner(Sized, Planner):
                          retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
 
         areas = self.areas(scenario, st.z, side)
-        work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
         # V_max per area is the global layer's unit; a dig area that is one local area (Fig. 6's
         # set-up) has nothing to split the target over: its local problem takes up to m_l buckets
         vmax = c.area_vmax if len(areas) > 1 else max(c.area_vmax, c.m_local * exc.bucket_capacity)
@@ -334,9 +334,9 @@ class StlTampPlanner(Sized, Planner):
                 in_block = kept
             v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
                                                              (c.block_phases - 1) * c.area_vmax)
-            tour = greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3)
-            chosen = self._choose(scenario, st, tour, v_block, side, box, block, len(blocks) > 1, trace)
-            queue = list(chosen) + [a for a in tour if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
+            seed = tour(c, in_block, (st.exc.x, st.exc.y), v_block, exc)
+            chosen = self._choose(scenario, st, seed, v_block, side, box, block, len(blocks) > 1, trace)
+            queue = list(chosen) + [a for a in seed if all(math.dist(a.centre, b.centre) > side / 2 for b in chosen)]
             got_block = 0.0
             while queue and remaining > c.volume_tol and got_block < v_block - c.volume_tol:
                 area = queue.pop(0)

@@ -39,13 +39,13 @@ from earthbench.soil import MATERIALS
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
+from .stand import tour as seed_tour
 from .hierarchy import (
     Area,
     Layout,
     Trace,
     global_blocks,
     global_lattice,
-    greedy_tour,
     in_box,
     nearest_block,
     site_box,
@@ -136,8 +136,7 @@ def _pass(planner, observation: Observation, h: Horizon, use_global: bool) -> Pl
     in_block = [a for a in areas if in_box(a.centre, block)]
     v_block = remaining if len(blocks) == 1 else min(remaining, c.block_fill * sum(a.estimate for a in in_block),
                                                      (c.block_phases - 1) * c.area_vmax)
-    work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
-    tour = _warm(greedy_tour(in_block, (st.exc.x, st.exc.y), v_block, exc.travel_speed, work_per_m3), h.ahead, side)
+    tour = _warm(seed_tour(c, in_block, (st.exc.x, st.exc.y), v_block, exc), h.ahead, side)
     if c.global_layer and use_global and len(tour) > 1:
         if len(blocks) == 1:
             surf = fit_rbf(sc.terrain.with_z(st.z), spacing=c.global_fit_spacing, solver="cholesky")

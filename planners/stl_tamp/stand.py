@@ -29,13 +29,17 @@ from earthbench.world import Pose, Scenario
 
 from ..truck_stands import GAP
 from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
-from .hierarchy import Area, Layout, candidate_areas, level_stand, site_layout
+from .hierarchy import Area, Layout, candidate_areas, greedy_tour, level_stand, site_layout
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
 #: shadow and the gap) and under its dump reach, for an area to face away from the truck.
 FACE_AWAY_MARGIN = 1.3
 #: Stands looked at, cheapest first, before the truck is left to the conversion's own choice.
 TRIES = 300
+#: Turns (rad) tried for the stand of a tile facing away from the truck when the straight one is too steep.
+AWAY_TURNS = (0.3, -0.3, 0.6, -0.6)
+#: Share of an area's V_max the tiles facing away must hold to be toured alone (:func:`tour`).
+MIN_AWAY = 0.5
 
 
 def area_shadow(area: Area, bucket_width: float) -> Polygon:
@@ -113,13 +117,41 @@ def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, 
     m = scenario.machines
     away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
     areas = candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
-                            layout, away)
+                            layout, away, AWAY_TURNS if c.swing_first else ())
+    if c.swing_first:
+        dig = Polygon(scenario.site.dig_area)
+        shapely.prepare(dig)
+        areas = [_priced(scenario, dig, a) for a in areas]
     if not c.side_by_swing or len(areas) < 2:
         return areas
     lay = layout or site_layout(scenario)
     dig = Polygon(scenario.site.dig_area)
     shapely.prepare(dig)
     return [_least_swing_side(scenario, z, dig, a, lay, c.base_offset, side) for a in areas]
+
+
+def _priced(scenario: Scenario, dig: Polygon, area: Area | None) -> Area | None:
+    """``area`` and its fallbacks, each with its least swing (:func:`least_swing`)."""
+    if area is None:
+        return None
+    return dataclasses.replace(area, swing=least_swing(scenario, dig, area), toward=_priced(scenario, dig, area.toward))
+
+
+def tour(c: Any, areas: list[Area], start: tuple[float, float], target: float, exc: Any) -> list[Area]:
+    """The areas in the order the global problem is seeded with (:func:`.hierarchy.greedy_tour`).
+    With ``c.swing_first`` (0.13.0, issue 49) the tiles the truck serves from beyond them (facing
+    away, the dump on the dig's bearing) are toured alone while they hold ``MIN_AWAY`` of an area,
+    and every area's work counts its least swing (``Area.swing``): the global problem and the
+    seed tour knew nothing of where the truck may stand, and chose areas it serves only behind
+    the excavator (a swing of 110–120° a dump on dem and paper-extensive)."""
+    work_per_m3 = (exc.min_stroke_time + exc.min_dump_time + 2.0) / (exc.bucket_capacity * c.fill_estimate)
+    if not c.swing_first:
+        return greedy_tour(areas, start, target, exc.travel_speed, work_per_m3)
+    away = [a for a in areas if a.toward is not None]
+    if sum(a.estimate for a in away) >= MIN_AWAY * c.area_vmax:
+        areas = away
+    swing_per_m3 = 2.0 / exc.swing_rate / (exc.bucket_capacity * c.fill_estimate)
+    return greedy_tour(areas, start, target, exc.travel_speed, work_per_m3, swing_per_m3=swing_per_m3)
 
 
 def _across(scenario: Scenario, z: np.ndarray, area: Area, toward: tuple[float, float], base_offset: float,
