@@ -203,10 +203,15 @@ class StlTampPlanner(Sized, Planner):
     0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
     ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
     (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
-    0.12.1–0.12.3: hopeless standless areas passed over; a truck in the NLPs' clearance seen beyond it; closed loop past fruitless areas."""
+    0.12.1–0.12.3: hopeless standless areas passed over; a truck in the NLPs' clearance seen beyond it; closed loop past fruitless areas.
+
+    0.13.0 (issue 49): the global problem is seeded, and closed loop too, with the tiles the truck serves from beyond them (facing
+    away, the dump on the dig's bearing) while they hold work, every area's swing to a truck off the dig area priced
+    (:func:`.stand.tour`, ``swing_first``); a facing-away tile whose stand is too steep tries it turned; on a scan a stand keeps the
+    tilt rule with the stand moved by the distance a face may be misplaced (:func:`.hierarchy.level_stand`). NLPs unchanged."""
 
     name = "stl-tamp"
-    version = "0.12.3"
+    version = "0.13.0"
     tracks = ("backhoe",)
     Config = Config
     reads = (SharedFolder("EARTHBENCH_NLP_CACHE", "earthbench/nlp"),)  # the built NLPs (.nlp_cache)
