@@ -372,7 +372,7 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
     ux, uy = toward
     yaw = math.atan2(-uy, -ux)
     half = side / math.sqrt(2.0)
-    shifts = _blurred(scenario)
+    shifts = _blurred(scenario) if ux * truck_side(scenario)[0] + uy * truck_side(scenario)[1] < 0 else [(0.0, 0.0)]
     for shift in STAND_SHIFTS:
         d = base_offset + shift
         if d - half < es.reach_min or d + half > es.reach_max:
@@ -385,10 +385,13 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
 
 
 def _blurred(scenario: Scenario) -> list[tuple[float, float]]:
-    """Where a stand's tilt is judged, relative to it: the stand, and on a scan the stand moved
-    by the distance the scan may misplace a face (:func:`..stability.face_blur`) every 45°. A cab's
-    scan sees the far side of a dig area worst: stl-tamp 0.13.0's stands there, judged on the scan
-    alone, stood on true ground tilted up to 26° (limit 20°) where the scan showed 17°."""
+    """Where the tilt of a stand beyond its area from the truck's side is judged, relative to it:
+    the stand, and on a scan the stand moved by the distance the scan may misplace a face
+    (:func:`..stability.face_blur`) every 45°. A scan taken from the machines' side sees the far
+    side of the soil worst: stl-tamp 0.13.0's first stands there, judged on the scan alone, stood
+    on true ground tilted up to 26° (limit 20°) where the scan showed 17°. A stand on the truck's
+    side is judged where it is (judged blurred, separate's open-loop plans on survey scans lost a
+    tenth of their load for want of stands)."""
     blur = face_blur(scenario)
     rings = [(blur * math.cos(k * math.pi / 4), blur * math.sin(k * math.pi / 4)) for k in range(8)] if blur > 0 else []
     return [(0.0, 0.0), *rings]
