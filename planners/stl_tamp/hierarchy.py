@@ -28,12 +28,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from shapely.geometry import Polygon
 
-from earthbench.rules import track_level_and_tilt
 from earthbench.world import Pose, Scenario
 from .surface import RbfSurface, fit_rbf
 
-from ..stability import face_blur
-from .convert import TILT_MARGIN, SimState
+from .convert import AT_THE_STAND, TILT_MARGIN, SimState, StandJudge
 from .guess import PhaseSeed
 from .problem import Shape
 
@@ -291,7 +289,8 @@ TILE_TOL = 1e-9
 
 def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float, vmax: float, base_offset: float,
                     truck_offset: float, truck_angle: float = 0.0, layout: Layout | None = None,
-                    facing_away: float | None = None, away_turns: tuple[float, ...] = ()) -> list[Area]:
+                    facing_away: float | None = None, away_turns: tuple[float, ...] = (),
+                    judge: StandJudge = AT_THE_STAND) -> list[Area]:
     """Areas tiling the dig area, with a volume estimate from the grid (top ``depth`` metres).
 
     The base sits ``base_offset`` beyond the area's centre toward the truck's side; the truck
@@ -300,7 +299,8 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
     half swing; the excavator tours away from its start, so the truck stays out of its way).
     ``layout``: the sides to face (default: :func:`site_layout` of ``scenario``). A tile within
     ``facing_away`` of the truck's side also faces away from it (the base beyond it), its stand
-    turned by each of ``away_turns`` (rad) in turn when the straight one is too steep."""
+    turned by each of ``away_turns`` (rad) in turn when the straight one is too steep; ``judge``:
+    see :func:`level_stand`."""
     t = scenario.terrain
     xmin, xmax, ymin, ymax = site_box(scenario)
     lay = layout or site_layout(scenario)
@@ -338,10 +338,10 @@ def candidate_areas(scenario: Scenario, z: np.ndarray, side: float, depth: float
             if facing_away is not None and (edge - (cx * ux + cy * uy)) + base_offset <= facing_away:
                 sides.append((-ux, -uy))  # the base beyond the area from the truck: the truck may stand on the dig's bearing
             for k, (sx, sy) in enumerate(sides):
-                base = level_stand(scenario, z, (cx, cy), (sx, sy), base_offset, side)
+                base = level_stand(scenario, z, (cx, cy), (sx, sy), base_offset, side, judge)
                 for turn in away_turns if base is None and k == 1 else ():
                     d = (math.cos(turn) * sx - math.sin(turn) * sy, math.sin(turn) * sx + math.cos(turn) * sy)
-                    if (base := level_stand(scenario, z, (cx, cy), d, base_offset, side)) is not None:
+                    if (base := level_stand(scenario, z, (cx, cy), d, base_offset, side, judge)) is not None:
                         sx, sy = d
                         break
                 if base is None:
@@ -362,39 +362,25 @@ STAND_SHIFTS = (0.0, 0.5, -0.5, 1.0, -1.0)
 
 
 def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], toward: tuple[float, float],
-                base_offset: float, side: float) -> tuple[float, float] | None:
+                base_offset: float, side: float, judge: StandJudge = AT_THE_STAND) -> tuple[float, float] | None:
     """The stand nearest the nominal one (``base_offset`` from the area's centre toward the
     truck's side) on which the referee's tilt rule lets the excavator work, facing the area;
     None when every stand in reach is too steep. The referee judges the tilt where the machine
     stands (:func:`earthbench.rules.track_level_and_tilt`), so a plan from a steep
-    stand would be invalid whatever the NLP does there."""
+    stand would be invalid whatever the NLP does there. ``judge``: how the tilt is judged
+    (:class:`.convert.StandJudge`; by default at the stand, on ``z``)."""
     es = scenario.machines.excavator
     ux, uy = toward
     yaw = math.atan2(-uy, -ux)
     half = side / math.sqrt(2.0)
-    shifts = _blurred(scenario) if ux * truck_side(scenario)[0] + uy * truck_side(scenario)[1] < 0 else [(0.0, 0.0)]
     for shift in STAND_SHIFTS:
         d = base_offset + shift
         if d - half < es.reach_min or d + half > es.reach_max:
             continue
         base = (centre[0] + ux * d, centre[1] + uy * d)
-        if all(track_level_and_tilt(scenario, z, es, Pose(base[0] + dx, base[1] + dy, yaw))[1] <= es.max_tilt - TILT_MARGIN
-               for dx, dy in shifts):
+        if judge.tilt(scenario, z, es, Pose(base[0], base[1], yaw)) <= es.max_tilt - TILT_MARGIN:
             return base
     return None
-
-
-def _blurred(scenario: Scenario) -> list[tuple[float, float]]:
-    """Where the tilt of a stand beyond its area from the truck's side is judged, relative to it:
-    the stand, and on a scan the stand moved by the distance the scan may misplace a face
-    (:func:`..stability.face_blur`) every 45°. A scan taken from the machines' side sees the far
-    side of the soil worst: stl-tamp 0.13.0's first stands there, judged on the scan alone, stood
-    on true ground tilted up to 26° (limit 20°) where the scan showed 17°. A stand on the truck's
-    side is judged where it is (judged blurred, separate's open-loop plans on survey scans lost a
-    tenth of their load for want of stands)."""
-    blur = face_blur(scenario)
-    rings = [(blur * math.cos(k * math.pi / 4), blur * math.sin(k * math.pi / 4)) for k in range(8)] if blur > 0 else []
-    return [(0.0, 0.0), *rings]
 
 
 def greedy_tour(areas: list[Area], start: tuple[float, float], target: float, speed: float, work_per_m3: float,

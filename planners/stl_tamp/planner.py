@@ -16,7 +16,7 @@ from earthbench.planner import Observation, Planner, SharedFolder, closed_loop_s
 from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
-from .convert import Converter, SimState
+from .convert import Converter, SimState, StandJudge
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from .hierarchy import (
     Area,
@@ -41,7 +41,7 @@ from .hierarchy import (
 )
 from .problem import Shape, Solution
 from .sizes import Sized, factors
-from .stand import candidate_areas_for, place, served, to_stand, tour
+from .stand import candidate_areas_for, place, served, stand_judge, to_stand, tour
 
 
 class TargetTooLargeError(EarthbenchError, ValueError):
@@ -236,9 +236,10 @@ class StlTampPlanner(Sized, Planner):
         e = scenario.machines.excavator
         return fitting_side(scenario, math.sqrt(self.config.area_buckets * e.bucket_width * e.max_drag_length))
 
-    def areas(self, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
+    def areas(self, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None,
+              judge: StandJudge | None = None) -> list[Area]:
         """The candidate areas, some facing away from the truck (:func:`.stand.candidate_areas_for`)."""
-        return candidate_areas_for(self.config, scenario, z, side, layout)
+        return candidate_areas_for(self.config, scenario, z, side, layout, judge)
 
     def _global_shape(self, exc: ExcavatorSpec, m_g: int, side: float, lattice: tuple[int, int], spacing: float,
                       sigma: float) -> Shape:
@@ -316,7 +317,8 @@ class StlTampPlanner(Sized, Planner):
         conv = Converter(scenario, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
                          retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
 
-        areas = self.areas(scenario, st.z, side)
+        st.judge = stand_judge(c, scenario)
+        areas = self.areas(scenario, st.z, side, judge=st.judge)
         # V_max per area is the global layer's unit; a dig area that is one local area (Fig. 6's
         # set-up) has nothing to split the target over: its local problem takes up to m_l buckets
         vmax = c.area_vmax if len(areas) > 1 else max(c.area_vmax, c.m_local * exc.bucket_capacity)
@@ -356,7 +358,7 @@ class StlTampPlanner(Sized, Planner):
             if not left and remaining > c.volume_tol and trace.regenerated < 3:
                 # every area visited once: tile the lowered grid anew
                 trace.regenerated += 1
-                left = self.areas(scenario, st.z, side)
+                left = self.areas(scenario, st.z, side, judge=st.judge)
         if len(trace.global_["blocks"]) == 1:  # one window: the record as before
             trace.global_ = dict(trace.global_["blocks"][0])
         info = {"planner": self.name, "areas": n_areas, "digs": st.digs, "nlp_model_volume": predicted_model_volume,
@@ -460,7 +462,7 @@ class StlTampPlanner(Sized, Planner):
             reach = math.hypot(base[0] - centre[0], base[1] - centre[1])
             if reach > 1e-6:  # the global NLP knows no tilt rule: the nearest level stand on its line
                 base = level_stand(scenario, st.z, centre, ((base[0] - centre[0]) / reach, (base[1] - centre[1]) / reach),
-                                   reach, side)
+                                   reach, side, st.judge)
             if base is None:
                 continue
             out.append(Area(float(sol.px[i]), float(sol.py[i]), float(sol.psi[i]), base,

@@ -33,12 +33,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from earthbench.plan import Plan, Prediction
 from earthbench.planner import Observation
 from earthbench.soil import MATERIALS
 from .surface import fit_rbf
 
 from .convert import Converter, SimState
+from .stand import stand_judge
 from .stand import tour as seed_tour
 from .hierarchy import (
     Area,
@@ -60,6 +63,8 @@ YIELD_BOUNDS = (0.5, 1.5)
 #: What a step asks for beyond the corrected missing volume: a share of it, and at least this
 #: many m³, so that the scan's noise does not leave the truck a sliver short.
 ASK_MARGIN, ASK_MIN = 0.05, 0.05
+#: Earlier scans a stand's tilt is also judged on (:class:`.convert.StandJudge`), the latest so many.
+SCANS_KEPT = 8
 
 
 @dataclass
@@ -67,11 +72,12 @@ class Horizon:
     """What one closed-loop run of ``stl-tamp`` carries from step to step."""
 
     ahead: list[Area] = field(default_factory=list)  # the previous solution's chosen areas not yet dug
-    done: list[tuple[float, float]] = field(default_factory=list)  # centres of areas that yielded nothing
+    done: list[tuple[float, float, float]] = field(default_factory=list)  # areas that yielded nothing: centre, drag heading
     joints: tuple[float, float] = (0.3, -1.5)
     trace: Trace = field(default_factory=Trace)
     layout: Layout | None = None  # the first step's sides, kept for the run
     modelled: float = 0.0  # the model's volume of the steps executed so far (m³)
+    scans: list[np.ndarray] = field(default_factory=list)  # the earlier steps' scans, last SCANS_KEPT (0.13.0)
 
     def ask(self, observation: Observation) -> float:
         """The model volume a step plans for: the missing volume over the yield observed so far
@@ -108,6 +114,7 @@ def step(planner, observation: Observation, h: Horizon) -> Plan | None:
         tried = len(h.done)
         plan = _pass(planner, observation, h, first)
         if plan is not None or (not first and len(h.done) == tried):
+            h.scans = [*h.scans, np.array(observation.scenario.terrain.z)][-SCANS_KEPT:]
             return plan
         first = False
 
@@ -124,10 +131,11 @@ def _pass(planner, observation: Observation, h: Horizon, use_global: bool) -> Pl
     box = site_box(sc)
     conv = Converter(sc, eta_on=c.eta_on, min_dig_volume=c.min_dig_volume, depth=c.dig_depth, repair=c.repair,
                      retime=c.retime_moves, follow_face=c.follow_face, keep_soil=True)
+    st.judge = stand_judge(c, sc, tuple(h.scans) if sc.soil is not None else ())
     if h.layout is None:
         h.layout = site_layout(sc)
-    areas = [a for a in planner.areas(sc, st.z, side, h.layout)
-             if all(math.dist(a.centre, d) > side / 2 for d in h.done)]
+    areas = [t for t in (_untried(a, h.done, side, c.swing_first) for a in planner.areas(sc, st.z, side, h.layout, st.judge))
+             if t is not None]
     if not areas:
         return None
     vmax = c.area_vmax if len(areas) > 1 else max(c.area_vmax, c.m_local * exc.bucket_capacity)
@@ -157,11 +165,26 @@ def _pass(planner, observation: Observation, h: Horizon, use_global: bool) -> Pl
         if got > c.volume_tol:
             h.ahead = chosen[k + 1:]
             break
-        h.done.append(area.centre)
+        h.done.append((area.centre[0], area.centre[1], area.psi))
     if not st.actions:
         return None
     h.modelled += got
     return Plan(tuple(st.actions), Prediction(volume=got), {"planner": planner.name, "area": list(area.centre)})
+
+
+def _untried(area: Area | None, done: list[tuple[float, float, float]], side: float, by_face: bool) -> Area | None:
+    """``area``, or with ``by_face`` (0.13.0) the first of its fallbacks (``Area.toward``), not yet
+    found fruitless: a tile facing away from the truck can yield nothing where the same tile
+    facing it still yields (the base elsewhere, another stand); without, no face of the tile."""
+    while area is not None:
+        fruitless = [d for d in done if math.dist(area.centre, d[:2]) <= side / 2]
+        if not fruitless:
+            return area
+        if not by_face or any(abs(math.remainder(area.psi - d[2], 2 * math.pi)) < math.pi / 2 for d in fruitless):
+            area = area.toward if by_face else None
+        else:
+            return area
+    return None
 
 
 def _warm(tour: list[Area], ahead: list[Area], side: float) -> list[Area]:

@@ -27,8 +27,9 @@ from earthbench.motion import turn_drive_turn
 from earthbench.plan import Move
 from earthbench.world import Pose, Scenario
 
+from ..stability import face_blur
 from ..truck_stands import GAP
-from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
+from .convert import TILT_MARGIN, Converter, SimState, StandJudge, fastest_steps, integrate
 from .hierarchy import Area, Layout, candidate_areas, greedy_tour, level_stand, site_layout
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
@@ -107,17 +108,27 @@ def kept_base(conv: Converter, st: SimState, area: Area) -> Area:
     return dataclasses.replace(area, base=(st.exc.x, st.exc.y))
 
 
-def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None) -> list[Area]:
+def stand_judge(c: Any, scenario: Scenario, others: tuple[np.ndarray, ...] = ()) -> StandJudge:
+    """How the planner's configuration ``c`` judges a stand's tilt on ``scenario``'s grid: with
+    ``c.swing_first`` (0.13.0, whose stands stand on the dig area) blurred by the distance a scan
+    may misplace a face (0 on the exact track) and on ``others``, earlier scans; else at the stand."""
+    return StandJudge(face_blur(scenario), others) if c.swing_first else StandJudge()
+
+
+def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None,
+                        judge: StandJudge | None = None) -> list[Area]:
     """The candidate areas of the planner's configuration ``c`` (:func:`.hierarchy.candidate_areas`);
     with ``c.face_away``, those whose base beyond them from the truck leaves the truck a stand on
     their far side, off the dig area and in dump reach (the dig area's row on the truck's side),
     face that way, the tile facing the truck kept as ``Area.toward``; with ``c.side_by_swing``,
     each area faces the side (toward the truck, away, or either way across) whose base leaves the
-    truck a stand with the least swing (:func:`least_swing`), the others kept as fallbacks."""
+    truck a stand with the least swing (:func:`least_swing`), the others kept as fallbacks.
+    ``judge``: how a stand's tilt is judged (default: :func:`stand_judge` of ``c``)."""
     m = scenario.machines
     away = m.excavator.reach_max + m.truck.loading_radius - FACE_AWAY_MARGIN if c.face_away else None
     areas = candidate_areas(scenario, z, side, c.dig_depth, c.area_vmax, c.base_offset, c.truck_offset, c.truck_angle,
-                            layout, away, AWAY_TURNS if c.swing_first else ())
+                            layout, away, AWAY_TURNS if c.swing_first else (),
+                            stand_judge(c, scenario) if judge is None else judge)
     if c.swing_first:
         dig = Polygon(scenario.site.dig_area)
         shapely.prepare(dig)
