@@ -208,8 +208,9 @@ class StlTampPlanner(Sized, Planner):
 
     0.13.0 (issue 49): the global problem is seeded, and closed loop too, with the tiles the truck serves from beyond them (facing
     away, the dump on the dig's bearing) while they hold work, every area's swing to a truck off the dig area priced
-    (:func:`.stand.tour`, ``swing_first``); a facing-away tile whose stand is too steep tries it turned; on a scan a stand keeps the
-    tilt rule with the stand moved by the distance a face may be misplaced (:func:`.hierarchy.level_stand`). NLPs unchanged."""
+    (:func:`.stand.tour`, ``swing_first``); a facing-away tile whose stand is too steep tries it turned; closed loop on a scan judges a
+    stand's tilt also with the stand moved by the distance a face may be misplaced, and on every scan seen (``convert.StandJudge``);
+    open loop on a scan keeps 0.12's tiles. NLPs unchanged."""
 
     name = "stl-tamp"
     version = "0.13.0"
