@@ -48,12 +48,12 @@ from earthbench.motion import arcs, dense_poses, min_dig_time, min_dump_time, po
 from earthbench.plan import Dig, Dump, Move
 from earthbench.rules import arm_shadow, bodies_touch, reach_of, track_level_and_tilt, undermining_excess
 from earthbench.cut import apply_cut, cut_level, footprint, path_cells
-from earthbench.world import ExcavatorSpec, Heightmap, Pose, Scenario
-
+from earthbench.world import Heightmap, Pose, Scenario
 from earthbench.soil import slump
 
 from ..stability import envelope, face_blur, margins
 from ..truck_stands import TruckStands
+from .judge import AT_THE_STAND, StandJudge
 
 EPS_T = 1e-6
 #: How far (m) the truck's body keeps from a dig's arm shadow (the referee's samples and a cell).
@@ -66,40 +66,6 @@ TILT_MARGIN = 0.01
 
 class ConversionError(RuntimeError):
     """A solution could not be turned into valid actions (reported with the solve's status)."""
-
-
-def worst_tilt(sc: Scenario, z: np.ndarray, spec: ExcavatorSpec, pose: Pose, blur: float) -> float:
-    """The tilt (rad) of the excavator's tracks at ``pose`` on the grid ``z``, the worst of it and,
-    where the tracks stand on the dig area, of the pose moved by ``blur`` metres every 45°. A scan
-    may misplace a face of the soil by that much (:func:`planners.stability.face_blur`): stl-tamp
-    0.13.0's stands on the dig area, judged at the pose alone, stood on true ground tilted up to
-    26° (limit 20°) where the scan showed 17°. Off the dig area, and with ``blur`` 0, the pose alone."""
-    tilt = track_level_and_tilt(sc, z, spec, pose)[1]
-    if blur <= 0.0 or not Polygon(sc.site.dig_area).intersects(Polygon(spec.body(pose.x, pose.y, pose.yaw)[0])):
-        return tilt
-    for k in range(8):
-        a = k * math.pi / 4
-        tilt = max(tilt, track_level_and_tilt(sc, z, spec, Pose(pose.x + blur * math.cos(a), pose.y + blur * math.sin(a), pose.yaw))[1])
-    return tilt
-
-
-@dataclass(frozen=True)
-class StandJudge:
-    """How the tilt of a stand is judged (stl-tamp 0.13.0, whose stands stand on the dig area): the
-    worst of :func:`worst_tilt` with ``blur`` on the grid planned on and on ``others``, earlier scans
-    of the site (closed loop: a cab sees a face from one side and fills it flatter from another; a
-    run stood, on its second step's scan from the south, on ground that scan showed at 17° and the
-    first at 23°; truth 23°). The default judges the pose on the grid alone."""
-
-    blur: float = 0.0
-    others: tuple[np.ndarray, ...] = ()
-
-    def tilt(self, sc: Scenario, z: np.ndarray, spec: ExcavatorSpec, pose: Pose) -> float:
-        return max(worst_tilt(sc, g, spec, pose, self.blur) for g in (z, *self.others))
-
-
-#: Judged at the stand, on the grid planned on (stl-tamp before 0.13.0).
-AT_THE_STAND = StandJudge()
 
 
 @dataclass

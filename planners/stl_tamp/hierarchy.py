@@ -31,7 +31,8 @@ from shapely.geometry import Polygon
 from earthbench.world import Pose, Scenario
 from .surface import RbfSurface, fit_rbf
 
-from .convert import AT_THE_STAND, TILT_MARGIN, SimState, StandJudge
+from .convert import TILT_MARGIN, SimState
+from .judge import AT_THE_STAND, StandJudge
 from .guess import PhaseSeed
 from .problem import Shape
 

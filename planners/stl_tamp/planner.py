@@ -17,7 +17,8 @@ from earthbench.planner import Observation, Planner, SharedFolder, closed_loop_s
 from earthbench.world import ExcavatorSpec, Scenario, TruckSpec
 from .surface import fit_rbf
 
-from .convert import Converter, SimState, StandJudge
+from .convert import Converter, SimState
+from .judge import StandJudge
 from .guess import PhaseSeed, build_guess, fill_volumes, settle_contacts
 from .hierarchy import (
     Area,
@@ -181,36 +182,8 @@ class Config(LocalNLPConfig):
 class StlTampPlanner(Sized, Planner):
     """Hierarchical STL-TAMP: a global NLP over local areas, a local NLP per area (Algorithm 1).
 
-    0.10.0–0.10.2: the NLPs compiled in a preparation (:meth:`prepare`, :mod:`.compiled`; the same values to the bit, so the same plans,
-    in less CPU), and an area tiling that tolerates rounding (:data:`.hierarchy.TILE_TOL`: a sealed draw's shifted site lost a row of
-    tiles).
-
-    0.10.3: closed loop (:mod:`.receding`) keeps the first step's sides and asks for the missing
-    volume over the yield the truck has reported. Open-loop plans are 0.10.2's.
-    0.10.4: an NLP's key leaves out the truck's capacity (:func:`.model.nlp_truck`): the same
-    plans, the prepared NLPs now serving the ``scale`` ladder's larger trucks.
-    0.10.5 (rules version 2, issue 48): the conversion keeps the site rules the NLP does not
-    model (digs under the arm skipped or repaired, truck moves over rough ground replaced).
-
-    Issue 50 (no new version: the default plans are 0.10.5's to the bit, its configuration hash the same): ``solver="fatrop"`` writes
-    every NLP stage by stage too (:mod:`.staged`, the same problem with its phase variables carried as states) and solves it by FATROP,
-    IPOPT on the classic NLP taking over from the same start when FATROP fails (``plan.info["solvers"]``). Measured slower than IPOPT on
-    these NLPs, so an option (planners/stl_tamp/NOTES.md).
-
-    0.11.0 (issues 48, 49): the truck's stand is the planner's decision (:mod:`.stand`), off the arm's reach, and the local
-    NLP is bound to it; areas on the truck's side face away from it, an area in reach keeps the base, and the truck follows
-    the dig face (``Converter.follow``). The NLPs' code is unchanged (a bound, not a new NLP), so the preparation's is too.
-
-    0.12.0 (issues 48, 51): on a scanned site the truck's ground keeps a margin for a face the scan misplaces (``convert.ScanStands``,
-    ``planners/stability.face_blur``); every machine class, with the settings in metres and m³ scaled by the scenario's excavator
-    (:mod:`.sizes`) and each class's NLPs compiled in the preparation. The compact exact track's plans are 0.11.0's.
-    0.12.1–0.12.3: hopeless standless areas passed over; a truck in the NLPs' clearance seen beyond it; closed loop past fruitless areas.
-
-    0.13.0 (issue 49): the global problem is seeded, and closed loop too, with the tiles the truck serves from beyond them (facing
-    away, the dump on the dig's bearing) while they hold work, every area's swing to a truck off the dig area priced
-    (:func:`.stand.tour`, ``swing_first``); a facing-away tile whose stand is too steep tries it turned; closed loop on a scan judges a
-    stand's tilt also with the stand moved by the distance a face may be misplaced, and on every scan seen (``convert.StandJudge``);
-    open loop on a scan keeps 0.12's tiles. NLPs unchanged."""
+    What each version changed, and why: planners/stl_tamp/README.md; the measurements behind it:
+    planners/stl_tamp/NOTES.md."""
 
     name = "stl-tamp"
     version = "0.13.0"
@@ -308,10 +281,8 @@ class StlTampPlanner(Sized, Planner):
         if exc is not None and (planner := self.sized_for(exc)) is not self:
             return planner.plan(scenario)
         if scenario.soil is not None and self.config.swing_first:
-            # open loop on a scan: 0.12's tiles. Their bases on the dig area are judged on one scan
-            # and on the plan's own model of the cuts beside them, which the truth does not follow
-            # (slump, harder layer): 6 of standard-realistic's 48 plans stood on ground tilted 23–27°
-            # (limit 20°). Closed loop sees the ground again each step (NOTES.md, "0.13.0").
+            # open loop on a scan: 0.12's tiles (bases on the dig area judged on one scan and on the
+            # plan's own model of its cuts stood on steep true ground: NOTES.md, "0.13.0")
             scan = copy.copy(self)
             scan.given = replace(self.given, swing_first=False)
             scan.config = replace(self.config, swing_first=False)

@@ -29,7 +29,8 @@ from earthbench.world import Pose, Scenario
 
 from ..stability import face_blur
 from ..truck_stands import GAP
-from .convert import TILT_MARGIN, Converter, SimState, StandJudge, fastest_steps, integrate
+from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
+from .judge import StandJudge
 from .hierarchy import Area, Layout, candidate_areas, greedy_tour, level_stand, site_layout
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
