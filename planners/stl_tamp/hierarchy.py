@@ -369,7 +369,7 @@ def level_stand(scenario: Scenario, z: np.ndarray, centre: tuple[float, float], 
     None when every stand in reach is too steep. The referee judges the tilt where the machine
     stands (:func:`earthbench.rules.track_level_and_tilt`), so a plan from a steep
     stand would be invalid whatever the NLP does there. ``judge``: how the tilt is judged
-    (:class:`.convert.StandJudge`; by default at the stand, on ``z``)."""
+    (:class:`.judge.StandJudge`; by default at the stand, on ``z``)."""
     es = scenario.machines.excavator
     ux, uy = toward
     yaw = math.atan2(-uy, -ux)

@@ -63,7 +63,7 @@ YIELD_BOUNDS = (0.5, 1.5)
 #: What a step asks for beyond the corrected missing volume: a share of it, and at least this
 #: many m³, so that the scan's noise does not leave the truck a sliver short.
 ASK_MARGIN, ASK_MIN = 0.05, 0.05
-#: Earlier scans a stand's tilt is also judged on (:class:`.convert.StandJudge`), the latest so many.
+#: Earlier scans a stand's tilt is also judged on (:class:`.judge.StandJudge`), the latest so many.
 SCANS_KEPT = 8
 
 
