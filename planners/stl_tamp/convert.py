@@ -217,8 +217,8 @@ class Converter:
         """The ground level under the tracks and their tilt where the excavator now stands,
         judged as it arrives, exactly as the referee judges a station (its first dig there)."""
         if self._station is None or self._station[0] != st.exc:
-            level = track_level_and_tilt(self.sc, st.z, self.exc_spec, st.exc)[0]
-            self._station = (st.exc, level, st.judge.tilt(self.sc, st.z, self.exc_spec, st.exc))
+            level, tilt = track_level_and_tilt(self.sc, st.z, self.exc_spec, st.exc)
+            self._station = (st.exc, level, st.judge.tilt(self.sc, st.z, self.exc_spec, st.exc, at_pose=tilt))
         return self._station[1], self._station[2]
 
     def undermines(self, st: SimState, contact: tuple[float, float], heading: float, depth: float, drag: float) -> bool:

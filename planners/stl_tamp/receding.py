@@ -178,12 +178,9 @@ def _untried(area: Area | None, done: list[tuple[float, float, float]], side: fl
     facing it still yields (the base elsewhere, another stand); without, no face of the tile."""
     while area is not None:
         fruitless = [d for d in done if math.dist(area.centre, d[:2]) <= side / 2]
-        if not fruitless:
+        if not fruitless or (by_face and all(abs(math.remainder(area.psi - d[2], 2 * math.pi)) >= math.pi / 2 for d in fruitless)):
             return area
-        if not by_face or any(abs(math.remainder(area.psi - d[2], 2 * math.pi)) < math.pi / 2 for d in fruitless):
-            area = area.toward if by_face else None
-        else:
-            return area
+        area = area.toward if by_face else None
     return None
 
 

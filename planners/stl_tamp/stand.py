@@ -30,7 +30,7 @@ from earthbench.world import Pose, Scenario
 from ..stability import face_blur
 from ..truck_stands import GAP
 from .convert import TILT_MARGIN, Converter, SimState, fastest_steps, integrate
-from .judge import StandJudge
+from .judge import AT_THE_STAND, StandJudge
 from .hierarchy import Area, Layout, candidate_areas, greedy_tour, level_stand, site_layout
 
 #: Metres between the truck's centre and the dig area's edge (half its width, the area's
@@ -113,7 +113,7 @@ def stand_judge(c: Any, scenario: Scenario, others: tuple[np.ndarray, ...] = ())
     """How the planner's configuration ``c`` judges a stand's tilt on ``scenario``'s grid: with
     ``c.swing_first`` (0.13.0, whose stands stand on the dig area) blurred by the distance a scan
     may misplace a face (0 on the exact track) and on ``others``, earlier scans; else at the stand."""
-    return StandJudge(face_blur(scenario), others) if c.swing_first else StandJudge()
+    return StandJudge(face_blur(scenario), others) if c.swing_first else AT_THE_STAND
 
 
 def candidate_areas_for(c: Any, scenario: Scenario, z: np.ndarray, side: float, layout: Layout | None = None,
